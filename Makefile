@@ -1,0 +1,52 @@
+# The front door. `make demo` and `make test` each set up what is missing first (Debian
+# packages, .venv, builds), so both work on a fresh clone.
+#
+# One optimised profile (release) for everything: binaries, tests and the extension module share
+# one target directory, so dependencies compile once.
+
+SHELL := /bin/bash
+CARGO ?= cargo
+CARGO_FLAGS := --release --locked
+VENV := .venv
+PY := $(VENV)/bin/python
+DEMO_PACK := build/demo.pack
+GLTF_SAMPLES_DIR ?= $(abspath ../shared/gltf-samples)
+export GLTF_SAMPLES_DIR
+
+# The cooker extension is rebuilt when any Rust or Python source it is made of changes.
+COOKER_SOURCES := $(shell find asset_pipeline engine/pack -name '*.rs' -o -name '*.toml' -o -name '*.py' 2>/dev/null | grep -v __pycache__) Cargo.lock
+
+.PHONY: all setup build cooker demo test test-rust test-python cook bench clean
+
+all: build
+
+setup:
+	@bash tools/setup.sh
+
+build: setup
+	$(CARGO) build $(CARGO_FLAGS) -p engine --bins
+
+cooker: setup $(VENV)/.cooker-built
+
+$(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
+	  $(VENV)/bin/maturin develop --release --locked --extras test -m asset_pipeline/Cargo.toml -q
+	@touch $@
+
+# The project's own content, cooked.
+cook: cooker $(DEMO_PACK)
+
+$(DEMO_PACK): $(VENV)/.cooker-built $(shell find content -type f 2>/dev/null)
+	@mkdir -p build
+	$(PY) content/demo/make_scene.py build/content/demo.gltf
+	$(VENV)/bin/cook build/content/demo.gltf -o $@
+
+demo: build cook
+	target/release/demo $(DEMO_PACK) $(DEMO_ARGS)
+
+test: build cooker cook
+	ENGINE_VALIDATION=1 $(CARGO) test $(CARGO_FLAGS) --workspace --exclude asset_pipeline
+	ENGINE_VALIDATION=1 $(PY) -m pytest tests -q -rs
+
+clean:
+	rm -rf build target $(VENV)

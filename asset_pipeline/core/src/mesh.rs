@@ -1,0 +1,176 @@
+//! glTF meshes -> pack meshes: one vertex and index buffer per mesh, one submesh per primitive.
+
+use crate::accessor::{self, check, Checked};
+use crate::label;
+use gltf::mesh::{Mode, Semantic};
+use pack::{PackBuilder, Submesh, Vertex};
+
+/// Cook one glTF mesh into `b`. Primitives without a material use `default_material`.
+pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32, b: &mut PackBuilder) -> Result<pack::Mesh, String> {
+    let what = label("mesh", mesh.index(), mesh.name());
+    let mut vertices: Vec<Vertex> = Vec::new();
+    let mut indices: Vec<u32> = Vec::new();
+    let mut submeshes = Vec::new();
+    for p in mesh.primitives() {
+        let (v, i) = primitive(&p, buffers).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
+        let too_big = || format!("{what}: more than {} vertices or indices", u32::MAX);
+        let base = u32::try_from(vertices.len()).map_err(|_| too_big())?;
+        u32::try_from(vertices.len() + v.len()).map_err(|_| too_big())?;
+        let first_index = u32::try_from(indices.len()).map_err(|_| too_big())?;
+        let index_count = u32::try_from(i.len()).map_err(|_| too_big())?;
+        let material = p.material().index().map_or(default_material, |m| m as u32);
+        submeshes.push(Submesh { first_index, index_count, material });
+        vertices.extend(v);
+        indices.extend(i.iter().map(|&i| i + base));
+    }
+    u32::try_from(indices.len()).map_err(|_| format!("{what}: more than {} indices", u32::MAX))?;
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for v in &vertices {
+        for c in 0..3 {
+            lo[c] = lo[c].min(v.position[c]);
+            hi[c] = hi[c].max(v.position[c]);
+        }
+    }
+    if vertices.is_empty() {
+        (lo, hi) = ([0.0; 3], [0.0; 3]);
+    }
+    let index_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+    Ok(pack::Mesh {
+        name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string),
+        vertices: b.push_bytes(Vertex::slice_as_bytes(&vertices)),
+        vertex_count: vertices.len() as u32,
+        indices: b.push_bytes(&index_bytes),
+        index_count: indices.len() as u32,
+        submeshes,
+        bounds_min: lo,
+        bounds_max: hi,
+    })
+}
+
+/// One primitive as vertices and a triangle list indexing them.
+fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, Vec<u32>), String> {
+    let mode = p.mode();
+    if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        return Err(format!("mode {mode:?} is not supported (only triangles, triangle strips and fans)"));
+    }
+    // Check every accessor before reading any of them.
+    let pos_acc = p.get(&Semantic::Positions).ok_or("has no POSITION attribute")?;
+    let pos = check(&pos_acc, buffers, "POSITION", &accessor::VEC3_F32)?;
+    let n = pos.count;
+    let attribute = |sem: Semantic, role: &str, expect| -> Result<Option<Checked>, String> {
+        let Some(acc) = p.get(&sem) else { return Ok(None) };
+        let c = check(&acc, buffers, role, expect)?;
+        if c.count != n {
+            return Err(format!("accessor {} ({role}) has {} elements but POSITION has {n}", acc.index(), c.count));
+        }
+        Ok(Some(c))
+    };
+    let normals = attribute(Semantic::Normals, "NORMAL", &accessor::VEC3_F32)?;
+    let tangents = attribute(Semantic::Tangents, "TANGENT", &accessor::VEC4_F32)?;
+    let uv0 = attribute(Semantic::TexCoords(0), "TEXCOORD_0", &accessor::TEXCOORD)?;
+    let uv1 = attribute(Semantic::TexCoords(1), "TEXCOORD_1", &accessor::TEXCOORD)?;
+    let colors = attribute(Semantic::Colors(0), "COLOR_0", &accessor::COLOR)?;
+    let index_acc = p.indices();
+    let checked_indices = match &index_acc {
+        Some(acc) => Some(check(acc, buffers, "indices", &accessor::INDICES)?),
+        None => None,
+    };
+
+    let positions = pos.vecs::<3>(0.0);
+    if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(format!("accessor {} (POSITION) element {i} is not a finite number", pos_acc.index()));
+    }
+    let mut idx = match (&checked_indices, &index_acc) {
+        (Some(c), Some(acc)) => {
+            let idx = c.uints();
+            if let Some(k) = idx.iter().position(|&i| i as usize >= n) {
+                return Err(format!(
+                    "accessor {} (indices) element {k} is {}, but there are only {n} vertices",
+                    acc.index(),
+                    idx[k]
+                ));
+            }
+            idx
+        }
+        _ => (0..n as u32).collect(),
+    };
+    idx = triangle_list(mode, idx)?;
+
+    let read = |c: &Option<Checked>, pad| c.as_ref().map(|c| c.vecs::<4>(pad));
+    let (nrm, tan, col) = (normals.as_ref().map(|c| c.vecs::<3>(0.0)), read(&tangents, 0.0), read(&colors, 1.0));
+    let (t0, t1) = (uv0.as_ref().map(|c| c.vecs::<2>(0.0)), uv1.as_ref().map(|c| c.vecs::<2>(0.0)));
+    let mut vertices: Vec<Vertex> = (0..n)
+        .map(|i| Vertex {
+            position: positions[i],
+            normal: nrm.as_ref().map_or([0.0, 0.0, 1.0], |v| v[i]),
+            tangent: tan.as_ref().map_or([0.0; 4], |v| v[i]),
+            uv0: t0.as_ref().map_or([0.0; 2], |v| v[i]),
+            uv1: t1.as_ref().map_or([0.0; 2], |v| v[i]),
+            color: col.as_ref().map_or([255; 4], |v| unorm8(v[i])),
+            _pad: 0,
+        })
+        .collect();
+    if normals.is_none() {
+        (vertices, idx) = flat_normals(&vertices, &idx);
+    }
+    if tangents.is_none() {
+        for v in &mut vertices {
+            v.tangent = default_tangent(v.normal);
+        }
+    }
+    Ok((vertices, idx))
+}
+
+/// Strips and fans as the equivalent list, with the winding glTF specifies.
+fn triangle_list(mode: Mode, idx: Vec<u32>) -> Result<Vec<u32>, String> {
+    let n = idx.len();
+    Ok(match mode {
+        Mode::TriangleStrip => (0..n.saturating_sub(2))
+            .flat_map(|i| if i % 2 == 0 { [idx[i], idx[i + 1], idx[i + 2]] } else { [idx[i + 1], idx[i], idx[i + 2]] })
+            .collect(),
+        Mode::TriangleFan => (1..n.saturating_sub(1)).flat_map(|i| [idx[i], idx[i + 1], idx[0]]).collect(),
+        _ if n % 3 != 0 => return Err(format!("{n} indices do not make whole triangles")),
+        _ => idx,
+    })
+}
+
+/// glTF: "When normals are not specified, client implementations MUST calculate flat normals."
+/// Flat shading needs a vertex per triangle corner, so the primitive is unwelded.
+fn flat_normals(vertices: &[Vertex], idx: &[u32]) -> (Vec<Vertex>, Vec<u32>) {
+    let mut out = Vec::with_capacity(idx.len());
+    for t in idx.chunks_exact(3) {
+        let [a, b, c] = [0, 1, 2].map(|k| vertices[t[k] as usize].position);
+        let n = normalize(cross(sub(b, a), sub(c, a))).unwrap_or([0.0, 0.0, 1.0]);
+        out.extend(t.iter().map(|&i| Vertex { normal: n, ..vertices[i as usize] }));
+    }
+    let idx = (0..out.len() as u32).collect();
+    (out, idx)
+}
+
+/// Stand-in until MikkTSpace: a unit tangent perpendicular to the normal, so the TBN basis the
+/// shader builds is at least orthonormal.
+fn default_tangent(n: [f32; 3]) -> [f32; 4] {
+    // Project the axis least aligned with n, so the difference never vanishes.
+    let axis = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let d = dot(n, axis);
+    normalize(sub(axis, n.map(|c| c * d))).map_or([1.0, 0.0, 0.0, 1.0], |t| [t[0], t[1], t[2], 1.0])
+}
+
+/// glTF vertex colours are linear already; only the storage changes.
+fn unorm8(c: [f32; 4]) -> [u8; 4] {
+    c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn normalize(v: [f32; 3]) -> Option<[f32; 3]> {
+    let len = dot(v, v).sqrt();
+    (len > 1e-12 && len.is_finite()).then(|| v.map(|c| c / len))
+}

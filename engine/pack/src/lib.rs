@@ -1,0 +1,208 @@
+//! The cooked pack format: one file per cooked level, written by the cooker and read by the runtime.
+//!
+//! This crate is the only place that knows the bytes of the format. The layout is
+//!
+//! ```text
+//! offset 0   header (64 bytes, little endian)
+//!              magic       [u8; 8]  = b"GAMEPACK"
+//!              version     u32      = FORMAT_VERSION
+//!              header_len  u32      = 64
+//!              file_len    u64      total length of the file in bytes
+//!              meta_off    u64      JSON metadata (the `Manifest`), UTF-8
+//!              meta_len    u64
+//!              data_off    u64      binary blob, 16-byte aligned; `BufferRange`s point into it
+//!              data_len    u64
+//!              checksum    u32      CRC-32 of the whole file with this field read as zero
+//!              reserved    u32      = 0
+//! 64         metadata
+//! data_off   data
+//! ```
+//!
+//! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
+//! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
+//! already in the layout the GPU consumes, so the runtime uploads them with one copy and no
+//! per-vertex parsing.
+
+mod error;
+mod manifest;
+mod write;
+
+pub use error::PackError;
+pub use manifest::*;
+pub use write::{write_pack_atomic, PackBuilder};
+
+/// The first eight bytes of every pack.
+pub const MAGIC: [u8; 8] = *b"GAMEPACK";
+/// The version this build writes and reads. Bump on any incompatible change.
+pub const FORMAT_VERSION: u32 = 1;
+/// Size of the fixed header in bytes.
+pub const HEADER_LEN: usize = 64;
+/// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads
+/// want at least 4; 16 keeps room for vec4 storage-buffer views).
+pub const DATA_ALIGN: usize = 16;
+
+/// A parsed pack: the manifest plus the data blob it points into.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pack {
+    pub manifest: Manifest,
+    pub data: Vec<u8>,
+}
+
+/// The fixed-size header, decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Header {
+    version: u32,
+    file_len: u64,
+    meta_off: u64,
+    meta_len: u64,
+    data_off: u64,
+    data_len: u64,
+    checksum: u32,
+}
+
+impl Header {
+    fn encode(&self) -> [u8; HEADER_LEN] {
+        let mut h = [0u8; HEADER_LEN];
+        h[0..8].copy_from_slice(&MAGIC);
+        h[8..12].copy_from_slice(&self.version.to_le_bytes());
+        h[12..16].copy_from_slice(&(HEADER_LEN as u32).to_le_bytes());
+        h[16..24].copy_from_slice(&self.file_len.to_le_bytes());
+        h[24..32].copy_from_slice(&self.meta_off.to_le_bytes());
+        h[32..40].copy_from_slice(&self.meta_len.to_le_bytes());
+        h[40..48].copy_from_slice(&self.data_off.to_le_bytes());
+        h[48..56].copy_from_slice(&self.data_len.to_le_bytes());
+        h[56..60].copy_from_slice(&self.checksum.to_le_bytes());
+        h
+    }
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(b[at..at + 4].try_into().unwrap())
+}
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
+}
+
+impl Pack {
+    /// Read and fully validate a pack file.
+    pub fn read_file(path: &std::path::Path) -> Result<Pack, PackError> {
+        let bytes = std::fs::read(path).map_err(|e| PackError::Io(e.to_string()))?;
+        Pack::from_bytes(&bytes)
+    }
+
+    /// Decode a pack from memory. The checks run from the outside in, so each kind of damage
+    /// gets its own error: not a pack at all, a pack from another version, a pack cut short,
+    /// a pack whose bytes changed, and finally a pack whose contents do not make sense.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Pack, PackError> {
+        if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
+            return Err(PackError::NotAPack);
+        }
+        if bytes.len() < 12 {
+            return Err(PackError::Truncated { expected: HEADER_LEN as u64, actual: bytes.len() as u64 });
+        }
+        let version = u32_at(bytes, 8);
+        if version != FORMAT_VERSION {
+            return Err(PackError::WrongVersion { found: version, supported: FORMAT_VERSION });
+        }
+        if bytes.len() < HEADER_LEN {
+            return Err(PackError::Truncated { expected: HEADER_LEN as u64, actual: bytes.len() as u64 });
+        }
+        let header = Header {
+            version,
+            file_len: u64_at(bytes, 16),
+            meta_off: u64_at(bytes, 24),
+            meta_len: u64_at(bytes, 32),
+            data_off: u64_at(bytes, 40),
+            data_len: u64_at(bytes, 48),
+            checksum: u32_at(bytes, 56),
+        };
+        let actual = bytes.len() as u64;
+        if actual < header.file_len {
+            return Err(PackError::Truncated { expected: header.file_len, actual });
+        }
+        if actual > header.file_len {
+            return Err(PackError::Corrupt(format!(
+                "{} unexpected trailing bytes after the declared end at {}",
+                actual - header.file_len,
+                header.file_len
+            )));
+        }
+        if u32_at(bytes, 12) as usize != HEADER_LEN {
+            return Err(PackError::Corrupt(format!("header length {} is not {HEADER_LEN}", u32_at(bytes, 12))));
+        }
+        let crc = checksum(bytes);
+        if crc != header.checksum {
+            return Err(PackError::ChecksumMismatch { stored: header.checksum, computed: crc });
+        }
+        // The checksum matched, so what follows can only fail for a pack written wrongly (or
+        // forged with a matching checksum): report it as malformed, naming the part.
+        let section = |name: &str, off: u64, len: u64| -> Result<&[u8], PackError> {
+            let end = off.checked_add(len).filter(|&e| e <= actual && off >= HEADER_LEN as u64);
+            match end {
+                Some(end) => Ok(&bytes[off as usize..end as usize]),
+                None => Err(PackError::Malformed(format!(
+                    "{name} section {off}..+{len} lies outside the file ({actual} bytes)"
+                ))),
+            }
+        };
+        let meta = section("metadata", header.meta_off, header.meta_len)?;
+        let data = section("data", header.data_off, header.data_len)?;
+        let manifest: Manifest = serde_json::from_slice(meta)
+            .map_err(|e| PackError::Malformed(format!("metadata: {e}")))?;
+        manifest.validate(data.len() as u64)?;
+        Ok(Pack { manifest, data: data.to_vec() })
+    }
+
+    /// Encode to bytes (header, metadata, data). `Pack::from_bytes` inverts this exactly.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, PackError> {
+        self.manifest.validate(self.data.len() as u64)?;
+        let meta = serde_json::to_vec(&self.manifest)
+            .map_err(|e| PackError::Malformed(format!("metadata: {e}")))?;
+        let meta_off = HEADER_LEN as u64;
+        let data_off = align_up(meta_off as usize + meta.len(), DATA_ALIGN) as u64;
+        let file_len = data_off + self.data.len() as u64;
+        let mut out = Vec::with_capacity(file_len as usize);
+        out.extend_from_slice(&[0u8; HEADER_LEN]);
+        out.extend_from_slice(&meta);
+        out.resize(data_off as usize, 0);
+        out.extend_from_slice(&self.data);
+        let header = Header {
+            version: FORMAT_VERSION,
+            file_len,
+            meta_off,
+            meta_len: meta.len() as u64,
+            data_off,
+            data_len: self.data.len() as u64,
+            checksum: 0,
+        };
+        out[..HEADER_LEN].copy_from_slice(&header.encode());
+        let crc = checksum(&out);
+        out[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
+        Ok(out)
+    }
+
+    /// The bytes a `BufferRange` refers to (validated on read, so this cannot go out of bounds
+    /// for a pack that came from `from_bytes`).
+    pub fn bytes(&self, r: BufferRange) -> &[u8] {
+        &self.data[r.offset as usize..(r.offset + r.len) as usize]
+    }
+}
+
+const CHECKSUM_AT: usize = 56;
+
+/// CRC-32 of the whole file, reading the checksum field itself as zero, so that damage to the
+/// header is caught as surely as damage to the body.
+fn checksum(file: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(&file[..CHECKSUM_AT]);
+    h.update(&[0u8; 4]);
+    h.update(&file[CHECKSUM_AT + 4..]);
+    h.finalize()
+}
+
+pub(crate) fn align_up(n: usize, a: usize) -> usize {
+    n.div_ceil(a) * a
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,235 @@
+//! The structured part of a pack (serialised as JSON inside it) and its consistency checks.
+
+use crate::PackError;
+use serde::{Deserialize, Serialize};
+
+/// A byte range inside the pack's data blob.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub struct BufferRange {
+    pub offset: u64,
+    pub len: u64,
+}
+
+/// The static vertex as stored in a pack and read by the vertex shader, interleaved, 64 bytes.
+/// The runtime's vertex input state is derived from these offsets (see `VERTEX_ATTRIBUTES`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Vertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    /// xyz tangent, w = handedness (+1/-1) of the bitangent, as glTF.
+    pub tangent: [f32; 4],
+    pub uv0: [f32; 2],
+    /// Lightmap UVs; zero until the uv2 stage has run.
+    pub uv1: [f32; 2],
+    /// Linear RGBA vertex colour, 8 bits per channel (UNORM).
+    pub color: [u8; 4],
+    pub _pad: u32,
+}
+
+pub const VERTEX_STRIDE: usize = std::mem::size_of::<Vertex>();
+const _: () = assert!(VERTEX_STRIDE == 64);
+
+/// What kind of data a vertex attribute holds, so the runtime can pick a Vulkan format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AttributeFormat {
+    F32x2,
+    F32x3,
+    F32x4,
+    Unorm8x4,
+}
+
+/// (shader location, byte offset, format) of every attribute of `Vertex`.
+pub const VERTEX_ATTRIBUTES: [(u32, u32, AttributeFormat); 6] = [
+    (0, 0, AttributeFormat::F32x3),
+    (1, 12, AttributeFormat::F32x3),
+    (2, 24, AttributeFormat::F32x4),
+    (3, 40, AttributeFormat::F32x2),
+    (4, 48, AttributeFormat::F32x2),
+    (5, 56, AttributeFormat::Unorm8x4),
+];
+
+impl Vertex {
+    /// Raw bytes of a vertex slice, for writing into the data blob.
+    pub fn slice_as_bytes(v: &[Vertex]) -> &[u8] {
+        // SAFETY: Vertex is repr(C), 64 bytes, made only of plain numbers with no padding holes
+        // (the explicit `_pad` field fills the tail).
+        unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Manifest {
+    /// Free-form provenance: the source file and the cooker version.
+    pub source: String,
+    pub cooker: String,
+    pub meshes: Vec<Mesh>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub nodes: Vec<Node>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Mesh {
+    pub name: String,
+    /// `Vertex` array, `vertex_count * VERTEX_STRIDE` bytes.
+    pub vertices: BufferRange,
+    pub vertex_count: u32,
+    /// u32 triangle list indices into this mesh's vertices.
+    pub indices: BufferRange,
+    pub index_count: u32,
+    /// Ranges of `indices` drawn with one material each.
+    pub submeshes: Vec<Submesh>,
+    /// Object-space axis-aligned bounds.
+    pub bounds_min: [f32; 3],
+    pub bounds_max: [f32; 3],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Submesh {
+    pub first_index: u32,
+    pub index_count: u32,
+    pub material: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum AlphaMode {
+    #[default]
+    Opaque,
+    Mask,
+    Blend,
+}
+
+/// A metallic-roughness material, as glTF.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    pub name: String,
+    /// Linear RGBA factor.
+    pub base_color: [f32; 4],
+    pub base_color_texture: Option<u32>,
+    pub metallic: f32,
+    pub roughness: f32,
+    /// Linear emitted radiance factor (already multiplied by any emissive strength).
+    pub emissive: [f32; 3],
+    pub alpha_mode: AlphaMode,
+    pub alpha_cutoff: f32,
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            name: "default".into(),
+            base_color: [1.0; 4],
+            base_color_texture: None,
+            metallic: 0.0,
+            roughness: 1.0,
+            emissive: [0.0; 3],
+            alpha_mode: AlphaMode::Opaque,
+            alpha_cutoff: 0.5,
+            double_sided: false,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TextureFormat {
+    /// 8-bit RGBA, sRGB-encoded colour (sampled through an _SRGB format).
+    Rgba8Srgb,
+    /// 8-bit RGBA, linear data (normal maps, roughness, masks).
+    Rgba8Unorm,
+    /// Half-float RGBA, linear HDR (lightmaps).
+    Rgba16Float,
+}
+
+impl TextureFormat {
+    pub fn bytes_per_texel(self) -> u64 {
+        match self {
+            TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => 4,
+            TextureFormat::Rgba16Float => 8,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Texture {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub format: TextureFormat,
+    /// One range per mip level, level 0 first; level i is max(1, w >> i) x max(1, h >> i), tightly packed rows.
+    pub mips: Vec<BufferRange>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Node {
+    pub name: String,
+    pub parent: Option<u32>,
+    /// Local transform relative to the parent, column-major 4x4 (as glam's `Mat4::to_cols_array`).
+    pub local: [f32; 16],
+    pub mesh: Option<u32>,
+}
+
+impl Manifest {
+    /// Every index and range must point at something that exists; a reader that passes this can
+    /// index without bounds checks failing.
+    pub fn validate(&self, data_len: u64) -> Result<(), PackError> {
+        let bad = |what: String| Err(PackError::Malformed(what));
+        let in_data = |what: &str, r: BufferRange, want: u64| -> Result<(), PackError> {
+            if r.offset % crate::DATA_ALIGN as u64 != 0 {
+                return bad(format!("{what}: offset {} is not {}-byte aligned", r.offset, crate::DATA_ALIGN));
+            }
+            if r.len != want {
+                return bad(format!("{what}: {} bytes stored but {want} expected", r.len));
+            }
+            match r.offset.checked_add(r.len) {
+                Some(end) if end <= data_len => Ok(()),
+                _ => bad(format!("{what}: range {}..+{} lies outside the data ({data_len} bytes)", r.offset, r.len)),
+            }
+        };
+        for (i, m) in self.meshes.iter().enumerate() {
+            let what = format!("mesh {i} '{}'", m.name);
+            in_data(&format!("{what} vertices"), m.vertices, m.vertex_count as u64 * VERTEX_STRIDE as u64)?;
+            in_data(&format!("{what} indices"), m.indices, m.index_count as u64 * 4)?;
+            for (s, sm) in m.submeshes.iter().enumerate() {
+                let end = sm.first_index as u64 + sm.index_count as u64;
+                if end > m.index_count as u64 || sm.index_count % 3 != 0 {
+                    return bad(format!("{what} submesh {s}: indices {}..{end} do not fit {} indices in whole triangles", sm.first_index, m.index_count));
+                }
+                if sm.material as usize >= self.materials.len() {
+                    return bad(format!("{what} submesh {s}: material {} does not exist", sm.material));
+                }
+            }
+        }
+        for (i, m) in self.materials.iter().enumerate() {
+            if let Some(t) = m.base_color_texture {
+                if t as usize >= self.textures.len() {
+                    return bad(format!("material {i} '{}': texture {t} does not exist", m.name));
+                }
+            }
+        }
+        for (i, t) in self.textures.iter().enumerate() {
+            if t.width == 0 || t.height == 0 || t.mips.is_empty() {
+                return bad(format!("texture {i} '{}': empty ({}x{}, {} mips)", t.name, t.width, t.height, t.mips.len()));
+            }
+            for (l, r) in t.mips.iter().enumerate() {
+                let (w, h) = ((t.width >> l).max(1) as u64, (t.height >> l).max(1) as u64);
+                in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, w * h * t.format.bytes_per_texel())?;
+            }
+        }
+        for (i, n) in self.nodes.iter().enumerate() {
+            // Parents come before children, which also rules out cycles.
+            if let Some(p) = n.parent {
+                if p as usize >= i {
+                    return bad(format!("node {i} '{}': parent {p} does not precede it", n.name));
+                }
+            }
+            if let Some(m) = n.mesh {
+                if m as usize >= self.meshes.len() {
+                    return bad(format!("node {i} '{}': mesh {m} does not exist", n.name));
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,152 @@
+use super::*;
+
+/// A small but complete pack: one textured quad with a node, a material and a 2-level texture.
+fn sample() -> Pack {
+    let mut b = PackBuilder::new("test.gltf", "test");
+    let verts: Vec<Vertex> = (0..4)
+        .map(|i| Vertex {
+            position: [(i & 1) as f32, (i >> 1) as f32, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            tangent: [1.0, 0.0, 0.0, 1.0],
+            uv0: [(i & 1) as f32, (i >> 1) as f32],
+            color: [255, 128, 0, 255],
+            ..Default::default()
+        })
+        .collect();
+    let idx: Vec<u8> = [0u32, 1, 2, 2, 1, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
+    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let indices = b.push_bytes(&idx);
+    let mip0 = b.push_bytes(&[7u8; 2 * 2 * 4]);
+    let mip1 = b.push_bytes(&[9u8; 4]);
+    b.manifest.textures.push(Texture {
+        name: "t".into(),
+        width: 2,
+        height: 2,
+        format: TextureFormat::Rgba8Srgb,
+        mips: vec![mip0, mip1],
+    });
+    b.manifest.materials.push(Material { base_color_texture: Some(0), ..Default::default() });
+    b.manifest.meshes.push(Mesh {
+        name: "quad".into(),
+        vertices,
+        vertex_count: 4,
+        indices,
+        index_count: 6,
+        submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0 }],
+        bounds_min: [0.0; 3],
+        bounds_max: [1.0, 1.0, 0.0],
+    });
+    b.manifest.nodes.push(Node { name: "root".into(), parent: None, local: IDENTITY, mesh: Some(0) });
+    b.finish()
+}
+
+const IDENTITY: [f32; 16] = [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.];
+
+#[test]
+fn round_trip_is_exact() {
+    let p = sample();
+    let bytes = p.to_bytes().unwrap();
+    let q = Pack::from_bytes(&bytes).unwrap();
+    assert_eq!(p, q);
+    assert_eq!(q.to_bytes().unwrap(), bytes, "encoding is deterministic");
+    let v = &q.bytes(q.manifest.meshes[0].vertices)[..VERTEX_STRIDE];
+    assert_eq!(&v[0..4], &0.0f32.to_le_bytes());
+    assert_eq!(&v[56..60], &[255, 128, 0, 255]);
+}
+
+#[test]
+fn data_is_aligned_in_the_file() {
+    let bytes = sample().to_bytes().unwrap();
+    let data_off = u64::from_le_bytes(bytes[40..48].try_into().unwrap());
+    assert_eq!(data_off % DATA_ALIGN as u64, 0);
+}
+
+#[test]
+fn truncated_pack_is_reported_as_truncated() {
+    let bytes = sample().to_bytes().unwrap();
+    for cut in [bytes.len() - 1, bytes.len() / 2, HEADER_LEN + 1, HEADER_LEN - 1, 20] {
+        match Pack::from_bytes(&bytes[..cut]) {
+            Err(PackError::Truncated { actual, .. }) => assert_eq!(actual, cut as u64),
+            other => panic!("cut at {cut}: expected Truncated, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn every_flipped_byte_after_the_header_is_caught() {
+    let bytes = sample().to_bytes().unwrap();
+    for i in HEADER_LEN..bytes.len() {
+        let mut b = bytes.clone();
+        b[i] ^= 0x40;
+        assert!(
+            matches!(Pack::from_bytes(&b), Err(PackError::ChecksumMismatch { .. })),
+            "flip at {i} not caught"
+        );
+    }
+}
+
+#[test]
+fn flipped_header_bytes_never_pass() {
+    let bytes = sample().to_bytes().unwrap();
+    for i in 0..HEADER_LEN {
+        let mut b = bytes.clone();
+        b[i] ^= 0x01;
+        assert!(Pack::from_bytes(&b).is_err(), "header flip at {i} accepted");
+    }
+}
+
+#[test]
+fn wrong_version_is_reported_with_both_versions() {
+    let mut bytes = sample().to_bytes().unwrap();
+    bytes[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    let e = Pack::from_bytes(&bytes).unwrap_err();
+    assert_eq!(e, PackError::WrongVersion { found: FORMAT_VERSION + 1, supported: FORMAT_VERSION });
+    assert!(e.to_string().contains("re-cook"));
+}
+
+#[test]
+fn non_pack_files_are_reported_as_such() {
+    for junk in [&b""[..], b"GAME", b"{\"asset\": {\"version\": \"2.0\"}}", b"\x89PNG\r\n\x1a\n0000000000"] {
+        assert_eq!(Pack::from_bytes(junk), Err(PackError::NotAPack));
+    }
+}
+
+#[test]
+fn trailing_garbage_is_corrupt() {
+    let mut bytes = sample().to_bytes().unwrap();
+    bytes.extend_from_slice(b"xx");
+    assert!(matches!(Pack::from_bytes(&bytes), Err(PackError::Corrupt(_))));
+}
+
+#[test]
+fn dangling_references_are_rejected_before_writing() {
+    let mut p = sample();
+    p.manifest.meshes[0].submeshes[0].material = 5;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("material 5 does not exist"), "{e}");
+
+    let mut p = sample();
+    p.manifest.textures[0].mips[1].len = 8;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("mip 1") && e.contains("4 expected"), "{e}");
+
+    let mut p = sample();
+    p.manifest.nodes.push(Node { name: "loop".into(), parent: Some(1), local: IDENTITY, mesh: None });
+    assert!(p.to_bytes().is_err());
+}
+
+#[test]
+fn atomic_write_leaves_no_temporary_and_replaces_whole() {
+    let dir = std::env::temp_dir().join(format!("pack-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("a.pack");
+    std::fs::write(&path, b"old").unwrap();
+    write_pack_atomic(&sample(), &path).unwrap();
+    assert_eq!(Pack::read_file(&path).unwrap(), sample());
+    let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 1, "left behind: {names:?}");
+    // A write into a directory that does not exist fails and creates nothing.
+    let bad = dir.join("missing/b.pack");
+    assert!(matches!(write_pack_atomic(&sample(), &bad), Err(PackError::Io(_))));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

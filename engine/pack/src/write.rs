@@ -1,0 +1,56 @@
+//! Building a pack in memory and writing it so that no reader ever sees half a file.
+
+use crate::{align_up, BufferRange, Manifest, Pack, PackError, DATA_ALIGN};
+use std::io::Write;
+use std::path::Path;
+
+/// Accumulates the data blob while the cooker adds meshes and textures.
+#[derive(Debug, Default)]
+pub struct PackBuilder {
+    pub manifest: Manifest,
+    data: Vec<u8>,
+}
+
+impl PackBuilder {
+    pub fn new(source: &str, cooker: &str) -> Self {
+        PackBuilder {
+            manifest: Manifest { source: source.into(), cooker: cooker.into(), ..Default::default() },
+            data: Vec::new(),
+        }
+    }
+
+    /// Append bytes to the data blob at the next aligned offset and return where they went.
+    pub fn push_bytes(&mut self, bytes: &[u8]) -> BufferRange {
+        let offset = align_up(self.data.len(), DATA_ALIGN);
+        self.data.resize(offset, 0);
+        self.data.extend_from_slice(bytes);
+        BufferRange { offset: offset as u64, len: bytes.len() as u64 }
+    }
+
+    pub fn finish(self) -> Pack {
+        Pack { manifest: self.manifest, data: self.data }
+    }
+}
+
+/// Write `pack` to `path` atomically: the bytes go to a temporary file in the same directory,
+/// are flushed to disk, and only then renamed over `path`. On any error the temporary file is
+/// removed and `path` is untouched.
+pub fn write_pack_atomic(pack: &Pack, path: &Path) -> Result<(), PackError> {
+    let bytes = pack.to_bytes()?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = path.file_name().ok_or_else(|| PackError::Io(format!("{}: not a file path", path.display())))?;
+    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(&bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        PackError::Io(format!("{}: cannot write: {e}", path.display()))
+    })
+}

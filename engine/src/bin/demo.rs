@@ -1,0 +1,213 @@
+//! `demo`: render a cooked pack. In a window with a fly camera when there is a display; headless
+//! (offscreen frames, screenshots, frame times) with `--headless` or when there is none.
+//!
+//! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
+
+use engine::camera::Camera;
+use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::headless::Offscreen;
+use engine::renderer::{Lighting, Renderer};
+use engine::scene::GpuScene;
+use engine::stats::{median, percentile};
+use engine::window::{self, WindowOptions};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
+            [--screenshot PATH] [--screenshot-every K] [--device auto|cpu|gpu|NAME] [--validation]
+
+  PACK                 cooked pack to show (default: build/demo.pack, made by `make cook`)
+  --headless           render offscreen even if a display is available
+  --frames N           headless: frames to render (default 100); window: close after N frames
+  --width/--height     image or window size in pixels (default 1280x720)
+  --screenshot PATH    headless: write the last frame here (default build/screenshots/demo.png)
+  --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
+  --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
+  --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
+                       any validation error makes the exit status 3";
+
+const DEFAULT_PACK: &str = "build/demo.pack";
+
+struct Args {
+    pack: Option<PathBuf>,
+    headless: bool,
+    frames: Option<u64>,
+    width: u32,
+    height: u32,
+    screenshot: PathBuf,
+    screenshot_every: Option<u64>,
+    device: DevicePreference,
+    validation: bool,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        pack: None,
+        headless: false,
+        frames: None,
+        width: 1280,
+        height: 720,
+        screenshot: PathBuf::from("build/screenshots/demo.png"),
+        screenshot_every: None,
+        device: DevicePreference::from_env(),
+        validation: GpuOptions::validation_from_env(),
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
+        fn number<T: std::str::FromStr>(name: &str, v: String) -> Result<T, String> {
+            v.parse().map_err(|_| format!("{name}: '{v}' is not a valid number"))
+        }
+        match arg.as_str() {
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                std::process::exit(0);
+            }
+            "--headless" => a.headless = true,
+            "--validation" => a.validation = true,
+            "--frames" => a.frames = Some(number("--frames", value("--frames")?)?),
+            "--width" => a.width = number("--width", value("--width")?)?,
+            "--height" => a.height = number("--height", value("--height")?)?,
+            "--screenshot" => a.screenshot = PathBuf::from(value("--screenshot")?),
+            "--screenshot-every" => a.screenshot_every = Some(number("--screenshot-every", value("--screenshot-every")?)?),
+            "--device" => a.device = DevicePreference::parse(&value("--device")?),
+            s if s.starts_with('-') => return Err(format!("unknown option '{s}'")),
+            s if a.pack.is_none() => a.pack = Some(PathBuf::from(s)),
+            s => return Err(format!("unexpected argument '{s}' (only one pack can be shown)")),
+        }
+    }
+    if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
+        return Err(format!("image size {}x{} is out of range (1..16384)", a.width, a.height));
+    }
+    if a.frames == Some(0) || a.screenshot_every == Some(0) {
+        return Err("--frames and --screenshot-every must be at least 1".into());
+    }
+    Ok(a)
+}
+
+/// The pack given, or the project's own content: relative to the working directory first, then
+/// to the repository the binary was built in (target/release/demo -> ../../build/demo.pack).
+fn resolve_pack(arg: Option<PathBuf>) -> PathBuf {
+    if let Some(p) = arg {
+        return p;
+    }
+    let local = PathBuf::from(DEFAULT_PACK);
+    if local.exists() {
+        return local;
+    }
+    std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent()?.parent()?.parent().map(|root| root.join(DEFAULT_PACK)))
+        .filter(|p| p.exists())
+        .unwrap_or(local)
+}
+
+fn has_display() -> bool {
+    ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
+}
+
+fn main() -> ExitCode {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("demo: error: {e}\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    let pack_path = resolve_pack(args.pack.clone());
+    let pack = match pack::Pack::read_file(&pack_path) {
+        Ok(p) => p,
+        Err(pack::PackError::Io(e)) => {
+            let hint = if args.pack.is_none() { " (run `make cook` to cook the project's content)" } else { "" };
+            eprintln!("demo: error: {}: {e}{hint}", pack_path.display());
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            eprintln!("demo: error: {}: {e}", pack_path.display());
+            return ExitCode::from(2);
+        }
+    };
+    let gpu_opts = GpuOptions { validation: args.validation, device: args.device.clone(), surface_extensions: vec![] };
+
+    if !args.headless && has_display() {
+        let opts = WindowOptions {
+            gpu: gpu_opts.clone(),
+            width: args.width,
+            height: args.height,
+            max_frames: args.frames,
+            title: format!("demo - {}", pack_path.display()),
+        };
+        match window::run(&pack, opts) {
+            Ok(run) => {
+                println!("window closed after {} frames on {}", run.frames, run.device_name);
+                return validation_verdict(args.validation, run.validation_errors);
+            }
+            Err(e) => eprintln!("demo: cannot use a window ({e:#}); rendering headless instead"),
+        }
+    }
+    match headless(&args, &pack, &gpu_opts) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("demo: error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn validation_verdict(enabled: bool, errors: usize) -> ExitCode {
+    if enabled {
+        println!("validation errors: {errors}");
+    }
+    if errors > 0 {
+        ExitCode::from(3)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Result<ExitCode> {
+    let gpu = Gpu::new(gpu_opts)?;
+    println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
+    let mut target = Offscreen::new(&gpu, args.width, args.height)?;
+    let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
+    let mut scene = GpuScene::upload(&gpu, pack, renderer.material_layout)?;
+    let (min, max) = scene.bounds();
+    let camera = Camera::framing(min, max);
+    let lighting = Lighting::default();
+    let frames = args.frames.unwrap_or(100);
+    let mut frame_ms = Vec::with_capacity(frames as usize);
+    let mut gpu_ms = Vec::with_capacity(frames as usize);
+    for f in 0..frames {
+        let last = f + 1 == frames;
+        let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
+        let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, last || every)?;
+        frame_ms.push(t.frame_ms);
+        gpu_ms.extend(t.gpu_ms);
+        if every {
+            let dir = args.screenshot.parent().unwrap_or(Path::new("."));
+            target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
+        }
+    }
+    target.save_png(&args.screenshot)?;
+    println!("wrote {}", args.screenshot.display());
+    println!(
+        "frames: {frames} at {}x{}, {} instances, {} triangles per frame",
+        args.width,
+        args.height,
+        scene.instances.len(),
+        scene.triangle_count()
+    );
+    println!(
+        "frame_ms: median {:.3} p95 {:.3}",
+        median(&frame_ms).unwrap_or(0.0),
+        percentile(&frame_ms, 95.0).unwrap_or(0.0)
+    );
+    if let Some(m) = median(&gpu_ms) {
+        println!("gpu_ms: median {m:.3}");
+    }
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    target.destroy(&gpu);
+    let errors = gpu.validation().error_count();
+    Ok(validation_verdict(gpu_opts.validation, errors))
+}

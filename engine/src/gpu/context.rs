@@ -1,0 +1,346 @@
+//! The Vulkan 1.3 instance, device, queue and memory allocator that everything else borrows.
+
+use super::validation::{messenger_callback, ValidationLog};
+use anyhow::{anyhow, bail, Context as _, Result};
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use std::ffi::{c_char, CStr};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// Which physical device to use. `Auto` prefers a real GPU and falls back to a CPU
+/// implementation (lavapipe).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum DevicePreference {
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+    /// The first device whose name contains this text (case-insensitive).
+    Named(String),
+}
+
+impl DevicePreference {
+    /// Parse `auto`, `cpu`, `gpu` or a name fragment (the `ENGINE_DEVICE` variable / `--device`).
+    pub fn parse(s: &str) -> DevicePreference {
+        match s.to_ascii_lowercase().as_str() {
+            "" | "auto" => DevicePreference::Auto,
+            "cpu" => DevicePreference::Cpu,
+            "gpu" => DevicePreference::Gpu,
+            other => DevicePreference::Named(other.to_string()),
+        }
+    }
+
+    /// From the `ENGINE_DEVICE` environment variable, `Auto` when unset.
+    pub fn from_env() -> DevicePreference {
+        std::env::var("ENGINE_DEVICE").map(|s| DevicePreference::parse(&s)).unwrap_or_default()
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct GpuOptions {
+    /// Enable VK_LAYER_KHRONOS_validation and count its errors.
+    pub validation: bool,
+    pub device: DevicePreference,
+    /// Instance extensions a window surface needs (from ash-window); empty when headless.
+    pub surface_extensions: Vec<*const c_char>,
+}
+
+impl GpuOptions {
+    /// Validation is on when asked for explicitly or when `ENGINE_VALIDATION=1` (tests set it).
+    pub fn validation_from_env() -> bool {
+        matches!(std::env::var("ENGINE_VALIDATION").as_deref(), Ok("1") | Ok("true"))
+    }
+}
+
+/// Device capabilities queried at start-up rather than assumed.
+#[derive(Debug, Clone)]
+pub struct Capabilities {
+    pub device_name: String,
+    pub device_type: vk::PhysicalDeviceType,
+    pub api_version: u32,
+    pub timestamp_period_ns: f32,
+    pub timestamps: bool,
+    pub pipeline_statistics: bool,
+    pub sampler_anisotropy: Option<f32>,
+    pub depth_format: vk::Format,
+}
+
+pub struct Gpu {
+    pub entry: ash::Entry,
+    pub instance: ash::Instance,
+    pub physical_device: vk::PhysicalDevice,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub queue_family: u32,
+    pub caps: Capabilities,
+    pub allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// Pool for one-off transfer command buffers.
+    upload_pool: vk::CommandPool,
+    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    validation_log: Arc<ValidationLog>,
+    pub swapchain_capable: bool,
+}
+
+fn cstr_name(raw: &[c_char]) -> String {
+    // SAFETY: Vulkan guarantees the fixed-size name arrays are NUL-terminated.
+    unsafe { CStr::from_ptr(raw.as_ptr()) }.to_string_lossy().into_owned()
+}
+
+impl Gpu {
+    pub fn new(opts: &GpuOptions) -> Result<Gpu> {
+        // SAFETY: loading the Vulkan loader library; failure is reported, not assumed away.
+        let entry = unsafe { ash::Entry::load() }
+            .context("cannot load the Vulkan loader (libvulkan.so.1); install libvulkan1 and mesa-vulkan-drivers (`make setup`)")?;
+
+        let mut layers: Vec<*const c_char> = Vec::new();
+        let mut extensions = opts.surface_extensions.clone();
+        if opts.validation {
+            let available = unsafe { entry.enumerate_instance_layer_properties()? };
+            if !available.iter().any(|l| cstr_name(&l.layer_name) == VALIDATION_LAYER.to_str().unwrap()) {
+                bail!("validation was requested but VK_LAYER_KHRONOS_validation is not installed (Debian package vulkan-validationlayers)");
+            }
+            layers.push(VALIDATION_LAYER.as_ptr());
+            extensions.push(ash::ext::debug_utils::NAME.as_ptr());
+        }
+
+        let app = vk::ApplicationInfo::default()
+            .application_name(c"engine")
+            .engine_name(c"engine")
+            .api_version(vk::API_VERSION_1_3);
+        let validation_log = Arc::new(ValidationLog::default());
+        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(messenger_callback))
+            .user_data(Arc::as_ptr(&validation_log) as *mut _);
+        let mut instance_info =
+            vk::InstanceCreateInfo::default().application_info(&app).enabled_layer_names(&layers).enabled_extension_names(&extensions);
+        if opts.validation {
+            // Also catch messages from vkCreateInstance/vkDestroyInstance themselves.
+            instance_info = instance_info.push_next(&mut messenger_info);
+        }
+        let instance = unsafe { entry.create_instance(&instance_info, None) }
+            .context("vkCreateInstance failed (is a Vulkan 1.3 driver installed?)")?;
+        let debug = if opts.validation {
+            let du = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let m = unsafe { du.create_debug_utils_messenger(&messenger_info, None)? };
+            Some((du, m))
+        } else {
+            None
+        };
+
+        let (physical_device, queue_family) = match pick_device(&instance, &opts.device) {
+            Ok(p) => p,
+            Err(e) => {
+                unsafe {
+                    if let Some((du, m)) = &debug {
+                        du.destroy_debug_utils_messenger(*m, None);
+                    }
+                    instance.destroy_instance(None);
+                }
+                return Err(e);
+            }
+        };
+        let props = unsafe { instance.get_physical_device_properties(physical_device) };
+        let features = unsafe { instance.get_physical_device_features(physical_device) };
+        let device_exts = unsafe { instance.enumerate_device_extension_properties(physical_device)? };
+        let swapchain_capable =
+            device_exts.iter().any(|e| cstr_name(&e.extension_name) == ash::khr::swapchain::NAME.to_str().unwrap());
+        let want_swapchain = !opts.surface_extensions.is_empty() && swapchain_capable;
+
+        let queue_props = unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
+        let caps = Capabilities {
+            device_name: cstr_name(&props.device_name),
+            device_type: props.device_type,
+            api_version: props.api_version,
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamps: queue_props[queue_family as usize].timestamp_valid_bits > 0,
+            pipeline_statistics: features.pipeline_statistics_query == vk::TRUE,
+            sampler_anisotropy: (features.sampler_anisotropy == vk::TRUE).then_some(props.limits.max_sampler_anisotropy),
+            depth_format: pick_depth_format(&instance, physical_device)?,
+        };
+
+        let priorities = [1.0f32];
+        let queue_info = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let enabled = vk::PhysicalDeviceFeatures::default()
+            .pipeline_statistics_query(caps.pipeline_statistics)
+            .sampler_anisotropy(caps.sampler_anisotropy.is_some());
+        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true).synchronization2(true);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().host_query_reset(true);
+        let dev_exts: Vec<*const c_char> =
+            if want_swapchain { vec![ash::khr::swapchain::NAME.as_ptr()] } else { vec![] };
+        let device_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_features(&enabled)
+            .enabled_extension_names(&dev_exts)
+            .push_next(&mut v13)
+            .push_next(&mut v12);
+        let device = unsafe { instance.create_device(physical_device, &device_info, None) }
+            .with_context(|| format!("vkCreateDevice failed on {}", caps.device_name))?;
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        })
+        .map_err(|e| anyhow!("gpu-allocator: {e}"))?;
+        let upload_pool = unsafe {
+            device.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(queue_family)
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )?
+        };
+
+        Ok(Gpu {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue,
+            queue_family,
+            caps,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            upload_pool,
+            debug,
+            validation_log,
+            swapchain_capable: want_swapchain,
+        })
+    }
+
+    /// Everything the validation layer has reported so far (empty when validation is off).
+    pub fn validation(&self) -> &ValidationLog {
+        &self.validation_log
+    }
+
+    pub fn validation_enabled(&self) -> bool {
+        self.debug.is_some()
+    }
+
+    /// Record and run a one-off command buffer, waiting for it to finish. For uploads and
+    /// read-backs at load time, not for per-frame work.
+    pub fn one_shot<R>(&self, record: impl FnOnce(vk::CommandBuffer) -> R) -> Result<R> {
+        let d = &self.device;
+        unsafe {
+            let cb = d.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(self.upload_pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )?[0];
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
+            let r = record(cb);
+            d.end_command_buffer(cb)?;
+            let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
+            let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(cb)];
+            let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cbs)];
+            let res = d.queue_submit2(self.queue, &submit, fence).and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX));
+            d.destroy_fence(fence, None);
+            d.free_command_buffers(self.upload_pool, &[cb]);
+            res?;
+            Ok(r)
+        }
+    }
+
+    pub fn wait_idle(&self) {
+        unsafe {
+            let _ = self.device.device_wait_idle();
+        }
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            self.device.destroy_command_pool(self.upload_pool, None);
+            // The allocator frees its memory blocks on drop, which needs the device alive.
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some((du, m)) = self.debug.take() {
+                du.destroy_debug_utils_messenger(m, None);
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+/// Choose a physical device with Vulkan 1.3, dynamic rendering and a graphics+compute queue.
+fn pick_device(instance: &ash::Instance, pref: &DevicePreference) -> Result<(vk::PhysicalDevice, u32)> {
+    let devices = unsafe { instance.enumerate_physical_devices()? };
+    let mut candidates = Vec::new();
+    let mut rejected = Vec::new();
+    for pd in devices {
+        let props = unsafe { instance.get_physical_device_properties(pd) };
+        let name = cstr_name(&props.device_name);
+        if props.api_version < vk::API_VERSION_1_3 {
+            rejected.push(format!("{name}: Vulkan {}.{} < 1.3", vk::api_version_major(props.api_version), vk::api_version_minor(props.api_version)));
+            continue;
+        }
+        let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f13);
+        unsafe { instance.get_physical_device_features2(pd, &mut f2) };
+        if f13.dynamic_rendering != vk::TRUE || f13.synchronization2 != vk::TRUE {
+            rejected.push(format!("{name}: no dynamic rendering / synchronization2"));
+            continue;
+        }
+        let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+        let Some(qf) = families.iter().position(|q| {
+            q.queue_flags.contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE)
+        }) else {
+            rejected.push(format!("{name}: no graphics+compute queue"));
+            continue;
+        };
+        let is_cpu = props.device_type == vk::PhysicalDeviceType::CPU;
+        let matches = match pref {
+            DevicePreference::Auto => true,
+            DevicePreference::Cpu => is_cpu,
+            DevicePreference::Gpu => !is_cpu,
+            DevicePreference::Named(n) => name.to_ascii_lowercase().contains(n),
+        };
+        if !matches {
+            rejected.push(format!("{name}: not selected by device preference {pref:?}"));
+            continue;
+        }
+        let rank = match props.device_type {
+            vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+            vk::PhysicalDeviceType::CPU => 3,
+            _ => 4,
+        };
+        candidates.push((rank, pd, qf as u32));
+    }
+    candidates.sort_by_key(|c| c.0);
+    candidates.first().map(|c| (c.1, c.2)).ok_or_else(|| {
+        anyhow!(
+            "no usable Vulkan device (preference {pref:?}); considered: [{}]. Install mesa-vulkan-drivers for lavapipe.",
+            rejected.join("; ")
+        )
+    })
+}
+
+fn pick_depth_format(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Result<vk::Format> {
+    // D32_SFLOAT first: reversed-Z wants float depth.
+    for f in [vk::Format::D32_SFLOAT, vk::Format::D32_SFLOAT_S8_UINT, vk::Format::D24_UNORM_S8_UINT] {
+        let p = unsafe { instance.get_physical_device_format_properties(pd, f) };
+        if p.optimal_tiling_features.contains(vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT) {
+            return Ok(f);
+        }
+    }
+    bail!("the device has no usable depth format")
+}

@@ -1,0 +1,269 @@
+//! Buffers and images with their memory, and uploads through a staging buffer.
+
+use super::Gpu;
+use anyhow::{anyhow, Result};
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+pub struct Buffer {
+    pub buffer: vk::Buffer,
+    pub size: u64,
+    allocation: Option<Allocation>,
+}
+
+impl Buffer {
+    pub fn new(gpu: &Gpu, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer> {
+        let d = &gpu.device;
+        let buffer = unsafe {
+            d.create_buffer(&vk::BufferCreateInfo::default().size(size.max(4)).usage(usage), None)?
+        };
+        let requirements = unsafe { d.get_buffer_memory_requirements(buffer) };
+        let allocation = gpu
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|e| anyhow!("allocating {size} bytes for buffer '{name}': {e}"))?;
+        // SAFETY: the allocation is bound once and freed only after the buffer is destroyed.
+        unsafe { d.bind_buffer_memory(buffer, allocation.memory(), allocation.offset())? };
+        Ok(Buffer { buffer, size, allocation: Some(allocation) })
+    }
+
+    /// The mapped bytes of a host-visible buffer.
+    pub fn mapped(&mut self) -> &mut [u8] {
+        let size = self.size as usize;
+        let slice = self.allocation.as_mut().and_then(|a| a.mapped_slice_mut()).expect("buffer is not host-visible");
+        &mut slice[..size]
+    }
+
+    pub fn mapped_ref(&self) -> &[u8] {
+        let slice = self.allocation.as_ref().and_then(|a| a.mapped_slice()).expect("buffer is not host-visible");
+        &slice[..self.size as usize]
+    }
+
+    /// A device-local buffer filled with `bytes` through a staging copy.
+    pub fn with_data(gpu: &Gpu, name: &str, bytes: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer> {
+        let mut staging = Buffer::new(gpu, "staging", bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        staging.mapped()[..bytes.len()].copy_from_slice(bytes);
+        let dst = Buffer::new(gpu, name, bytes.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
+        gpu.one_shot(|cb| unsafe {
+            gpu.device.cmd_copy_buffer(cb, staging.buffer, dst.buffer, &[vk::BufferCopy::default().size(bytes.len() as u64)]);
+        })?;
+        staging.destroy(gpu);
+        Ok(dst)
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        if let Some(a) = self.allocation.take() {
+            unsafe { gpu.device.destroy_buffer(self.buffer, None) };
+            let _ = gpu.allocator.lock().unwrap().free(a);
+        }
+    }
+}
+
+pub struct Image {
+    pub image: vk::Image,
+    pub view: vk::ImageView,
+    pub format: vk::Format,
+    pub extent: vk::Extent2D,
+    pub mip_levels: u32,
+    allocation: Option<Allocation>,
+}
+
+impl Image {
+    pub fn new(
+        gpu: &Gpu,
+        name: &str,
+        format: vk::Format,
+        extent: vk::Extent2D,
+        mip_levels: u32,
+        usage: vk::ImageUsageFlags,
+        aspect: vk::ImageAspectFlags,
+    ) -> Result<Image> {
+        let d = &gpu.device;
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(format)
+            .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
+            .mip_levels(mip_levels)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(usage)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        let image = unsafe { d.create_image(&info, None)? };
+        let requirements = unsafe { d.get_image_memory_requirements(image) };
+        let allocation = gpu
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location: MemoryLocation::GpuOnly,
+                linear: false,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|e| anyhow!("allocating image '{name}': {e}"))?;
+        unsafe { d.bind_image_memory(image, allocation.memory(), allocation.offset())? };
+        let view = unsafe {
+            d.create_image_view(
+                &vk::ImageViewCreateInfo::default()
+                    .image(image)
+                    .view_type(vk::ImageViewType::TYPE_2D)
+                    .format(format)
+                    .subresource_range(full_range(aspect, mip_levels)),
+                None,
+            )?
+        };
+        Ok(Image { image, view, format, extent, mip_levels, allocation: Some(allocation) })
+    }
+
+    /// A sampled image with every mip level uploaded from `mips` (level 0 first, tightly packed),
+    /// left in SHADER_READ_ONLY_OPTIMAL.
+    pub fn sampled_with_mips(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, mips: &[&[u8]]) -> Result<Image> {
+        let image = Image::new(
+            gpu,
+            name,
+            format,
+            extent,
+            mips.len() as u32,
+            vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+            vk::ImageAspectFlags::COLOR,
+        )?;
+        let total: usize = mips.iter().map(|m| m.len()).sum();
+        let mut staging = Buffer::new(gpu, "texture staging", total as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        let mut regions = Vec::new();
+        let mut offset = 0usize;
+        for (level, bytes) in mips.iter().enumerate() {
+            staging.mapped()[offset..offset + bytes.len()].copy_from_slice(bytes);
+            regions.push(
+                vk::BufferImageCopy::default()
+                    .buffer_offset(offset as u64)
+                    .image_subresource(vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: level as u32,
+                        base_array_layer: 0,
+                        layer_count: 1,
+                    })
+                    .image_extent(vk::Extent3D {
+                        width: (extent.width >> level).max(1),
+                        height: (extent.height >> level).max(1),
+                        depth: 1,
+                    }),
+            );
+            offset += bytes.len();
+        }
+        let range = full_range(vk::ImageAspectFlags::COLOR, mips.len() as u32);
+        gpu.one_shot(|cb| unsafe {
+            barrier(gpu, cb, image.image, range, Transition::UNDEFINED_TO_TRANSFER_DST);
+            gpu.device.cmd_copy_buffer_to_image(cb, staging.buffer, image.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &regions);
+            barrier(gpu, cb, image.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
+        })?;
+        staging.destroy(gpu);
+        Ok(image)
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        if let Some(a) = self.allocation.take() {
+            unsafe {
+                gpu.device.destroy_image_view(self.view, None);
+                gpu.device.destroy_image(self.image, None);
+            }
+            let _ = gpu.allocator.lock().unwrap().free(a);
+        }
+    }
+}
+
+pub fn full_range(aspect: vk::ImageAspectFlags, mip_levels: u32) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange { aspect_mask: aspect, base_mip_level: 0, level_count: mip_levels, base_array_layer: 0, layer_count: 1 }
+}
+
+/// An image layout transition with the stages and accesses on both sides.
+#[derive(Clone, Copy)]
+pub struct Transition {
+    pub old: vk::ImageLayout,
+    pub new: vk::ImageLayout,
+    pub src_stage: vk::PipelineStageFlags2,
+    pub src_access: vk::AccessFlags2,
+    pub dst_stage: vk::PipelineStageFlags2,
+    pub dst_access: vk::AccessFlags2,
+}
+
+impl Transition {
+    pub const UNDEFINED_TO_TRANSFER_DST: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::TOP_OF_PIPE,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: vk::PipelineStageFlags2::COPY,
+        dst_access: vk::AccessFlags2::TRANSFER_WRITE,
+    };
+    pub const TRANSFER_DST_TO_SAMPLED: Transition = Transition {
+        old: vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        new: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COPY,
+        src_access: vk::AccessFlags2::TRANSFER_WRITE,
+        dst_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        dst_access: vk::AccessFlags2::SHADER_SAMPLED_READ,
+    };
+    /// Start of a frame: previous contents are discarded (the pass clears).
+    pub const COLOR_ATTACHMENT_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        dst_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+    };
+    pub const DEPTH_ATTACHMENT_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::from_raw(
+            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
+        ),
+        src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::from_raw(
+            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
+        ),
+        dst_access: vk::AccessFlags2::from_raw(
+            vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
+        ),
+    };
+    pub const COLOR_ATTACHMENT_TO_TRANSFER_SRC: Transition = Transition {
+        old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::COPY,
+        dst_access: vk::AccessFlags2::TRANSFER_READ,
+    };
+    pub const COLOR_ATTACHMENT_TO_PRESENT: Transition = Transition {
+        old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::PRESENT_SRC_KHR,
+        src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::BOTTOM_OF_PIPE,
+        dst_access: vk::AccessFlags2::NONE,
+    };
+}
+
+pub fn barrier(gpu: &Gpu, cb: vk::CommandBuffer, image: vk::Image, range: vk::ImageSubresourceRange, t: Transition) {
+    let b = [vk::ImageMemoryBarrier2::default()
+        .image(image)
+        .subresource_range(range)
+        .old_layout(t.old)
+        .new_layout(t.new)
+        .src_stage_mask(t.src_stage)
+        .src_access_mask(t.src_access)
+        .dst_stage_mask(t.dst_stage)
+        .dst_access_mask(t.dst_access)];
+    unsafe { gpu.device.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().image_memory_barriers(&b)) };
+}

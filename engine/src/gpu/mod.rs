@@ -1,0 +1,9 @@
+//! Vulkan plumbing: context (instance, device, allocator), memory objects, validation.
+
+mod context;
+mod memory;
+mod validation;
+
+pub use context::{Capabilities, DevicePreference, Gpu, GpuOptions};
+pub use memory::{barrier, full_range, Buffer, Image, Transition};
+pub use validation::ValidationLog;

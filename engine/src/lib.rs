@@ -1,0 +1,12 @@
+//! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
+
+pub mod camera;
+pub mod gpu;
+pub mod headless;
+pub mod renderer;
+pub mod scene;
+pub mod shaders;
+pub mod stats;
+pub mod window;
+
+pub use pack;

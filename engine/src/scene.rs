@@ -1,0 +1,215 @@
+//! A cooked pack on the GPU: one vertex and one index buffer for all meshes, textures, material
+//! descriptor sets, and instances (mesh + world transform) from the node hierarchy.
+
+use crate::gpu::{Buffer, Gpu, Image};
+use anyhow::{Context, Result};
+use ash::vk;
+use glam::{Mat4, Vec3};
+use pack::{Pack, TextureFormat};
+
+/// Where one mesh lives inside the shared buffers.
+#[derive(Debug, Clone)]
+pub struct GpuMesh {
+    pub name: String,
+    pub base_vertex: i32,
+    pub first_index: u32,
+    pub submeshes: Vec<pack::Submesh>,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct GpuMaterial {
+    pub base_color: [f32; 4],
+    /// Alpha-test threshold, or a negative value for "no alpha test".
+    pub alpha_cutoff: f32,
+    pub double_sided: bool,
+    pub descriptor_set: vk::DescriptorSet,
+}
+
+/// One placed mesh.
+#[derive(Debug, Clone, Copy)]
+pub struct Instance {
+    pub mesh: u32,
+    pub world: Mat4,
+}
+
+pub struct GpuScene {
+    pub meshes: Vec<GpuMesh>,
+    pub materials: Vec<GpuMaterial>,
+    pub instances: Vec<Instance>,
+    pub vertex_buffer: Buffer,
+    pub index_buffer: Buffer,
+    textures: Vec<Image>,
+    white: Image,
+    sampler: vk::Sampler,
+    pool: vk::DescriptorPool,
+}
+
+fn vk_format(f: TextureFormat) -> vk::Format {
+    match f {
+        TextureFormat::Rgba8Srgb => vk::Format::R8G8B8A8_SRGB,
+        TextureFormat::Rgba8Unorm => vk::Format::R8G8B8A8_UNORM,
+        TextureFormat::Rgba16Float => vk::Format::R16G16B16A16_SFLOAT,
+    }
+}
+
+/// World transforms of every node (parents precede children, as the pack guarantees).
+pub fn world_transforms(nodes: &[pack::Node]) -> Vec<Mat4> {
+    let mut world: Vec<Mat4> = Vec::with_capacity(nodes.len());
+    for n in nodes {
+        let local = Mat4::from_cols_array(&n.local);
+        let w = match n.parent {
+            Some(p) => world[p as usize] * local,
+            None => local,
+        };
+        world.push(w);
+    }
+    world
+}
+
+/// World-space bounds of a box under a transform (the box of the transformed corners).
+pub fn transform_bounds(m: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { min.x } else { max.x },
+            if i & 2 == 0 { min.y } else { max.y },
+            if i & 4 == 0 { min.z } else { max.z },
+        );
+        let p = m.transform_point3(c);
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    (lo, hi)
+}
+
+impl GpuScene {
+    pub fn upload(gpu: &Gpu, pack: &Pack, material_layout: vk::DescriptorSetLayout) -> Result<GpuScene> {
+        let m = &pack.manifest;
+        // Concatenate every mesh's vertices and indices: one bind for the whole scene.
+        let mut vertex_bytes = Vec::new();
+        let mut index_bytes = Vec::new();
+        let mut meshes = Vec::with_capacity(m.meshes.len());
+        for mesh in &m.meshes {
+            meshes.push(GpuMesh {
+                name: mesh.name.clone(),
+                base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
+                first_index: (index_bytes.len() / 4) as u32,
+                submeshes: mesh.submeshes.clone(),
+                bounds_min: Vec3::from(mesh.bounds_min),
+                bounds_max: Vec3::from(mesh.bounds_max),
+            });
+            vertex_bytes.extend_from_slice(pack.bytes(mesh.vertices));
+            index_bytes.extend_from_slice(pack.bytes(mesh.indices));
+        }
+        let vertex_buffer = Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
+        let index_buffer = Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?;
+
+        let mut textures = Vec::with_capacity(m.textures.len());
+        for t in &m.textures {
+            let mips: Vec<&[u8]> = t.mips.iter().map(|r| pack.bytes(*r)).collect();
+            let extent = vk::Extent2D { width: t.width, height: t.height };
+            textures.push(
+                Image::sampled_with_mips(gpu, &t.name, vk_format(t.format), extent, &mips)
+                    .with_context(|| format!("uploading texture '{}'", t.name))?,
+            );
+        }
+        // Materials without a base colour texture sample this instead: no shader variants.
+        let white = Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?;
+
+        let mut sampler_info = vk::SamplerCreateInfo::default()
+            .mag_filter(vk::Filter::LINEAR)
+            .min_filter(vk::Filter::LINEAR)
+            .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+            .address_mode_u(vk::SamplerAddressMode::REPEAT)
+            .address_mode_v(vk::SamplerAddressMode::REPEAT)
+            .address_mode_w(vk::SamplerAddressMode::REPEAT)
+            .max_lod(vk::LOD_CLAMP_NONE);
+        if let Some(max) = gpu.caps.sampler_anisotropy {
+            sampler_info = sampler_info.anisotropy_enable(true).max_anisotropy(max.min(16.0));
+        }
+        let sampler = unsafe { gpu.device.create_sampler(&sampler_info, None)? };
+
+        let set_count = m.materials.len().max(1) as u32;
+        let pool_sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: set_count }];
+        let pool = unsafe {
+            gpu.device.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default().max_sets(set_count).pool_sizes(&pool_sizes),
+                None,
+            )?
+        };
+        let mut materials = Vec::with_capacity(m.materials.len());
+        for mat in &m.materials {
+            let layouts = [material_layout];
+            let set = unsafe {
+                gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0]
+            };
+            let view = match mat.base_color_texture {
+                Some(t) => textures[t as usize].view,
+                None => white.view,
+            };
+            let image_info = [vk::DescriptorImageInfo { sampler, image_view: view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+            let write = vk::WriteDescriptorSet::default()
+                .dst_set(set)
+                .dst_binding(0)
+                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .image_info(&image_info);
+            unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
+            materials.push(GpuMaterial {
+                base_color: mat.base_color,
+                alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
+                double_sided: mat.double_sided,
+                descriptor_set: set,
+            });
+        }
+
+        let world = world_transforms(&m.nodes);
+        let instances = m
+            .nodes
+            .iter()
+            .zip(&world)
+            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w }))
+            .collect();
+
+        Ok(GpuScene { meshes, materials, instances, vertex_buffer, index_buffer, textures, white, sampler, pool })
+    }
+
+    /// World-space bounds of every instance together (for framing the camera).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for i in &self.instances {
+            let m = &self.meshes[i.mesh as usize];
+            let (a, b) = transform_bounds(i.world, m.bounds_min, m.bounds_max);
+            lo = lo.min(a);
+            hi = hi.max(b);
+        }
+        if lo.x > hi.x {
+            (Vec3::splat(-1.0), Vec3::splat(1.0))
+        } else {
+            (lo, hi)
+        }
+    }
+
+    pub fn triangle_count(&self) -> u64 {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].submeshes.iter().map(|s| s.index_count as u64 / 3).sum::<u64>())
+            .sum()
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        unsafe {
+            gpu.device.destroy_descriptor_pool(self.pool, None);
+            gpu.device.destroy_sampler(self.sampler, None);
+        }
+        for t in &mut self.textures {
+            t.destroy(gpu);
+        }
+        self.white.destroy(gpu);
+        self.vertex_buffer.destroy(gpu);
+        self.index_buffer.destroy(gpu);
+    }
+}

@@ -1,0 +1,490 @@
+//! The windowed front end: winit window, Vulkan surface and swapchain, fly camera input.
+
+use crate::camera::Camera;
+use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
+use crate::renderer::{FrameTarget, Lighting, Renderer};
+use crate::scene::GpuScene;
+use anyhow::{anyhow, Context, Result};
+use ash::vk;
+use glam::Vec3;
+use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
+use std::collections::HashSet;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
+use winit::event::{ElementState, MouseButton, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+const FRAMES_IN_FLIGHT: usize = 2;
+
+pub struct WindowOptions {
+    pub gpu: GpuOptions,
+    pub width: u32,
+    pub height: u32,
+    /// Close after this many presented frames (for tests); run until closed when `None`.
+    pub max_frames: Option<u64>,
+    pub title: String,
+}
+
+/// What a finished windowed run reports.
+pub struct WindowRun {
+    pub frames: u64,
+    pub validation_errors: usize,
+    pub device_name: String,
+}
+
+/// Open a window and render `pack` until it is closed (or `max_frames` is reached).
+pub fn run(pack: &pack::Pack, opts: WindowOptions) -> Result<WindowRun> {
+    // Ctrl-C / SIGTERM close the window like the close button does, so the run still ends with
+    // its summary and a clean Vulkan teardown.
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+        eprintln!("demo: cannot install the Ctrl-C handler ({e}); closing the window still works");
+    }
+    let event_loop = EventLoop::new().map_err(|e| anyhow!("cannot open a window: {e}"))?;
+    let mut app = App { pack, opts, state: None, error: None, result: None, stop };
+    event_loop.run_app(&mut app).map_err(|e| anyhow!("event loop: {e}"))?;
+    if let Some(e) = app.error {
+        return Err(e);
+    }
+    app.result.ok_or_else(|| anyhow!("the window closed before the first frame"))
+}
+
+struct App<'a> {
+    pack: &'a pack::Pack,
+    opts: WindowOptions,
+    state: Option<State>,
+    error: Option<anyhow::Error>,
+    result: Option<WindowRun>,
+    stop: Arc<AtomicBool>,
+}
+
+/// Everything that exists while the window is open. Field order is destruction order.
+struct State {
+    swapchain: Swapchain,
+    renderer: Renderer,
+    scene: GpuScene,
+    frames: Frames,
+    window: Arc<Window>,
+    gpu: Gpu,
+    camera: Camera,
+    lighting: Lighting,
+    keys: HashSet<KeyCode>,
+    looking: bool,
+    last_cursor: Option<(f64, f64)>,
+    last_frame: Instant,
+    presented: u64,
+    needs_resize: bool,
+}
+
+impl ApplicationHandler for App<'_> {
+    fn resumed(&mut self, el: &ActiveEventLoop) {
+        if self.state.is_some() {
+            return;
+        }
+        match State::new(el, self.pack, &self.opts) {
+            Ok(s) => {
+                println!("window: {}x{} on {}", s.swapchain.extent.width, s.swapchain.extent.height, s.gpu.caps.device_name);
+                self.state = Some(s);
+            }
+            Err(e) => {
+                self.error = Some(e);
+                el.exit();
+            }
+        }
+    }
+
+    fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(s) = self.state.as_mut() else { return };
+        match event {
+            WindowEvent::CloseRequested => el.exit(),
+            WindowEvent::Resized(_) => s.needs_resize = true,
+            WindowEvent::KeyboardInput { event, .. } => {
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    if event.state == ElementState::Pressed {
+                        if code == KeyCode::Escape {
+                            el.exit();
+                        }
+                        s.keys.insert(code);
+                    } else {
+                        s.keys.remove(&code);
+                    }
+                }
+            }
+            WindowEvent::MouseInput { state, button: MouseButton::Left | MouseButton::Right, .. } => {
+                s.looking = state == ElementState::Pressed;
+                s.last_cursor = None;
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                if s.looking {
+                    if let Some((x, y)) = s.last_cursor {
+                        let sensitivity = 0.004;
+                        s.camera.rotate(-(position.x - x) as f32 * sensitivity, -(position.y - y) as f32 * sensitivity);
+                    }
+                    s.last_cursor = Some((position.x, position.y));
+                }
+            }
+            WindowEvent::RedrawRequested => {
+                match s.frame() {
+                    Ok(()) => {}
+                    Err(e) => {
+                        self.error = Some(e);
+                        el.exit();
+                        return;
+                    }
+                }
+                if s.presented == 10 {
+                    println!("window: presented 10 frames");
+                }
+                if self.opts.max_frames.is_some_and(|m| s.presented >= m) {
+                    el.exit();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, el: &ActiveEventLoop) {
+        if self.stop.load(Ordering::SeqCst) {
+            el.exit();
+            return;
+        }
+        if let Some(s) = &self.state {
+            s.window.request_redraw();
+        }
+    }
+
+    fn exiting(&mut self, _el: &ActiveEventLoop) {
+        if let Some(mut s) = self.state.take() {
+            s.gpu.wait_idle();
+            self.result = Some(WindowRun {
+                frames: s.presented,
+                validation_errors: s.gpu.validation().error_count(),
+                device_name: s.gpu.caps.device_name.clone(),
+            });
+            s.destroy();
+        }
+    }
+}
+
+impl State {
+    fn new(el: &ActiveEventLoop, pack: &pack::Pack, opts: &WindowOptions) -> Result<State> {
+        let attrs = Window::default_attributes()
+            .with_title(opts.title.clone())
+            .with_inner_size(PhysicalSize::new(opts.width, opts.height));
+        let window = Arc::new(el.create_window(attrs).context("creating the window")?);
+        let display = window.display_handle().map_err(|e| anyhow!("display handle: {e}"))?.as_raw();
+        let mut gpu_opts = opts.gpu.clone();
+        gpu_opts.surface_extensions = ash_window::enumerate_required_extensions(display)?.to_vec();
+        gpu_opts.surface_extensions.push(ash::khr::surface::NAME.as_ptr());
+        gpu_opts.surface_extensions.dedup();
+        let gpu = Gpu::new(&gpu_opts)?;
+        if !gpu.swapchain_capable {
+            return Err(anyhow!("{} cannot present to a window (no VK_KHR_swapchain)", gpu.caps.device_name));
+        }
+        let surface = unsafe {
+            ash_window::create_surface(
+                &gpu.entry,
+                &gpu.instance,
+                display,
+                window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw(),
+                None,
+            )?
+        };
+        let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
+        let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        let scene = match GpuScene::upload(&gpu, pack, renderer.material_layout) {
+            Ok(s) => s,
+            Err(e) => {
+                renderer.destroy(&gpu);
+                return Err(e);
+            }
+        };
+        let (min, max) = scene.bounds();
+        let frames = Frames::new(&gpu)?;
+        Ok(State {
+            swapchain,
+            renderer,
+            scene,
+            frames,
+            window,
+            gpu,
+            camera: Camera::framing(min, max),
+            lighting: Lighting::default(),
+            keys: HashSet::new(),
+            looking: false,
+            last_cursor: None,
+            last_frame: Instant::now(),
+            presented: 0,
+            needs_resize: false,
+        })
+    }
+
+    /// WASD to move, Q/E down/up, Shift to go faster; drag with a mouse button to look.
+    fn update_camera(&mut self, dt: f32) {
+        let (min, max) = self.scene.bounds();
+        let mut speed = ((max - min).length() * 0.4).max(1.0);
+        if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) {
+            speed *= 4.0;
+        }
+        let axis = |pos: KeyCode, neg: KeyCode| (self.keys.contains(&pos) as i32 - self.keys.contains(&neg) as i32) as f32;
+        let local = Vec3::new(axis(KeyCode::KeyD, KeyCode::KeyA), axis(KeyCode::KeyE, KeyCode::KeyQ), axis(KeyCode::KeyW, KeyCode::KeyS));
+        self.camera.translate_local(local * speed * dt);
+    }
+
+    fn frame(&mut self) -> Result<()> {
+        let now = Instant::now();
+        let dt = (now - self.last_frame).as_secs_f32().min(0.1);
+        self.last_frame = now;
+        self.update_camera(dt);
+        if self.needs_resize {
+            self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
+            self.needs_resize = false;
+        }
+        if self.swapchain.extent.width == 0 || self.swapchain.extent.height == 0 {
+            return Ok(()); // minimised
+        }
+        let d = &self.gpu.device;
+        let slot = (self.presented % FRAMES_IN_FLIGHT as u64) as usize;
+        let (cb, fence, acquired) = (self.frames.cbs[slot], self.frames.fences[slot], self.frames.acquired[slot]);
+        unsafe { d.wait_for_fences(&[fence], true, u64::MAX)? };
+        let image_index = match unsafe {
+            self.swapchain.loader.acquire_next_image(self.swapchain.swapchain, u64::MAX, acquired, vk::Fence::null())
+        } {
+            Ok((i, _)) => i,
+            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
+                self.needs_resize = true;
+                return Ok(());
+            }
+            Err(e) => return Err(anyhow!("acquiring a swapchain image: {e}")),
+        };
+        let i = image_index as usize;
+        let target = FrameTarget {
+            color_image: self.swapchain.images[i],
+            color_view: self.swapchain.views[i],
+            depth_image: self.swapchain.depth.image,
+            depth_view: self.swapchain.depth.view,
+            extent: self.swapchain.extent,
+        };
+        let aspect = target.extent.width as f32 / target.extent.height as f32;
+        unsafe {
+            d.reset_fences(&[fence])?;
+            d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
+            d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
+        }
+        self.renderer.record(&self.gpu, cb, slot, &self.scene, self.camera.view_proj(aspect), self.camera.position, &self.lighting, &target);
+        barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
+        let rendered = self.swapchain.rendered[i];
+        unsafe {
+            d.end_command_buffer(cb)?;
+            let waits = [vk::SemaphoreSubmitInfo::default().semaphore(acquired).stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
+            let signals = [vk::SemaphoreSubmitInfo::default().semaphore(rendered).stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
+            let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(cb)];
+            let submit = [vk::SubmitInfo2::default().wait_semaphore_infos(&waits).command_buffer_infos(&cbs).signal_semaphore_infos(&signals)];
+            d.queue_submit2(self.gpu.queue, &submit, fence)?;
+            let swapchains = [self.swapchain.swapchain];
+            let indices = [image_index];
+            let wait = [rendered];
+            let present = vk::PresentInfoKHR::default().wait_semaphores(&wait).swapchains(&swapchains).image_indices(&indices);
+            match self.swapchain.loader.queue_present(self.gpu.queue, &present) {
+                Ok(false) => {}
+                Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.needs_resize = true,
+                Err(e) => return Err(anyhow!("presenting: {e}")),
+            }
+        }
+        self.presented += 1;
+        Ok(())
+    }
+
+    fn destroy(&mut self) {
+        self.gpu.wait_idle();
+        self.frames.destroy(&self.gpu);
+        self.scene.destroy(&self.gpu);
+        self.renderer.destroy(&self.gpu);
+        self.swapchain.destroy(&self.gpu);
+    }
+}
+
+/// Per-frame-in-flight command buffers and synchronisation.
+struct Frames {
+    pool: vk::CommandPool,
+    cbs: Vec<vk::CommandBuffer>,
+    fences: Vec<vk::Fence>,
+    acquired: Vec<vk::Semaphore>,
+}
+
+impl Frames {
+    fn new(gpu: &Gpu) -> Result<Frames> {
+        let d = &gpu.device;
+        unsafe {
+            let pool = d.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(gpu.queue_family)
+                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
+                None,
+            )?;
+            let cbs = d.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(FRAMES_IN_FLIGHT as u32),
+            )?;
+            let mut fences = Vec::new();
+            let mut acquired = Vec::new();
+            for _ in 0..FRAMES_IN_FLIGHT {
+                fences.push(d.create_fence(&vk::FenceCreateInfo::default().flags(vk::FenceCreateFlags::SIGNALED), None)?);
+                acquired.push(d.create_semaphore(&vk::SemaphoreCreateInfo::default(), None)?);
+            }
+            Ok(Frames { pool, cbs, fences, acquired })
+        }
+    }
+
+    fn destroy(&mut self, gpu: &Gpu) {
+        unsafe {
+            for &f in &self.fences {
+                gpu.device.destroy_fence(f, None);
+            }
+            for &s in &self.acquired {
+                gpu.device.destroy_semaphore(s, None);
+            }
+            gpu.device.destroy_command_pool(self.pool, None);
+        }
+    }
+}
+
+struct Swapchain {
+    surface_loader: ash::khr::surface::Instance,
+    loader: ash::khr::swapchain::Device,
+    surface: vk::SurfaceKHR,
+    swapchain: vk::SwapchainKHR,
+    format: vk::Format,
+    color_space: vk::ColorSpaceKHR,
+    extent: vk::Extent2D,
+    images: Vec<vk::Image>,
+    views: Vec<vk::ImageView>,
+    /// One "rendering finished" semaphore per swapchain image: presentation holds it until that
+    /// image is acquired again, so it cannot be shared across frames in flight.
+    rendered: Vec<vk::Semaphore>,
+    depth: Image,
+}
+
+impl Swapchain {
+    fn new(gpu: &Gpu, surface: vk::SurfaceKHR, size: PhysicalSize<u32>) -> Result<Swapchain> {
+        let surface_loader = ash::khr::surface::Instance::new(&gpu.entry, &gpu.instance);
+        let supported = unsafe { surface_loader.get_physical_device_surface_support(gpu.physical_device, gpu.queue_family, surface)? };
+        if !supported {
+            return Err(anyhow!("{} cannot present to this window's surface", gpu.caps.device_name));
+        }
+        let formats = unsafe { surface_loader.get_physical_device_surface_formats(gpu.physical_device, surface)? };
+        let format = formats
+            .iter()
+            .find(|f| {
+                matches!(f.format, vk::Format::B8G8R8A8_SRGB | vk::Format::R8G8B8A8_SRGB)
+                    && f.color_space == vk::ColorSpaceKHR::SRGB_NONLINEAR
+            })
+            .or(formats.first())
+            .copied()
+            .ok_or_else(|| anyhow!("the surface offers no formats"))?;
+        let loader = ash::khr::swapchain::Device::new(&gpu.instance, &gpu.device);
+        let mut sc = Swapchain {
+            surface_loader,
+            loader,
+            surface,
+            swapchain: vk::SwapchainKHR::null(),
+            format: format.format,
+            color_space: format.color_space,
+            extent: vk::Extent2D::default(),
+            images: vec![],
+            views: vec![],
+            rendered: vec![],
+            depth: Image::new(gpu, "placeholder depth", gpu.caps.depth_format, vk::Extent2D { width: 1, height: 1 }, 1, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?,
+        };
+        sc.build(gpu, size)?;
+        Ok(sc)
+    }
+
+    fn build(&mut self, gpu: &Gpu, size: PhysicalSize<u32>) -> Result<()> {
+        let caps = unsafe { self.surface_loader.get_physical_device_surface_capabilities(gpu.physical_device, self.surface)? };
+        self.extent = if caps.current_extent.width != u32::MAX {
+            caps.current_extent
+        } else {
+            vk::Extent2D {
+                width: size.width.clamp(caps.min_image_extent.width, caps.max_image_extent.width),
+                height: size.height.clamp(caps.min_image_extent.height, caps.max_image_extent.height),
+            }
+        };
+        if self.extent.width == 0 || self.extent.height == 0 {
+            return Ok(());
+        }
+        let mut count = caps.min_image_count + 1;
+        if caps.max_image_count > 0 {
+            count = count.min(caps.max_image_count);
+        }
+        let old = self.swapchain;
+        let info = vk::SwapchainCreateInfoKHR::default()
+            .surface(self.surface)
+            .min_image_count(count)
+            .image_format(self.format)
+            .image_color_space(self.color_space)
+            .image_extent(self.extent)
+            .image_array_layers(1)
+            .image_usage(vk::ImageUsageFlags::COLOR_ATTACHMENT)
+            .image_sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .pre_transform(caps.current_transform)
+            .composite_alpha(vk::CompositeAlphaFlagsKHR::OPAQUE)
+            .present_mode(vk::PresentModeKHR::FIFO)
+            .clipped(true)
+            .old_swapchain(old);
+        self.swapchain = unsafe { self.loader.create_swapchain(&info, None)? };
+        self.destroy_images(gpu);
+        if old != vk::SwapchainKHR::null() {
+            unsafe { self.loader.destroy_swapchain(old, None) };
+        }
+        self.images = unsafe { self.loader.get_swapchain_images(self.swapchain)? };
+        for &image in &self.images {
+            let view = unsafe {
+                gpu.device.create_image_view(
+                    &vk::ImageViewCreateInfo::default()
+                        .image(image)
+                        .view_type(vk::ImageViewType::TYPE_2D)
+                        .format(self.format)
+                        .subresource_range(full_range(vk::ImageAspectFlags::COLOR, 1)),
+                    None,
+                )?
+            };
+            self.views.push(view);
+            self.rendered.push(unsafe { gpu.device.create_semaphore(&vk::SemaphoreCreateInfo::default(), None)? });
+        }
+        self.depth.destroy(gpu);
+        self.depth = Image::new(gpu, "window depth", gpu.caps.depth_format, self.extent, 1, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?;
+        Ok(())
+    }
+
+    fn recreate(&mut self, gpu: &Gpu, size: PhysicalSize<u32>) -> Result<()> {
+        gpu.wait_idle();
+        self.build(gpu, size)
+    }
+
+    fn destroy_images(&mut self, gpu: &Gpu) {
+        unsafe {
+            for v in self.views.drain(..) {
+                gpu.device.destroy_image_view(v, None);
+            }
+            for s in self.rendered.drain(..) {
+                gpu.device.destroy_semaphore(s, None);
+            }
+        }
+        self.images.clear();
+    }
+
+    fn destroy(&mut self, gpu: &Gpu) {
+        self.destroy_images(gpu);
+        self.depth.destroy(gpu);
+        unsafe {
+            self.loader.destroy_swapchain(self.swapchain, None);
+            self.surface_loader.destroy_surface(self.surface, None);
+        }
+    }
+}

@@ -1,0 +1,28 @@
+#version 450
+#include "frame.glsl"
+
+layout(location = 0) in vec3 in_position;
+layout(location = 1) in vec3 in_normal;
+layout(location = 3) in vec2 in_uv0;
+layout(location = 5) in vec4 in_color;
+// Locations 2 (tangent) and 4 (lightmap UV) exist in the vertex format but are not read yet.
+
+// 128 bytes: the minimum every device guarantees. Mirrors `DrawPush` in renderer.rs.
+layout(push_constant) uniform Draw {
+    mat4 model;
+    vec4 normal_cols[3]; // inverse-transpose of model's 3x3 (handles non-uniform and mirrored scale)
+    vec4 base_color;
+} draw;
+
+layout(location = 0) out vec3 out_normal;
+layout(location = 1) out vec2 out_uv0;
+layout(location = 2) out vec4 out_color;
+
+void main() {
+    vec4 world = draw.model * vec4(in_position, 1.0);
+    mat3 normal_matrix = mat3(draw.normal_cols[0].xyz, draw.normal_cols[1].xyz, draw.normal_cols[2].xyz);
+    out_normal = normal_matrix * in_normal;
+    out_uv0 = in_uv0;
+    out_color = in_color;
+    gl_Position = frame.view_proj * world;
+}

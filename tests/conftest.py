@@ -1,0 +1,52 @@
+"""Fixtures shared by the end-to-end tests."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+COOK = REPO / ".venv" / "bin" / "cook"
+DEMO = REPO / "target" / "release" / "demo"
+
+
+def gltf_samples_path() -> Path:
+    """Where the Khronos sample models live: $GLTF_SAMPLES_DIR, else <repo>/../shared/gltf-samples."""
+    return Path(os.environ.get("GLTF_SAMPLES_DIR") or REPO.parent / "shared" / "gltf-samples")
+
+
+@pytest.fixture(scope="session")
+def gltf_samples() -> Path:
+    d = gltf_samples_path()
+    if not d.is_dir():
+        pytest.skip(f"glTF samples not found at {d} (set GLTF_SAMPLES_DIR to run these tests)")
+    return d
+
+
+@pytest.fixture
+def run_cook():
+    """Run the installed `cook` console script: run_cook(*args) -> CompletedProcess (text)."""
+    if not COOK.exists():
+        pytest.fail(f"{COOK} is missing: build and install the cooker first "
+                    "(VIRTUAL_ENV=$PWD/.venv .venv/bin/maturin develop --release -m asset_pipeline/Cargo.toml)")
+
+    def run(*args: object, **kwargs) -> subprocess.CompletedProcess:
+        return subprocess.run([str(COOK), *map(str, args)], capture_output=True, text=True, timeout=300, **kwargs)
+
+    return run
+
+
+def run_demo(args, timeout=300, env=None) -> subprocess.CompletedProcess:
+    """Run the built `demo` binary (text output captured)."""
+    assert DEMO.exists(), f"{DEMO} is built by `make build` (a prerequisite of `make test`)"
+    return subprocess.run([str(DEMO), *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def cook_ok(source: Path, out: Path) -> None:
+    """Cook `source` to `out` with the CLI and require success."""
+    result = subprocess.run([str(COOK), str(source), "-o", str(out)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, f"cook {source} failed ({result.returncode}):\n{result.stderr}"
+    assert out.exists()

@@ -1,0 +1,126 @@
+"""Cook -> render headless on the real Vulkan device (lavapipe in CI) -> compare.
+
+Every `demo` run here has the validation layer on; a validation error makes demo exit with 3,
+which fails the test that caused it.
+"""
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import DEMO, REPO, cook_ok, run_demo
+
+REFERENCE_DIR = REPO / "tests" / "reference"
+
+# Reference comparison tolerance, per pixel and channel, in 8-bit sRGB steps. Rasterisation and
+# filtering can differ by a step between Mesa versions or GPUs; anything more is a real change.
+TOLERANCE = 3
+# Fraction of pixels allowed beyond TOLERANCE (triangle edges may rasterise a pixel differently).
+OUTLIER_FRACTION = 0.002
+
+
+def render_headless(pack: Path, out: Path, width: int, height: int, frames: int = 1) -> subprocess.CompletedProcess:
+    result = run_demo([str(pack), "--headless", "--validation", "--frames", str(frames), "--width", str(width), "--height", str(height), "--screenshot", str(out)])
+    assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
+    assert "validation errors: 0" in result.stdout, result.stdout
+    assert "[vulkan validation error]" not in result.stderr, result.stderr
+    return result
+
+
+def load_rgb(path: Path) -> np.ndarray:
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
+
+
+def compare_to_reference(image: Path, reference: Path):
+    got, want = load_rgb(image), load_rgb(reference)
+    assert got.shape == want.shape, f"{image} is {got.shape}, reference {reference} is {want.shape}"
+    diff = np.abs(got - want).max(axis=-1)
+    outliers = (diff > TOLERANCE).mean()
+    assert outliers <= OUTLIER_FRACTION, (
+        f"{image} differs from {reference}: {outliers:.4%} of pixels beyond {TOLERANCE}/255 "
+        f"(allowed {OUTLIER_FRACTION:.2%}), largest difference {diff.max()}; "
+        f"if the change is intended, regenerate with UPDATE_REFERENCE=1"
+    )
+
+
+@pytest.fixture(scope="module")
+def box_textured_pack(gltf_samples, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("box") / "BoxTextured.pack"
+    cook_ok(gltf_samples / "BoxTextured" / "BoxTextured.gltf", out)
+    return out
+
+
+def test_box_textured_matches_reference_and_renders_identically_twice(box_textured_pack, tmp_path):
+    first, second = tmp_path / "first.png", tmp_path / "second.png"
+    render_headless(box_textured_pack, first, 320, 240)
+    render_headless(box_textured_pack, second, 320, 240)
+    assert first.read_bytes() == second.read_bytes(), "two renders of the same pack differ"
+
+    reference = REFERENCE_DIR / "BoxTextured_320x240.png"
+    if os.environ.get("UPDATE_REFERENCE") == "1":
+        reference.parent.mkdir(exist_ok=True)
+        reference.write_bytes(first.read_bytes())
+    compare_to_reference(first, reference)
+
+
+def test_box_textured_shows_the_texture(box_textured_pack, tmp_path):
+    # Independent of the stored reference: the box covers the centre of the frame, and its faces
+    # show the texture's two colours (the sample's texture is a green logo on white-ish ground),
+    # not a flat colour and not the clear colour.
+    out = tmp_path / "box.png"
+    render_headless(box_textured_pack, out, 320, 240)
+    img = load_rgb(out)
+    clear = img[0, 0]
+    centre = img[80:160, 110:210]
+    covered = (np.abs(centre - clear).max(axis=-1) > 10).mean()
+    assert covered > 0.95, f"the box covers only {covered:.0%} of the centre"
+    distinct = len({tuple(p // 32) for p in centre.reshape(-1, 3)})
+    assert distinct >= 4, f"the box shows {distinct} colour classes: is the texture missing?"
+
+
+def test_demo_cooks_and_renders_every_sample(gltf_samples, tmp_path):
+    # Every Khronos sample we ship with must cook and render without a validation error.
+    for gltf in sorted(gltf_samples.glob("*/*.gltf")):
+        pack = tmp_path / (gltf.stem + ".pack")
+        cook_ok(gltf, pack)
+        render_headless(pack, tmp_path / (gltf.stem + ".png"), 160, 120)
+
+
+def test_project_demo_content_renders(tmp_path):
+    pack = REPO / "build" / "demo.pack"
+    assert pack.exists(), "build/demo.pack is made by `make cook` (a prerequisite of `make test`)"
+    out = tmp_path / "demo.png"
+    result = render_headless(pack, out, 320, 180, frames=3)
+    assert "instances" in result.stdout
+    img = load_rgb(out)
+    assert len({tuple(p // 16) for p in img.reshape(-1, 3)}) > 20, "the demo scene renders as a few flat colours"
+
+
+def test_demo_reports_bad_packs_with_exit_2(tmp_path):
+    cases = {
+        "missing.pack": None,
+        "not-a-pack.pack": b"hello, I am not a pack\n",
+        "truncated.pack": b"GAMEPACK\x01\x00\x00\x00",
+    }
+    for name, content in cases.items():
+        path = tmp_path / name
+        if content is not None:
+            path.write_bytes(content)
+        result = run_demo([str(path), "--headless", "--frames", "1"])
+        assert result.returncode == 2, f"{name}: exit {result.returncode}\n{result.stderr}"
+        assert str(path) in result.stderr and "panicked" not in result.stderr, result.stderr
+    assert "not a pack" in run_demo([str(tmp_path / "not-a-pack.pack"), "--headless"]).stderr
+    assert "truncated" in run_demo([str(tmp_path / "truncated.pack"), "--headless"]).stderr
+
+
+def test_demo_rejects_bad_arguments():
+    for args in (["--frames"], ["--frames", "x"], ["--width", "0"], ["--bogus"]):
+        result = run_demo(args)
+        assert result.returncode == 2, f"{args}: exit {result.returncode}"
+        assert "demo: error:" in result.stderr and "usage:" in result.stderr
+        assert "panicked" not in result.stderr
+    assert DEMO.exists()
