@@ -10,3 +10,38 @@ pub fn module(device: &ash::Device, spv: &[u8]) -> Result<vk::ShaderModule> {
     let words = ash::util::read_spv(&mut std::io::Cursor::new(spv))?;
     Ok(unsafe { device.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)? })
 }
+
+#[cfg(test)]
+#[path = "../build/shader_compile.rs"]
+mod shader_compile;
+
+#[cfg(test)]
+mod tests {
+    use super::shader_compile::compile_all;
+
+    #[test]
+    fn a_shader_error_names_the_file_and_carries_glslcs_message() {
+        let dir = std::env::temp_dir().join(format!("shader-test-{}", std::process::id()));
+        let out = dir.join("out");
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(dir.join("good.frag"), "#version 450\nlayout(location=0) out vec4 c;\nvoid main() { c = vec4(1.0); }\n").unwrap();
+        std::fs::write(dir.join("broken.vert"), "#version 450\nvoid main() { gl_Position = undefined_thing; }\n").unwrap();
+        let failures = compile_all("glslc", &dir, &out).unwrap_err();
+        assert_eq!(failures.len(), 1, "{failures:?}");
+        let msg = &failures[0];
+        assert!(msg.contains("broken.vert"), "{msg}");
+        assert!(msg.contains("undefined_thing") && msg.contains("error"), "glslc's diagnostic is missing: {msg}");
+        assert!(out.join("good.frag.spv").exists(), "the good shader should still compile");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_project_shaders_compile() {
+        let shaders = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shaders");
+        let out = std::env::temp_dir().join(format!("shader-ok-{}", std::process::id()));
+        std::fs::create_dir_all(&out).unwrap();
+        let compiled = compile_all("glslc", &shaders, &out).unwrap();
+        assert!(compiled.len() >= 2);
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}

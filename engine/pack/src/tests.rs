@@ -150,3 +150,18 @@ fn atomic_write_leaves_no_temporary_and_replaces_whole() {
     assert!(matches!(write_pack_atomic(&sample(), &bad), Err(PackError::Io(_))));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn concurrent_writes_to_one_path_never_leave_a_broken_file() {
+    let dir = std::env::temp_dir().join(format!("pack-race-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("a.pack");
+    std::thread::scope(|s| {
+        for _ in 0..8 {
+            s.spawn(|| write_pack_atomic(&sample(), &path).unwrap());
+        }
+    });
+    assert_eq!(Pack::read_file(&path).unwrap(), sample());
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "temporary files left behind");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

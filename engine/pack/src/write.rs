@@ -3,6 +3,10 @@
 use crate::{align_up, BufferRange, Manifest, Pack, PackError, DATA_ALIGN};
 use std::io::Write;
 use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Makes temporary names unique across threads of one process (the pid covers processes).
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
 /// Accumulates the data blob while the cooker adds meshes and textures.
 #[derive(Debug, Default)]
@@ -42,7 +46,8 @@ pub fn write_pack_atomic(pack: &Pack, path: &Path) -> Result<(), PackError> {
         _ => Path::new("."),
     };
     let name = path.file_name().ok_or_else(|| PackError::Io(format!("{}: not a file path", path.display())))?;
-    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    let unique = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let tmp = dir.join(format!(".{}.tmp-{}-{unique}", name.to_string_lossy(), std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(&bytes)?;
