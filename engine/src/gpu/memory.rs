@@ -19,18 +19,13 @@ impl Buffer {
             d.create_buffer(&vk::BufferCreateInfo::default().size(size.max(4)).usage(usage), None)?
         };
         let requirements = unsafe { d.get_buffer_memory_requirements(buffer) };
-        let allocation = gpu
-            .allocator
-            .lock()
-            .unwrap()
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements,
-                location,
-                linear: true,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            })
-            .map_err(|e| anyhow!("allocating {size} bytes for buffer '{name}': {e}"))?;
+        let allocation = match allocate(gpu, name, requirements, location, true) {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe { d.destroy_buffer(buffer, None) };
+                return Err(e);
+            }
+        };
         // SAFETY: the allocation is bound once and freed only after the buffer is destroyed.
         unsafe { d.bind_buffer_memory(buffer, allocation.memory(), allocation.offset())? };
         Ok(Buffer { buffer, size, allocation: Some(allocation) })
@@ -100,18 +95,13 @@ impl Image {
             .initial_layout(vk::ImageLayout::UNDEFINED);
         let image = unsafe { d.create_image(&info, None)? };
         let requirements = unsafe { d.get_image_memory_requirements(image) };
-        let allocation = gpu
-            .allocator
-            .lock()
-            .unwrap()
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements,
-                location: MemoryLocation::GpuOnly,
-                linear: false,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            })
-            .map_err(|e| anyhow!("allocating image '{name}': {e}"))?;
+        let allocation = match allocate(gpu, name, requirements, MemoryLocation::GpuOnly, false) {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe { d.destroy_image(image, None) };
+                return Err(e);
+            }
+        };
         unsafe { d.bind_image_memory(image, allocation.memory(), allocation.offset())? };
         let view = unsafe {
             d.create_image_view(
@@ -180,6 +170,15 @@ impl Image {
             let _ = gpu.allocator.lock().unwrap().free(a);
         }
     }
+}
+
+/// Memory for one buffer (`linear`) or optimally tiled image from the shared allocator.
+fn allocate(gpu: &Gpu, name: &str, requirements: vk::MemoryRequirements, location: MemoryLocation, linear: bool) -> Result<Allocation> {
+    gpu.allocator
+        .lock()
+        .unwrap()
+        .allocate(&AllocationCreateDesc { name, requirements, location, linear, allocation_scheme: AllocationScheme::GpuAllocatorManaged })
+        .map_err(|e| anyhow!("allocating {} bytes for '{name}': {e}", requirements.size))
 }
 
 pub fn full_range(aspect: vk::ImageAspectFlags, mip_levels: u32) -> vk::ImageSubresourceRange {
