@@ -72,14 +72,16 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
     out = tmp_path / "box.pack"
     r = run_cook(gltf_samples / "BoxTextured" / "BoxTextured.gltf", "-o", out)
     assert r.returncode == 0, r.stderr
-    assert r.stderr == "", "no progress bar when stderr is not a terminal"
+    # Not a terminal: one plain line per stage, no bar.
+    assert "%|" not in r.stderr and all(l.startswith("cook: ") for l in r.stderr.splitlines()), r.stderr
+    assert "cook: import: 1/1" in r.stderr and "cook: write: 1/1" in r.stderr
     assert r.stdout.splitlines() == [f"cook: wrote {out}: 1 mesh, 12 triangles, 1 texture, {out.stat().st_size} bytes"]
     s = asset_pipeline.read_pack_summary(out)
     assert s == {
         "meshes": 1, "submeshes": 1, "vertices": 24, "indices": 36, "triangles": 12, "materials": 1,
-        "textures": 1, "texture_sizes": [(256, 256)], "nodes": 2, "bytes": out.stat().st_size,
+        "textures": 1, "texture_sizes": [[256, 256]], "nodes": 2, "bytes": out.stat().st_size,
     }
-    assert [p.name for p in tmp_path.iterdir()] == ["box.pack"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "box.pack", "box.report.md"]
 
 
 @pytest.mark.parametrize(
@@ -90,10 +92,10 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
 def test_every_sample_cooks(source, tmp_path):
     out = tmp_path / f"{source.stem}.pack"
     calls = []
-    summary = asset_pipeline.cook(source, out, progress=lambda what, f: calls.append(f))
+    summary = asset_pipeline.cook(source, out, progress=lambda stage, done, total: calls.append((stage, done, total)))
     assert summary["meshes"] >= 1 and summary["triangles"] >= 1
     assert asset_pipeline.read_pack_summary(out) == summary
-    assert calls[0] == 0.0 and calls[-1] == 1.0 and calls == sorted(calls)
+    assert calls[0] == ("import", 0, 1) and calls[-1] == ("write", 1, 1), calls
 
 
 def test_broken_sample_accessor(gltf_samples, run_cook, tmp_path):
@@ -195,7 +197,7 @@ def test_successful_cook_replaces_existing_output(run_cook, tmp_path):
     out.write_bytes(b"stale")
     assert run_cook(src, "-o", out).returncode == 0
     assert asset_pipeline.read_pack_summary(out)["vertices"] == 3
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["tri.gltf", "tri.pack"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "tri.gltf", "tri.pack", "tri.report.md"]
 
 
 def test_api_raises_cook_error_with_the_message(tmp_path):
@@ -209,7 +211,7 @@ def test_progress_callback_error_aborts_without_writing(tmp_path):
     src = write_json(tmp_path / "tri.gltf", triangle_gltf())
     out = tmp_path / "tri.pack"
 
-    def boom(what: str, fraction: float) -> None:
+    def boom(stage: str, done: int, total: int) -> None:
         raise KeyError("stop")
 
     with pytest.raises(KeyError, match="stop"):
@@ -240,4 +242,4 @@ def test_progress_bar_only_on_a_terminal(tmp_path):
                 break
             shown += chunk
     assert r.returncode == 0
-    assert b"tri.gltf:" in shown and b"%|" in shown, shown
+    assert b"import" in shown and b"write" in shown and b"%|" in shown, shown

@@ -91,8 +91,8 @@ def test_demo_cooks_and_renders_every_sample(gltf_samples, tmp_path):
 
 
 def test_project_demo_content_renders(tmp_path):
-    pack = REPO / "build" / "demo.pack"
-    assert pack.exists(), "build/demo.pack is made by `make cook` (a prerequisite of `make test`)"
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
     out = tmp_path / "demo.png"
     result = render_headless(pack, out, 320, 180, frames=3)
     assert "instances" in result.stdout

@@ -45,8 +45,8 @@ def xvfb():
 
 
 def test_demo_window_shows_the_scene(xvfb, tmp_path):
-    pack = REPO / "build" / "demo.pack"
-    assert pack.exists(), "build/demo.pack is made by `make cook`"
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook`"
     env = {**os.environ, "DISPLAY": xvfb, "ENGINE_VALIDATION": "1"}
     env.pop("WAYLAND_DISPLAY", None)
     demo = subprocess.Popen(

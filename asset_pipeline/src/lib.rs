@@ -14,7 +14,7 @@ create_exception!(
     "A cook failed. str(e) is one line naming the file, the object and the problem."
 );
 
-fn raise(e: cook_core::CookError) -> PyErr {
+pub(crate) fn raise(e: cook_core::CookError) -> PyErr {
     CookError::new_err(e.to_string())
 }
 
@@ -50,7 +50,7 @@ fn read_pack_summary(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyDict>> {
     summary(py, &cook_core::Summary::of(&pack, bytes))
 }
 
-fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyDict>> {
+pub(crate) fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyDict>> {
     let d = PyDict::new(py);
     d.set_item("meshes", s.meshes)?;
     d.set_item("submeshes", s.submeshes)?;
@@ -65,11 +65,20 @@ fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyDict>> {
     Ok(d.unbind())
 }
 
+// Each area of the core has its own bindings module with a `register` function; add new ones
+// here (one `mod` line and one `register` line).
+mod scene;
+mod uv_raster;
+mod measure;
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CookError", m.py().get_type::<CookError>())?;
     m.add("COOKER", cook_core::COOKER)?;
     m.add_function(wrap_pyfunction!(cook_gltf, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_summary, m)?)?;
+    scene::register(m)?;
+    uv_raster::register(m)?;
+    measure::register(m)?;
     Ok(())
 }

@@ -64,6 +64,24 @@ impl Camera {
         }
     }
 
+    /// The camera a pack asks for: at its `player` spawn point (eye height above it, looking
+    /// along the spawn's rotation) when it has one, else framing the scene's bounds.
+    pub fn for_pack(manifest: &pack::Manifest, min: Vec3, max: Vec3) -> Camera {
+        const EYE_HEIGHT_M: f32 = 1.7;
+        let Some(spawn) = manifest.spawns.iter().find(|s| s.kind == "player") else {
+            return Camera::framing(min, max);
+        };
+        let rotation = glam::Quat::from_array(spawn.rotation).normalize();
+        let forward = rotation * Vec3::NEG_Z;
+        Camera {
+            position: Vec3::from(spawn.position) + Vec3::Y * EYE_HEIGHT_M,
+            yaw: (-forward.x).atan2(-forward.z),
+            pitch: forward.y.clamp(-1.0, 1.0).asin(),
+            fov_y: 70f32.to_radians(),
+            near: 0.05,
+        }
+    }
+
     /// Move relative to the view: `local` is (right, up, forward) in metres.
     pub fn translate_local(&mut self, local: Vec3) {
         self.position += self.right() * local.x + Vec3::Y * local.y + self.forward() * local.z;
@@ -118,6 +136,18 @@ mod tests {
         // pipeline.md T2.1: e=(0,0,5) looking at the origin sends the origin to (0,0,-5).
         let o = c.view().transform_point3(Vec3::ZERO);
         assert!((o - Vec3::new(0.0, 0.0, -5.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn player_spawn_places_the_camera_at_eye_height_looking_along_its_rotation() {
+        let mut m = pack::Manifest::default();
+        assert_eq!(Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE), Camera::framing(Vec3::ZERO, Vec3::ONE));
+        // Rotated 90 degrees about +Y: -Z turns into -X.
+        let q = glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        m.spawns.push(pack::Spawn { name: "p".into(), kind: "player".into(), position: [1.0, 0.0, 2.0], rotation: q.to_array(), params: Default::default() });
+        let c = Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE);
+        assert!((c.position - Vec3::new(1.0, 1.7, 2.0)).length() < 1e-6);
+        assert!((c.forward() - Vec3::NEG_X).length() < 1e-5, "{}", c.forward());
     }
 
     #[test]

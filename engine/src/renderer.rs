@@ -45,6 +45,22 @@ impl Default for Lighting {
     }
 }
 
+impl Lighting {
+    /// The stand-in lighting for a pack: its first sun's direction and tint when it has one.
+    pub fn for_pack(manifest: &pack::Manifest) -> Lighting {
+        let mut l = Lighting::default();
+        if let Some(sun) = manifest.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
+            let towards_sun = -Vec3::from(sun.direction);
+            if towards_sun.length_squared() > 0.0 {
+                l.sun_dir = towards_sun.normalize();
+            }
+            let tint = Vec3::from(sun.color);
+            l.sun_color = tint / tint.max_element().max(1e-6) * l.sun_color.x;
+        }
+        l
+    }
+}
+
 pub const CLEAR_COLOR: [f32; 4] = [0.32, 0.42, 0.55, 1.0];
 
 /// The attachments one frame renders into.

@@ -7,7 +7,7 @@ use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
-use pack::{Material, Mesh, Node, Pack, PackBuilder, Submesh, Texture, TextureFormat, Vertex};
+use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Texture, TextureFormat, Vertex};
 
 fn gpu() -> Gpu {
     // Tests always validate; ENGINE_DEVICE can still point them at a real GPU.
@@ -65,13 +65,17 @@ fn cube_pack(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> P
     b.manifest.materials.push(Material { base_color_texture: Some(0), ..material });
     b.manifest.meshes.push(Mesh {
         name: "cube".into(),
-        vertices,
-        vertex_count: verts.len() as u32,
-        indices,
-        index_count: idx.len() as u32,
-        submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0 }],
+        lods: vec![MeshLod {
+            vertices,
+            vertex_count: verts.len() as u32,
+            indices,
+            index_count: idx.len() as u32,
+            submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0, lightmap_page: None }],
+            error: 0.0,
+        }],
         bounds_min: [-0.5; 3],
         bounds_max: [0.5; 3],
+        is_static: false,
     });
     for (i, m) in placements.iter().enumerate() {
         b.manifest.nodes.push(Node { name: format!("cube{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });

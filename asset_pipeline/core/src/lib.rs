@@ -6,24 +6,42 @@
 
 mod accessor;
 mod error;
+pub mod ir;
 mod load;
 mod material;
 mod mesh;
+pub mod measure;
+pub mod pack_build;
 mod scene;
+pub mod uv_raster;
+pub mod wire;
 
 pub use error::CookError;
 pub use pack;
 
-use pack::{Pack, PackBuilder, PackError};
+use ir::SceneIr;
+use pack::{Pack, PackError};
 use std::collections::HashSet;
 use std::path::Path;
 
 /// Written into every pack's manifest as provenance.
 pub const COOKER: &str = concat!("cook_core ", env!("CARGO_PKG_VERSION"));
 
-/// Cook a .gltf or .glb file into a pack in memory. `progress` is called with what is being
-/// worked on and the fraction done (0..=1).
+/// Cook a .gltf or .glb file into a pack in memory (import, then write; no other stages).
 pub fn cook_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<Pack, CookError> {
+    let scene = import_gltf(source, progress)?;
+    build_pack(&scene)
+}
+
+/// The pack for a scene IR; a failure here is a cooker bug or bad data from a stage, reported
+/// against the scene's source file.
+pub fn build_pack(scene: &SceneIr) -> Result<Pack, CookError> {
+    pack_build::build_pack(scene, COOKER).map_err(|e| CookError::invalid(&scene.source, e))
+}
+
+/// Import a .gltf or .glb file into the scene IR. `progress` is called with what is being
+/// worked on and the fraction done (0..=1).
+pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<SceneIr, CookError> {
     let file = source.display().to_string();
     let invalid = |problem: String| CookError::invalid(&file, problem);
     progress("reading", 0.0);
@@ -42,22 +60,37 @@ pub fn cook_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<P
         done += 1;
     };
 
-    let mut b = PackBuilder::new(&file, COOKER);
-    b.manifest.materials = material::cook_materials(&src, &mut b, &mut step).map_err(invalid)?;
-    let default_material = b.manifest.materials.len() as u32;
+    let mut scene = SceneIr {
+        name: source.file_stem().map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned()),
+        source: file.clone(),
+        ..Default::default()
+    };
+    scene.materials = material::cook_materials(&src, &mut scene.textures, &mut step).map_err(invalid)?;
+    let default_material = scene.materials.len() as u32;
     for m in doc.meshes() {
         step(&label("mesh", m.index(), m.name()));
-        let cooked = mesh::cook_mesh(&m, &src.buffers, default_material, &mut b).map_err(invalid)?;
-        b.manifest.meshes.push(cooked);
+        scene.meshes.push(mesh::cook_mesh(&m, &src.buffers, default_material).map_err(invalid)?);
     }
-    let uses_default = b.manifest.meshes.iter().flat_map(|m| &m.submeshes).any(|s| s.material == default_material);
+    let uses_default = scene.meshes.iter().flat_map(|m| &m.lods[0].materials).any(|&m| m == default_material);
     if uses_default {
-        b.manifest.materials.push(pack::Material::default());
+        scene.materials.push(pack::Material::default());
     }
     step("nodes");
-    b.manifest.nodes = scene::flatten(doc).map_err(invalid)?;
+    scene.nodes = scene::flatten(doc).map_err(invalid)?;
     progress("done", 1.0);
-    Ok(b.finish())
+    Ok(scene)
+}
+
+/// Decode a PNG or JPEG file to RGBA8: (width, height, texels).
+pub fn decode_image(path: &Path) -> Result<(u32, u32, Vec<u8>), CookError> {
+    let file = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => CookError::NotFound { file: file.clone() },
+        _ => CookError::io(&file, e.to_string()),
+    })?;
+    let rgba = image::load_from_memory(&bytes).map_err(|e| CookError::invalid(&file, format!("cannot decode image: {e}")))?.to_rgba8();
+    let (w, h) = rgba.dimensions();
+    Ok((w, h, rgba.into_raw()))
 }
 
 /// Fail early, before any cooking, when `out` cannot be written or would overwrite `source`.
@@ -118,25 +151,27 @@ pub struct Summary {
     pub materials: usize,
     pub textures: usize,
     /// (width, height) of each texture, in pack order.
-    pub texture_sizes: Vec<(u32, u32)>,
+    pub texture_sizes: Vec<[u32; 2]>,
     pub nodes: usize,
     /// Size of the pack file.
     pub bytes: u64,
 }
 
 impl Summary {
+    /// Counts over LOD 0 of every mesh (what a full-detail frame draws).
     pub fn of(pack: &Pack, bytes: u64) -> Summary {
         let m = &pack.manifest;
-        let indices: u64 = m.meshes.iter().map(|x| x.index_count as u64).sum();
+        let lod0 = || m.meshes.iter().map(|x| &x.lods[0]);
+        let indices: u64 = lod0().map(|x| x.index_count as u64).sum();
         Summary {
             meshes: m.meshes.len(),
-            submeshes: m.meshes.iter().map(|x| x.submeshes.len()).sum(),
-            vertices: m.meshes.iter().map(|x| x.vertex_count as u64).sum(),
+            submeshes: lod0().map(|x| x.submeshes.len()).sum(),
+            vertices: lod0().map(|x| x.vertex_count as u64).sum(),
             indices,
             triangles: indices / 3,
             materials: m.materials.len(),
             textures: m.textures.len(),
-            texture_sizes: m.textures.iter().map(|t| (t.width, t.height)).collect(),
+            texture_sizes: m.textures.iter().map(|t| [t.width, t.height]).collect(),
             nodes: m.nodes.len(),
             bytes,
         }

@@ -1,15 +1,16 @@
-//! glTF materials -> pack materials, and the images they use as base colour -> pack textures.
+//! glTF materials -> pack materials, and the images they use as base colour -> IR textures.
 
 use crate::load::{read_uri, Source};
 use crate::{accessor::view_bytes, label};
 use gltf::material::AlphaMode;
-use pack::{PackBuilder, Texture, TextureFormat};
+use crate::ir::TextureIr;
+use pack::TextureFormat;
 use std::collections::HashMap;
 
 /// Cook every material, in glTF order (so material indices carry over). Each image used as a
 /// base colour becomes one pack texture, however many glTF textures or materials refer to it;
 /// `on_image` is told before each decode (for progress).
-pub(crate) fn cook_materials(src: &Source, b: &mut PackBuilder, on_image: &mut dyn FnMut(&str)) -> Result<Vec<pack::Material>, String> {
+pub(crate) fn cook_materials(src: &Source, textures: &mut Vec<TextureIr>, on_image: &mut dyn FnMut(&str)) -> Result<Vec<pack::Material>, String> {
     let mut by_image: HashMap<usize, u32> = HashMap::new();
     let mut out = Vec::new();
     for (i, m) in src.document.materials().enumerate() {
@@ -26,10 +27,8 @@ pub(crate) fn cook_materials(src: &Source, b: &mut PackBuilder, on_image: &mut d
                         let tex = decode(&image, src).map_err(|e| {
                             format!("{what} (base colour of {}): {e}", label("material", i, m.name()))
                         })?;
-                        let rgba = tex.1.into_raw();
-                        let t = pack::Texture { mips: vec![b.push_bytes(&rgba)], ..tex.0 };
-                        b.manifest.textures.push(t);
-                        let index = (b.manifest.textures.len() - 1) as u32;
+                        textures.push(tex);
+                        let index = (textures.len() - 1) as u32;
                         by_image.insert(image.index(), index);
                         Some(index)
                     }
@@ -56,8 +55,8 @@ pub(crate) fn cook_materials(src: &Source, b: &mut PackBuilder, on_image: &mut d
     Ok(out)
 }
 
-/// Decode an image to RGBA8; the returned texture lacks only its mip ranges.
-fn decode(image: &gltf::Image, src: &Source) -> Result<(Texture, image::RgbaImage), String> {
+/// Decode an image to an RGBA8 sRGB texture with one mip level.
+fn decode(image: &gltf::Image, src: &Source) -> Result<TextureIr, String> {
     // Read the JSON rather than `image.source()`, which unwraps a missing uri or mimeType.
     let json = src.document.as_json().images.get(image.index()).ok_or("does not exist")?;
     let (bytes, name) = match (&json.buffer_view, &json.uri) {
@@ -75,5 +74,5 @@ fn decode(image: &gltf::Image, src: &Source) -> Result<(Texture, image::RgbaImag
     let rgba = image::load_from_memory(&bytes).map_err(|e| format!("cannot decode: {e}"))?.to_rgba8();
     let name = image.name().map(str::to_string).or(name).unwrap_or_else(|| format!("image{}", image.index()));
     let (width, height) = rgba.dimensions();
-    Ok((Texture { name, width, height, format: TextureFormat::Rgba8Srgb, mips: Vec::new() }, rgba))
+    Ok(TextureIr { name, width, height, format: TextureFormat::Rgba8Srgb, mips: vec![rgba.into_raw()] })
 }

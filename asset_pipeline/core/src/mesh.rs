@@ -1,50 +1,45 @@
-//! glTF meshes -> pack meshes: one vertex and index buffer per mesh, one submesh per primitive.
+//! glTF meshes -> IR meshes: one LOD 0 per mesh with every primitive's triangles, each tagged
+//! with its material.
 
 use crate::accessor::{self, check, Checked};
+use crate::ir::{LodIr, MeshIr};
 use crate::label;
 use gltf::mesh::{Mode, Semantic};
-use pack::{PackBuilder, Submesh, Vertex};
+use pack::Vertex;
 
-/// Cook one glTF mesh into `b`. Primitives without a material use `default_material`.
-pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32, b: &mut PackBuilder) -> Result<pack::Mesh, String> {
+/// Import one glTF mesh. Primitives without a material use `default_material`.
+pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32) -> Result<MeshIr, String> {
     let what = label("mesh", mesh.index(), mesh.name());
     let mut vertices: Vec<Vertex> = Vec::new();
-    let mut indices: Vec<u32> = Vec::new();
-    let mut submeshes = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    let mut materials: Vec<u32> = Vec::new();
+    let mut has_uv1 = false;
     for p in mesh.primitives() {
         let (v, i) = primitive(&p, buffers).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
-        let too_big = || format!("{what}: more than {} vertices or indices", u32::MAX);
-        let base = u32::try_from(vertices.len()).map_err(|_| too_big())?;
-        u32::try_from(vertices.len() + v.len()).map_err(|_| too_big())?;
-        let first_index = u32::try_from(indices.len()).map_err(|_| too_big())?;
-        let index_count = u32::try_from(i.len()).map_err(|_| too_big())?;
+        has_uv1 |= p.get(&Semantic::TexCoords(1)).is_some();
+        let base = u32::try_from(vertices.len())
+            .ok()
+            .filter(|b| b.checked_add(v.len() as u32).is_some() && v.len() <= u32::MAX as usize)
+            .ok_or_else(|| format!("{what}: more than {} vertices", u32::MAX))?;
         let material = p.material().index().map_or(default_material, |m| m as u32);
-        submeshes.push(Submesh { first_index, index_count, material });
         vertices.extend(v);
-        indices.extend(i.iter().map(|&i| i + base));
-    }
-    u32::try_from(indices.len()).map_err(|_| format!("{what}: more than {} indices", u32::MAX))?;
-    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    for v in &vertices {
-        for c in 0..3 {
-            lo[c] = lo[c].min(v.position[c]);
-            hi[c] = hi[c].max(v.position[c]);
+        for t in i.chunks_exact(3) {
+            triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+            materials.push(material);
         }
     }
-    if vertices.is_empty() {
-        (lo, hi) = ([0.0; 3], [0.0; 3]);
-    }
-    let index_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
-    Ok(pack::Mesh {
-        name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string),
-        vertices: b.push_bytes(Vertex::slice_as_bytes(&vertices)),
-        vertex_count: vertices.len() as u32,
-        indices: b.push_bytes(&index_bytes),
-        index_count: indices.len() as u32,
-        submeshes,
-        bounds_min: lo,
-        bounds_max: hi,
-    })
+    let lod = LodIr {
+        positions: vertices.iter().map(|v| v.position).collect(),
+        normals: Some(vertices.iter().map(|v| v.normal).collect()),
+        tangents: Some(vertices.iter().map(|v| v.tangent).collect()),
+        uv0: Some(vertices.iter().map(|v| v.uv0).collect()),
+        uv1: has_uv1.then(|| vertices.iter().map(|v| v.uv1).collect()),
+        colors: Some(vertices.iter().map(|v| v.color).collect()),
+        triangles,
+        materials,
+        ..Default::default()
+    };
+    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), is_static: false, lods: vec![lod] })
 }
 
 /// One primitive as vertices and a triangle list indexing them.

@@ -111,7 +111,7 @@ fn cook_err(j: Value, bin: &[u8]) -> String {
 
 fn vertices(p: &Pack, mesh: usize) -> Vec<pack::Vertex> {
     let m = &p.manifest.meshes[mesh];
-    p.bytes(m.vertices)
+    p.bytes(m.lods[0].vertices)
         .chunks_exact(pack::VERTEX_STRIDE)
         .map(|c| {
             let f = |at: usize| f32::from_le_bytes(c[at..at + 4].try_into().unwrap());
@@ -129,7 +129,7 @@ fn vertices(p: &Pack, mesh: usize) -> Vec<pack::Vertex> {
 }
 
 fn indices(p: &Pack, mesh: usize) -> Vec<u32> {
-    p.bytes(p.manifest.meshes[mesh].indices).chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
+    p.bytes(p.manifest.meshes[mesh].lods[0].indices).chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
 }
 
 #[test]
@@ -143,9 +143,9 @@ fn textured_quad_cooks_completely() {
 
     assert_eq!(m.meshes.len(), 1);
     let mesh = &m.meshes[0];
-    assert_eq!((mesh.name.as_str(), mesh.vertex_count, mesh.index_count), ("Quad", 4, 6));
+    assert_eq!((mesh.name.as_str(), mesh.lods[0].vertex_count, mesh.lods[0].index_count), ("Quad", 4, 6));
     assert_eq!(indices(&p, 0), [0, 1, 2, 2, 1, 3], "u16 indices widened to u32");
-    assert_eq!(mesh.submeshes, [pack::Submesh { first_index: 0, index_count: 6, material: 0 }]);
+    assert_eq!(mesh.lods[0].submeshes, [pack::Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: None }]);
     assert_eq!((mesh.bounds_min, mesh.bounds_max), ([0.0; 3], [1.0, 1.0, 0.0]));
     let v = vertices(&p, 0);
     assert_eq!(v[3].position, [1.0, 1.0, 0.0]);
@@ -214,7 +214,7 @@ fn glb_with_image_in_a_buffer_view_cooks() {
     let p = dir.path("quad.glb");
     std::fs::write(&p, &glb).unwrap();
     let pack = cook(&p).unwrap();
-    assert_eq!(pack.manifest.meshes[0].index_count, 6);
+    assert_eq!(pack.manifest.meshes[0].lods[0].index_count, 6);
     assert_eq!((pack.manifest.textures[0].width, pack.manifest.textures[0].height), (3, 1));
 
     // A GLB whose header length would underflow is refused, not parsed.
@@ -333,7 +333,7 @@ fn unindexed_primitive_without_normals_gets_indices_and_flat_normals() {
     let v = vertices(&p, 0);
     assert!(v.iter().all(|v| v.normal == [0.0, 0.0, 1.0] && v.uv0 == [0.0, 0.0]));
     assert_eq!(p.manifest.materials.len(), 2, "a default material is appended");
-    assert_eq!(p.manifest.meshes[0].submeshes[0].material, 1);
+    assert_eq!(p.manifest.meshes[0].lods[0].submeshes[0].material, 1);
     assert_eq!(p.manifest.materials[1], pack::Material::default());
 }
 
@@ -447,4 +447,48 @@ fn image_without_a_source_is_refused_not_a_panic() {
     let (mut j, bin) = quad();
     j["images"] = json!([{"bufferView": 0}]); // no mimeType: the gltf crate would unwrap
     assert!(cook_err(j, &bin).contains("cannot decode"));
+}
+
+#[test]
+fn scene_ir_survives_the_wire_both_ways() {
+    let dir = TempDir::new("wire");
+    let (j, bin) = quad();
+    let path = write_gltf(&dir, "quad.gltf", j, &bin);
+    let mut scene = crate::import_gltf(&path, &mut |_, _| {}).unwrap();
+    // Exercise the optional parts too: a second LOD, lightmap pages, skin attributes, lights.
+    let mut lod1 = scene.meshes[0].lods[0].clone();
+    lod1.triangles.truncate(1);
+    lod1.materials.truncate(1);
+    lod1.error = 0.25;
+    lod1.joints = Some(vec![[0, 1, 0, 0]; lod1.positions.len()]);
+    lod1.weights = Some(vec![[0.5, 0.5, 0.0, 0.0]; lod1.positions.len()]);
+    lod1.lightmap_pages = Some(vec![0]);
+    scene.meshes[0].lods.push(lod1);
+    scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2 });
+    scene.sky = Some(pack::Sky { color: [0.1, 0.2, 0.3], intensity: 2.0 });
+    let (json, arrays) = crate::wire::to_wire(&scene);
+    let back = crate::wire::from_wire(&json, &arrays).unwrap();
+    assert_eq!(back, scene);
+    let pack = crate::build_pack(&back).unwrap();
+    assert_eq!(pack.manifest.meshes[0].lods.len(), 2);
+    assert_eq!(pack.manifest.meshes[0].lods[1].submeshes[0].lightmap_page, Some(0));
+    assert_eq!(pack.manifest.meshes[0].lods[1].error, 0.25);
+}
+
+#[test]
+fn wire_arrays_of_the_wrong_type_or_shape_are_named() {
+    let dir = TempDir::new("wire");
+    let (j, bin) = quad();
+    let scene = crate::import_gltf(&write_gltf(&dir, "quad.gltf", j, &bin), &mut |_, _| {}).unwrap();
+    let (json, arrays) = crate::wire::to_wire(&scene);
+    let position = arrays.iter().position(|a| a.shape == vec![4, 3] && a.dtype == "<f4").unwrap();
+    let mut bad = arrays.clone();
+    bad[position].dtype = "<f8".into();
+    let e = crate::wire::from_wire(&json, &bad).unwrap_err();
+    assert!(e.contains("LOD 0 position") && e.contains("<f8"), "{e}");
+    let mut bad = arrays.clone();
+    let tri = bad.iter().position(|a| a.dtype == "<u4" && a.shape.len() == 2).unwrap();
+    bad[tri].bytes[0] = 200; // index 200 in a 4-vertex mesh
+    let e = crate::wire::from_wire(&json, &bad).unwrap_err();
+    assert!(e.contains("out of range"), "{e}");
 }

@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from asset_pipeline import CookError, cook
+from asset_pipeline import CookError
+from asset_pipeline.cook import cook_detailed
+from asset_pipeline.pipeline import CookSettings
 
 
 def _count(n: int, one: str, many: str) -> str:
@@ -17,22 +20,32 @@ def _count(n: int, one: str, many: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="cook", description="Cook a glTF 2.0 file (.gltf or .glb) into a pack.")
-    parser.add_argument("source", help="the .gltf or .glb file to cook")
-    parser.add_argument("-o", "--out", required=True, metavar="OUT.pack",
-                        help="where to write the pack (its directory must exist)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    parser = argparse.ArgumentParser(prog="cook", description="Cook a glTF 2.0 file (.gltf/.glb) or a CSG level (.toml) into a pack.")
+    parser.add_argument("source", help="the .gltf, .glb or level .toml to cook")
+    parser.add_argument("-o", "--out", required=True, metavar="OUT.pack", help="where to write the pack (its directory must exist)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    parser.add_argument("--force", action="store_true", help="ignore cached stage results and rebuild everything")
+    parser.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
+    parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
+    parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
+    parser.add_argument("--no-report", action="store_true", help="do not write OUT.report.md")
     args = parser.parse_args(argv)
+    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods,
+                            lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report)
     try:
-        s = cook(args.source, args.out, progress=not args.quiet)
+        result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
     except CookError as e:
         print(f"cook: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("cook: interrupted; nothing written", file=sys.stderr)
         return 130
-    print(f"cook: wrote {args.out}: {_count(s['meshes'], 'mesh', 'meshes')}, {_count(s['triangles'], 'triangle', 'triangles')}, "
-          f"{_count(s['textures'], 'texture', 'textures')}, {s['bytes']} bytes")
+    s = result.summary
+    if result.up_to_date:
+        print(f"cook: {args.out} is up to date")
+    else:
+        print(f"cook: wrote {args.out}: {_count(s['meshes'], 'mesh', 'meshes')}, {_count(s['triangles'], 'triangle', 'triangles')}, "
+              f"{_count(s['textures'], 'texture', 'textures')}, {s['bytes']} bytes")
     return 0
 
 

@@ -67,22 +67,104 @@ pub struct Manifest {
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub nodes: Vec<Node>,
+    #[serde(default)]
+    pub lights: Vec<Light>,
+    #[serde(default)]
+    pub spawns: Vec<Spawn>,
+    #[serde(default)]
+    pub sky: Option<Sky>,
+    /// The lightmap atlas the static meshes' uv1 refer to (pages and density); `None` when the
+    /// level has no lightmap UVs.
+    #[serde(default)]
+    pub lightmap: Option<LightmapLayout>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    Sun,
+    Point,
+    Spot,
+    Rect,
+}
+
+/// A light in physical units: sun in lux (illuminance at normal incidence), point and spot in
+/// candela, rect in nits (luminance of its emitting face). `color` is a linear tint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Light {
+    pub name: String,
+    pub kind: LightKind,
+    pub color: [f32; 3],
+    pub intensity: f32,
+    pub position: [f32; 3],
+    /// The direction the light travels (unit).
+    pub direction: [f32; 3],
+    /// Metres; `None` is physically unbounded.
+    pub range: Option<f32>,
+    pub inner_cone: f32,
+    pub outer_cone: f32,
+    /// Rect: width and height in metres.
+    pub size: [f32; 2],
+    /// Sun: angular radius in radians.
+    pub angular_radius: f32,
+}
+
+/// Where the game places something at start: the player, characters, boid flocks, emitters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Spawn {
+    pub name: String,
+    pub kind: String,
+    pub position: [f32; 3],
+    /// Quaternion xyzw.
+    pub rotation: [f32; 4],
+    /// Kind-specific parameters (asset, count, radius, rate, ...), kept as authored.
+    #[serde(default)]
+    pub params: serde_json::Value,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sky {
+    /// Linear colour.
+    pub color: [f32; 3],
+    /// Luminance scale in nits.
+    pub intensity: f32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LightmapLayout {
+    pub texels_per_metre: f32,
+    /// (width, height) in texels of each atlas page.
+    pub pages: Vec<[u32; 2]>,
+    /// Texels kept free around every chart.
+    pub padding: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Mesh {
     pub name: String,
+    /// Levels of detail, full detail first. Each has its own vertices and indices.
+    pub lods: Vec<MeshLod>,
+    /// Object-space axis-aligned bounds (of LOD 0, which every LOD stays close to).
+    pub bounds_min: [f32; 3],
+    pub bounds_max: [f32; 3],
+    /// Static level geometry (lightmapped) rather than a movable prop or character.
+    #[serde(default)]
+    pub is_static: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshLod {
     /// `Vertex` array, `vertex_count * VERTEX_STRIDE` bytes.
     pub vertices: BufferRange,
     pub vertex_count: u32,
-    /// u32 triangle list indices into this mesh's vertices.
+    /// u32 triangle list indices into this LOD's vertices.
     pub indices: BufferRange,
     pub index_count: u32,
-    /// Ranges of `indices` drawn with one material each.
+    /// Ranges of `indices` drawn with one material (and lightmap page) each.
     pub submeshes: Vec<Submesh>,
-    /// Object-space axis-aligned bounds.
-    pub bounds_min: [f32; 3],
-    pub bounds_max: [f32; 3],
+    /// Geometric error to LOD 0 in metres, object space (an upper bound of the measured
+    /// two-sided Hausdorff distance); 0 for LOD 0. Non-decreasing along the chain.
+    pub error: f32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -90,6 +172,9 @@ pub struct Submesh {
     pub first_index: u32,
     pub index_count: u32,
     pub material: u32,
+    /// The lightmap atlas page its lightmap UVs (uv1) refer to; `None` when not lightmapped.
+    #[serde(default)]
+    pub lightmap_page: Option<u32>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -187,17 +272,33 @@ impl Manifest {
                 _ => bad(format!("{what}: range {}..+{} lies outside the data ({data_len} bytes)", r.offset, r.len)),
             }
         };
+        let pages = self.lightmap.as_ref().map_or(0, |l| l.pages.len());
         for (i, m) in self.meshes.iter().enumerate() {
-            let what = format!("mesh {i} '{}'", m.name);
-            in_data(&format!("{what} vertices"), m.vertices, m.vertex_count as u64 * VERTEX_STRIDE as u64)?;
-            in_data(&format!("{what} indices"), m.indices, m.index_count as u64 * 4)?;
-            for (s, sm) in m.submeshes.iter().enumerate() {
-                let end = sm.first_index as u64 + sm.index_count as u64;
-                if end > m.index_count as u64 || sm.index_count % 3 != 0 {
-                    return bad(format!("{what} submesh {s}: indices {}..{end} do not fit {} indices in whole triangles", sm.first_index, m.index_count));
+            if m.lods.is_empty() {
+                return bad(format!("mesh {i} '{}': no LODs", m.name));
+            }
+            let mut last_error = 0.0f32;
+            for (l, lod) in m.lods.iter().enumerate() {
+                let what = format!("mesh {i} '{}' LOD {l}", m.name);
+                in_data(&format!("{what} vertices"), lod.vertices, lod.vertex_count as u64 * VERTEX_STRIDE as u64)?;
+                in_data(&format!("{what} indices"), lod.indices, lod.index_count as u64 * 4)?;
+                if !(lod.error >= last_error) || !lod.error.is_finite() {
+                    return bad(format!("{what}: error {} is not finite and non-decreasing (previous {last_error})", lod.error));
                 }
-                if sm.material as usize >= self.materials.len() {
-                    return bad(format!("{what} submesh {s}: material {} does not exist", sm.material));
+                last_error = lod.error;
+                for (s, sm) in lod.submeshes.iter().enumerate() {
+                    let end = sm.first_index as u64 + sm.index_count as u64;
+                    if end > lod.index_count as u64 || sm.index_count % 3 != 0 {
+                        return bad(format!("{what} submesh {s}: indices {}..{end} do not fit {} indices in whole triangles", sm.first_index, lod.index_count));
+                    }
+                    if sm.material as usize >= self.materials.len() {
+                        return bad(format!("{what} submesh {s}: material {} does not exist", sm.material));
+                    }
+                    if let Some(p) = sm.lightmap_page {
+                        if p as usize >= pages {
+                            return bad(format!("{what} submesh {s}: lightmap page {p} does not exist ({pages} pages)"));
+                        }
+                    }
                 }
             }
         }

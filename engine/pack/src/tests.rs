@@ -26,16 +26,53 @@ fn sample() -> Pack {
         mips: vec![mip0, mip1],
     });
     b.manifest.materials.push(Material { base_color_texture: Some(0), ..Default::default() });
+    let lod1 = b.push_bytes(&idx[..12]);
     b.manifest.meshes.push(Mesh {
         name: "quad".into(),
-        vertices,
-        vertex_count: 4,
-        indices,
-        index_count: 6,
-        submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0 }],
+        lods: vec![
+            MeshLod {
+                vertices,
+                vertex_count: 4,
+                indices,
+                index_count: 6,
+                submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: Some(0) }],
+                error: 0.0,
+            },
+            MeshLod {
+                vertices,
+                vertex_count: 4,
+                indices: lod1,
+                index_count: 3,
+                submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_page: Some(0) }],
+                error: 0.5,
+            },
+        ],
         bounds_min: [0.0; 3],
         bounds_max: [1.0, 1.0, 0.0],
+        is_static: true,
     });
+    b.manifest.lights.push(Light {
+        name: "sun".into(),
+        kind: LightKind::Sun,
+        color: [1.0, 0.95, 0.9],
+        intensity: 100_000.0,
+        position: [0.0; 3],
+        direction: [0.0, -1.0, 0.0],
+        range: None,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+        size: [0.0; 2],
+        angular_radius: 0.00465,
+    });
+    b.manifest.spawns.push(Spawn {
+        name: "player".into(),
+        kind: "player".into(),
+        position: [0.0, 1.7, 0.0],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        params: serde_json::json!({"speed": 4.0}),
+    });
+    b.manifest.sky = Some(Sky { color: [0.5, 0.7, 1.0], intensity: 8000.0 });
+    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[256, 256]], padding: 2 });
     b.manifest.nodes.push(Node { name: "root".into(), parent: None, local: IDENTITY, mesh: Some(0) });
     b.finish()
 }
@@ -49,7 +86,7 @@ fn round_trip_is_exact() {
     let q = Pack::from_bytes(&bytes).unwrap();
     assert_eq!(p, q);
     assert_eq!(q.to_bytes().unwrap(), bytes, "encoding is deterministic");
-    let v = &q.bytes(q.manifest.meshes[0].vertices)[..VERTEX_STRIDE];
+    let v = &q.bytes(q.manifest.meshes[0].lods[0].vertices)[..VERTEX_STRIDE];
     assert_eq!(&v[0..4], &0.0f32.to_le_bytes());
     assert_eq!(&v[56..60], &[255, 128, 0, 255]);
 }
@@ -121,7 +158,7 @@ fn trailing_garbage_is_corrupt() {
 #[test]
 fn dangling_references_are_rejected_before_writing() {
     let mut p = sample();
-    p.manifest.meshes[0].submeshes[0].material = 5;
+    p.manifest.meshes[0].lods[0].submeshes[0].material = 5;
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("material 5 does not exist"), "{e}");
 
@@ -129,6 +166,16 @@ fn dangling_references_are_rejected_before_writing() {
     p.manifest.textures[0].mips[1].len = 8;
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("mip 1") && e.contains("4 expected"), "{e}");
+
+    let mut p = sample();
+    p.manifest.meshes[0].lods[1].submeshes[0].lightmap_page = Some(3);
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("lightmap page 3 does not exist"), "{e}");
+
+    let mut p = sample();
+    p.manifest.meshes[0].lods[1].error = -1.0;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("non-decreasing"), "{e}");
 
     let mut p = sample();
     p.manifest.nodes.push(Node { name: "loop".into(), parent: Some(1), local: IDENTITY, mesh: None });

@@ -16,7 +16,7 @@ use std::process::ExitCode;
 const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--device auto|cpu|gpu|NAME] [--validation]
 
-  PACK                 cooked pack to show (default: build/demo.pack, made by `make cook`)
+  PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`)
   --headless           render offscreen even if a display is available
   --frames N           headless: frames to render (default 100); window: close after N frames
   --width/--height     image or window size in pixels (default 1280x720)
@@ -26,7 +26,7 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3";
 
-const DEFAULT_PACK: &str = "build/demo.pack";
+const DEFAULT_PACK: &str = "build/temple.pack";
 
 struct Args {
     pack: Option<PathBuf>,
@@ -86,7 +86,7 @@ fn parse_args() -> Result<Args, String> {
 }
 
 /// The pack given, or the project's own content: relative to the working directory first, then
-/// to the repository the binary was built in (target/release/demo -> ../../build/demo.pack).
+/// to the repository the binary was built in (target/release/demo -> ../../build/temple.pack).
 fn resolve_pack(arg: Option<PathBuf>) -> PathBuf {
     if let Some(p) = arg {
         return p;
@@ -172,8 +172,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
     let mut scene = GpuScene::upload(&gpu, pack, renderer.material_layout)?;
     let (min, max) = scene.bounds();
-    let camera = Camera::framing(min, max);
-    let lighting = Lighting::default();
+    let camera = Camera::for_pack(&pack.manifest, min, max);
+    let lighting = Lighting::for_pack(&pack.manifest);
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);

@@ -1,0 +1,1234 @@
+//! Geometric measurement on triangle meshes: closest points (a BVH over triangles, and walks over
+//! face adjacency), and sampled one-sided Hausdorff distances. Used by the LOD stage to measure
+//! each level's error and to find where on LOD 0 a simplified vertex lies.
+//!
+//! - [`closest_on_triangle`]: exact closest point of a point to a triangle (Ericson, *Real-Time
+//!   Collision Detection* §5.1.5), in f64, with barycentric coordinates, robust to degenerate
+//!   (zero-area) triangles.
+//! - [`Bvh`]: a bounding-volume hierarchy over a mesh's triangles (binned SAH, leaves of at most
+//!   [`LEAF_SIZE`]) answering closest-point queries by best-first-ish depth-first traversal
+//!   (nearer child first, subtrees pruned by their box distance). A query may start from a hint
+//!   triangle (its distance is the initial bound, which prunes almost everything when the hint is
+//!   near).
+//! - [`Bvh::directed_hausdorff`]: `max over samples s of src: dist(s, target)`, samples on a
+//!   barycentric grid per source triangle (vertices included) with a spacing bound. Because only
+//!   the maximum is wanted, a sample is settled as soon as *any* target triangle is within the
+//!   running maximum ("early break", as in Taha & Hanbury 2015): usually the previous sample's
+//!   closest triangle already is, so most samples cost one point-triangle test. The result is
+//!   still the exact maximum over the sample set, independent of thread timing.
+//! - [`face_adjacency`] + [`walk_closest`]: closest point found by walking from a start face
+//!   across edges whose two faces share both vertex indices (and a key). With split vertices,
+//!   that walk stays on its side of every seam: the LOD stage's way to find a moved vertex's
+//!   attributes on the right side of a UV seam.
+//!
+//! Everything is deterministic: parallel work is split into fixed chunks (not per thread), and each
+//! chunk's result does not depend on when it runs.
+
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+type V3 = [f64; 3];
+
+/// Triangles per leaf at most.
+pub const LEAF_SIZE: usize = 4;
+/// Queries per parallel work item; fixed so results never depend on the thread count.
+const CHUNK: usize = 256;
+
+#[inline]
+fn v3(p: [f32; 3]) -> V3 {
+    [p[0] as f64, p[1] as f64, p[2] as f64]
+}
+#[inline]
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline]
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+fn d2(a: V3, b: V3) -> f64 {
+    let d = sub(a, b);
+    dot(d, d)
+}
+
+/// Closest point of segment ab to p as (squared distance, t) with the point a + t (b - a).
+#[inline]
+fn closest_on_segment(p: V3, a: V3, b: V3) -> (f64, f64) {
+    let ab = sub(b, a);
+    let len2 = dot(ab, ab);
+    let t = if len2 > 0.0 { (dot(sub(p, a), ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let q = [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]];
+    (d2(p, q), t)
+}
+
+/// The closest point of triangle abc to p: (squared distance, barycentrics [u, v, w]) with the
+/// point = u a + v b + w c, u + v + w = 1, all >= 0.
+pub fn closest_on_triangle(p: V3, a: V3, b: V3, c: V3) -> (f64, [f64; 3]) {
+    let ab = sub(b, a);
+    let ac = sub(c, a);
+    let ap = sub(p, a);
+    let d1 = dot(ab, ap);
+    let d2_ = dot(ac, ap);
+    let bary = if d1 <= 0.0 && d2_ <= 0.0 {
+        [1.0, 0.0, 0.0]
+    } else {
+        let bp = sub(p, b);
+        let d3 = dot(ab, bp);
+        let d4 = dot(ac, bp);
+        if d3 >= 0.0 && d4 <= d3 {
+            [0.0, 1.0, 0.0]
+        } else {
+            let vc = d1 * d4 - d3 * d2_;
+            if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+                let v = d1 / (d1 - d3);
+                [1.0 - v, v, 0.0]
+            } else {
+                let cp = sub(p, c);
+                let d5 = dot(ab, cp);
+                let d6 = dot(ac, cp);
+                if d6 >= 0.0 && d5 <= d6 {
+                    [0.0, 0.0, 1.0]
+                } else {
+                    let vb = d5 * d2_ - d1 * d6;
+                    if vb <= 0.0 && d2_ >= 0.0 && d6 <= 0.0 {
+                        let w = d2_ / (d2_ - d6);
+                        [1.0 - w, 0.0, w]
+                    } else {
+                        let va = d3 * d6 - d5 * d4;
+                        if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+                            let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+                            [0.0, 1.0 - w, w]
+                        } else {
+                            let sum = va + vb + vc;
+                            if sum > 0.0 && sum.is_finite() {
+                                let v = vb / sum;
+                                let w = vc / sum;
+                                [1.0 - v - w, v, w]
+                            } else {
+                                // Degenerate (collinear) triangle that slipped past the region
+                                // tests through rounding: the closest point is on an edge.
+                                return closest_on_degenerate(p, a, b, c);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    };
+    let q = [
+        bary[0] * a[0] + bary[1] * b[0] + bary[2] * c[0],
+        bary[0] * a[1] + bary[1] * b[1] + bary[2] * c[1],
+        bary[0] * a[2] + bary[1] * b[2] + bary[2] * c[2],
+    ];
+    (d2(p, q), bary)
+}
+
+fn closest_on_degenerate(p: V3, a: V3, b: V3, c: V3) -> (f64, [f64; 3]) {
+    let (dab, t) = closest_on_segment(p, a, b);
+    let (dbc, s) = closest_on_segment(p, b, c);
+    let (dca, r) = closest_on_segment(p, c, a);
+    if dab <= dbc && dab <= dca {
+        (dab, [1.0 - t, t, 0.0])
+    } else if dbc <= dca {
+        (dbc, [0.0, 1.0 - s, s])
+    } else {
+        (dca, [r, 0.0, 1.0 - r])
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    lo: [f32; 3],
+    hi: [f32; 3],
+    /// Leaf: first triangle slot. Internal: index of the left child (the right one follows it).
+    start: u32,
+    /// Triangles in a leaf; 0 for an internal node.
+    count: u32,
+}
+
+impl Node {
+    /// Squared distance from p to the node's box (0 inside).
+    #[inline]
+    fn dist2(&self, p: V3) -> f64 {
+        let mut s = 0.0;
+        for k in 0..3 {
+            let lo = self.lo[k] as f64;
+            let hi = self.hi[k] as f64;
+            let d = if p[k] < lo { lo - p[k] } else if p[k] > hi { p[k] - hi } else { 0.0 };
+            s += d * d;
+        }
+        s
+    }
+}
+
+/// The closest triangle to a query point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index of the triangle in the mesh the BVH was built from.
+    pub triangle: u32,
+    /// Euclidean distance.
+    pub distance: f64,
+    /// Barycentric coordinates of the closest point in that triangle's corner order.
+    pub bary: [f64; 3],
+}
+
+/// A BVH over one triangle mesh, owning a reordered copy of its triangles.
+pub struct Bvh {
+    nodes: Vec<Node>,
+    /// Triangle corners, in leaf order.
+    tris: Vec<[V3; 3]>,
+    /// Leaf order -> triangle index in the source mesh.
+    ids: Vec<u32>,
+    /// Triangle index in the source mesh -> leaf order.
+    slot: Vec<u32>,
+    /// Edge neighbours in leaf order, over positions welded by value (see [`weld_positions`]).
+    adj: Vec<[u32; 3]>,
+}
+
+/// Why a BVH cannot be built from the given arrays.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MeshError(pub String);
+
+impl std::fmt::Display for MeshError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+impl std::error::Error for MeshError {}
+
+/// Checks shared by everything that reads a mesh: indices in range, finite positions.
+pub fn check_mesh(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<(), MeshError> {
+    if let Some(i) = positions.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+        return Err(MeshError(format!("position {i} is not finite")));
+    }
+    let n = positions.len() as u64;
+    if let Some(t) = triangles.iter().position(|t| t.iter().any(|&i| i as u64 >= n)) {
+        return Err(MeshError(format!("triangle {t} has an index >= the vertex count {n}")));
+    }
+    Ok(())
+}
+
+struct BuildTri {
+    lo: [f32; 3],
+    hi: [f32; 3],
+    c: [f32; 3],
+}
+
+const BINS: usize = 16;
+
+impl Bvh {
+    /// Build over `triangles` (indices into `positions`).
+    pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<Bvh, MeshError> {
+        let t0 = std::time::Instant::now();
+        let dbg = std::env::var("MEASURE_DEBUG").is_ok();
+        check_mesh(positions, triangles)?;
+        if dbg { eprintln!("check {:?}", t0.elapsed()); }
+        if triangles.len() >= u32::MAX as usize {
+            return Err(MeshError("too many triangles".into()));
+        }
+        let prims: Vec<BuildTri> = triangles
+            .par_iter()
+            .map(|t| {
+                let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+                let mut lo = a;
+                let mut hi = a;
+                for p in [b, c] {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(p[k]);
+                        hi[k] = hi[k].max(p[k]);
+                    }
+                }
+                BuildTri { lo, hi, c: [(lo[0] + hi[0]) * 0.5, (lo[1] + hi[1]) * 0.5, (lo[2] + hi[2]) * 0.5] }
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        if dbg { eprintln!("prims {:?}", t0.elapsed()); }
+        let nodes = if triangles.is_empty() { Vec::new() } else { build_tree(&prims, &mut order, 0) };
+        if dbg { eprintln!("tree {:?}", t0.elapsed()); }
+        let tris: Vec<[V3; 3]> = order
+            .par_iter()
+            .map(|&i| {
+                let t = triangles[i as usize];
+                [v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize])]
+            })
+            .collect();
+        let mut slot = vec![0u32; triangles.len()];
+        for (s, &i) in order.iter().enumerate() {
+            slot[i as usize] = s as u32;
+        }
+        if dbg { eprintln!("tris+slot {:?}", t0.elapsed()); }
+        let (weld, _) = weld_positions(positions);
+        if dbg { eprintln!("weld {:?}", t0.elapsed()); }
+        let welded: Vec<[u32; 3]> = triangles.par_iter().map(|t| t.map(|i| weld[i as usize])).collect();
+        let adj = face_adjacency(&welded, &vec![0; triangles.len()]);
+        if dbg { eprintln!("adj {:?}", t0.elapsed()); }
+        let adj = order.iter().map(|&i| adj[i as usize].map(|n| if n == NO_FACE { NO_FACE } else { slot[n as usize] })).collect();
+        if dbg { eprintln!("done {:?}", t0.elapsed()); }
+        Ok(Bvh { nodes, tris, ids: order, slot, adj })
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Depth of the tree (1 for a single leaf, 0 when empty); for tests and diagnostics.
+    pub fn depth(&self) -> usize {
+        fn go(nodes: &[Node], i: usize) -> usize {
+            let n = &nodes[i];
+            if n.count > 0 {
+                1
+            } else {
+                1 + go(nodes, n.start as usize).max(go(nodes, n.start as usize + 1))
+            }
+        }
+        if self.nodes.is_empty() {
+            0
+        } else {
+            go(&self.nodes, 0)
+        }
+    }
+
+    /// Core query. Starts with `start` (a slot) as the current best when given, visits only
+    /// and stops as soon as the best squared distance is
+    /// <= `good_enough` (pass a negative value for the exact closest triangle). Returns
+    /// (slot, squared distance, bary) or None when no triangle qualifies.
+    fn query(&self, p: V3, start: Option<u32>, good_enough: f64, stack: &mut Vec<u32>) -> Option<(u32, f64, [f64; 3])> {
+        let mut best: Option<(u32, f64, [f64; 3])> = None;
+        let mut best_d2 = f64::INFINITY;
+        if let Some(s) = start {
+            let t = &self.tris[s as usize];
+            let (dd, bary) = closest_on_triangle(p, t[0], t[1], t[2]);
+            best = Some((s, dd, bary));
+            best_d2 = dd;
+            if best_d2 <= good_enough {
+                return best;
+            }
+        }
+        if self.nodes.is_empty() {
+            return best;
+        }
+        stack.clear();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let node = &self.nodes[ni as usize];
+            // Re-check: the bound may have shrunk since this node was pushed.
+            if node.dist2(p) >= best_d2 {
+                continue;
+            }
+            if node.count > 0 {
+                for s in node.start..node.start + node.count {
+                    let t = &self.tris[s as usize];
+                    let (dd, bary) = closest_on_triangle(p, t[0], t[1], t[2]);
+                    if dd < best_d2 {
+                        best_d2 = dd;
+                        best = Some((s, dd, bary));
+                    }
+                }
+                if best_d2 <= good_enough {
+                    return best;
+                }
+            } else {
+                let l = node.start;
+                let r = l + 1;
+                let dl = self.nodes[l as usize].dist2(p);
+                let dr = self.nodes[r as usize].dist2(p);
+                // Push the farther child first so the nearer one is visited next.
+                let (near, dn, far, df) = if dl <= dr { (l, dl, r, dr) } else { (r, dr, l, dl) };
+                if df < best_d2 {
+                    stack.push(far);
+                }
+                if dn < best_d2 {
+                    stack.push(near);
+                }
+            }
+        }
+        best
+    }
+
+    /// The closest triangle of the mesh to `p`. `hint` (a triangle index of the source mesh)
+    /// only speeds the search up. None when the mesh has no triangles.
+    pub fn closest(&self, p: [f64; 3], hint: Option<u32>) -> Option<Hit> {
+        let mut stack = Vec::with_capacity(64);
+        self.closest_with(p, hint, &mut stack)
+    }
+
+    fn closest_with(&self, p: V3, hint: Option<u32>, stack: &mut Vec<u32>) -> Option<Hit> {
+        let start = hint.and_then(|h| self.slot.get(h as usize).copied());
+        self.query(p, start, -1.0, stack).map(|(s, dd, bary)| Hit { triangle: self.ids[s as usize], distance: dd.sqrt(), bary })
+    }
+
+    /// [`Bvh::closest`] for many points in parallel. `hints`, when given, has one entry per
+    /// point; u32::MAX means none. Without hints, each query starts from the
+    /// previous point's answer within its chunk (points in mesh order are spatially coherent).
+    pub fn closest_many(&self, points: &[[f32; 3]], hints: Option<&[u32]>) -> Vec<Option<Hit>> {
+        let mut out = vec![None; points.len()];
+        out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, dst)| {
+            let mut stack = Vec::with_capacity(64);
+            let mut prev: Option<u32> = None;
+            for (j, o) in dst.iter_mut().enumerate() {
+                let i = c * CHUNK + j;
+                let hint = match hints {
+                    Some(h) if h[i] != u32::MAX => Some(h[i]),
+                    Some(_) => None,
+                    None => prev,
+                };
+                *o = self.closest_with(v3(points[i]), hint, &mut stack);
+                if hints.is_none() {
+                    prev = o.map(|h| h.triangle);
+                }
+            }
+        });
+        out
+    }
+
+    /// Settle one Hausdorff sample against the running maximum `bound` (squared): is some
+    /// triangle within it? Tries the hint, then walks over neighbouring triangles toward `p`
+    /// (cheap, and nearly always enough for coherent samples), and only then searches the tree.
+    /// Returns (slot, squared distance, exact): exact is true when no triangle is within `bound`,
+    /// and the distance is then the sample's true distance.
+    fn settle(&self, p: V3, hint: Option<u32>, bound: f64, stack: &mut Vec<u32>) -> Option<(u32, f64, bool)> {
+        let eval = |s: u32| {
+            let t = &self.tris[s as usize];
+            closest_on_triangle(p, t[0], t[1], t[2]).0
+        };
+        let mut start = None;
+        if let Some(mut cur) = hint {
+            let mut d = eval(cur);
+            loop {
+                if d <= bound {
+                    return Some((cur, d, false));
+                }
+                let mut next = None;
+                for &n in &self.adj[cur as usize] {
+                    if n != NO_FACE {
+                        let dn = eval(n);
+                        if dn < d {
+                            d = dn;
+                            next = Some(n);
+                        }
+                    }
+                }
+                match next {
+                    Some(n) => cur = n,
+                    None => break,
+                }
+            }
+            start = Some(cur);
+        }
+        self.query(p, start, bound, stack).map(|(s, dd, _)| (s, dd, dd > bound))
+    }
+
+    /// One-sided Hausdorff distance from the source mesh to this one, sampled:
+    /// `max over samples s of min over triangles t of |s - t|`. The samples are the source's
+    /// vertices (those of its triangles) and, per triangle, the other points of a barycentric
+    /// grid of k subdivisions ((k+1)(k+2)/2 points with the corners) with
+    /// k = clamp(ceil(longest edge / spacing), min_subdiv, 1024): every point of a source triangle
+    /// is then within 2/3 of a grid cell's longest edge of a sample. When the samples would exceed
+    /// `max_samples`, the spacing is widened to fit (min_subdiv still holds).
+    pub fn directed_hausdorff(&self, positions: &[[f32; 3]], triangles: &[[u32; 3]], spacing: f64, min_subdiv: u32, max_samples: u64) -> Result<Directed, MeshError> {
+        check_mesh(positions, triangles)?;
+        if self.tris.is_empty() {
+            return Err(MeshError("the target mesh has no triangles".into()));
+        }
+        let mut used = vec![false; positions.len()];
+        for t in triangles {
+            for &i in t {
+                used[i as usize] = true;
+            }
+        }
+        let vertices: Vec<u32> = (0..positions.len() as u32).filter(|&i| used[i as usize]).collect();
+        let min_k = min_subdiv.max(1) as u64;
+        let longest: Vec<f64> = triangles
+            .par_iter()
+            .map(|t| {
+                let (a, b, c) = (v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]));
+                d2(a, b).max(d2(b, c)).max(d2(c, a)).sqrt()
+            })
+            .collect();
+        let subdiv = |s: f64, l: f64| -> u64 {
+            let k = if s > 0.0 && s.is_finite() { (l / s).ceil() } else { 1.0 };
+            (k.clamp(1.0, 1024.0) as u64).max(min_k)
+        };
+        let count = |s: f64| -> u64 { vertices.len() as u64 + longest.par_iter().map(|&l| { let k = subdiv(s, l); (k + 1) * (k + 2) / 2 - 3 }).sum::<u64>() };
+        let mut s = if spacing > 0.0 && spacing.is_finite() { spacing } else { f64::INFINITY };
+        let mut total = count(s);
+        for _ in 0..8 {
+            if total <= max_samples.max(1) || !s.is_finite() {
+                break;
+            }
+            s *= (total as f64 / max_samples.max(1) as f64).sqrt() * 1.02;
+            total = count(s);
+        }
+        let best = AtomicU64::new(0f64.to_bits()); // squared distance; non-negative f64 bits order as u64
+        // One sample: settle it against the running maximum, raise the maximum if it is above.
+        let sample = |p: V3, hint: &mut Option<u32>, local: &mut f64, stack: &mut Vec<u32>| {
+            let bound = f64::from_bits(best.load(Ordering::Relaxed)).max(*local);
+            if let Some((slot, dd, exact)) = self.settle(p, *hint, bound, stack) {
+                *hint = Some(slot);
+                if exact {
+                    *local = dd;
+                    best.fetch_max(dd.to_bits(), Ordering::Relaxed);
+                }
+            }
+        };
+        vertices.par_chunks(CHUNK).for_each(|chunk| {
+            let (mut stack, mut hint, mut local) = (Vec::with_capacity(64), None, 0.0);
+            for &i in chunk {
+                sample(v3(positions[i as usize]), &mut hint, &mut local, &mut stack);
+            }
+        });
+        triangles.par_chunks(CHUNK / 4).enumerate().for_each(|(c, chunk)| {
+            let (mut stack, mut hint, mut local) = (Vec::with_capacity(64), None, 0.0);
+            for (j, t) in chunk.iter().enumerate() {
+                let k = subdiv(s, longest[c * (CHUNK / 4) + j]);
+                if k == 1 {
+                    continue; // corners only: the vertex pass has them
+                }
+                let (a, b, cc) = (v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]));
+                let (ab, ac) = (sub(b, a), sub(cc, a));
+                let inv = 1.0 / k as f64;
+                for i in 0..=k {
+                    // Serpentine order keeps consecutive samples adjacent (good hints).
+                    for step in 0..=k - i {
+                        let jj = if i % 2 == 0 { step } else { k - i - step };
+                        if (i == 0 && (jj == 0 || jj == k)) || i == k {
+                            continue; // a corner
+                        }
+                        let (u, v) = (i as f64 * inv, jj as f64 * inv);
+                        let p = [a[0] + u * ab[0] + v * ac[0], a[1] + u * ab[1] + v * ac[1], a[2] + u * ab[2] + v * ac[2]];
+                        sample(p, &mut hint, &mut local, &mut stack);
+                    }
+                }
+            }
+        });
+        Ok(Directed { max: f64::from_bits(best.load(Ordering::Relaxed)).sqrt(), samples: total, spacing: s })
+    }
+}
+
+/// Result of [`Bvh::directed_hausdorff`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Directed {
+    /// The largest distance of a sample to the target mesh.
+    pub max: f64,
+    /// Number of samples taken.
+    pub samples: u64,
+    /// The sample spacing used (wider than asked when the budget was exceeded).
+    pub spacing: f64,
+}
+
+/// Ranges at least this large are split and their halves built in parallel.
+const PARALLEL_BUILD: usize = 1 << 14;
+
+/// Binned-SAH BVH over `order` (triangle indices, reordered in place into leaf order; leaf
+/// `start`s are offset by `offset`, the range's position in the whole list). Node 0 is the root;
+/// the children of a node are adjacent. Large ranges are split once here and both halves built in
+/// parallel, then spliced: [root, left root, right root, rest of left, rest of right].
+fn build_tree(prims: &[BuildTri], order: &mut [u32], offset: usize) -> Vec<Node> {
+    if order.len() < PARALLEL_BUILD {
+        return build_serial(prims, order, offset);
+    }
+    let mut root = vec![Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 }];
+    let mid = split_range(prims, order, &mut root[0], 0);
+    let Some(mid) = mid else { return build_serial(prims, order, offset) };
+    let (lo, hi) = order.split_at_mut(mid);
+    let (left, right) = rayon::join(|| build_tree(prims, lo, offset), || build_tree(prims, hi, offset + mid));
+    let (nl, nr) = (left.len(), right.len());
+    // Index maps: left i -> 1 (root) or i + 2; right i -> 2 (root) or nl + 1 + i.
+    let map_l = |i: u32| if i == 0 { 1 } else { i + 2 };
+    let map_r = |i: u32| if i == 0 { 2 } else { nl as u32 + 1 + i };
+    let fix = |n: &Node, map: &dyn Fn(u32) -> u32| if n.count > 0 { *n } else { Node { start: map(n.start), ..*n } };
+    let mut nodes = Vec::with_capacity(1 + nl + nr);
+    nodes.push(Node { start: 1, count: 0, ..root[0] });
+    nodes.push(fix(&left[0], &map_l));
+    nodes.push(fix(&right[0], &map_r));
+    nodes.extend(left[1..].iter().map(|n| fix(n, &map_l)));
+    nodes.extend(right[1..].iter().map(|n| fix(n, &map_r)));
+    nodes
+}
+
+fn build_serial(prims: &[BuildTri], order: &mut [u32], offset: usize) -> Vec<Node> {
+    let mut nodes = Vec::with_capacity(2 * order.len() / LEAF_SIZE + 1);
+    nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
+    // Explicit stack: (node index, range start, range end) in `order`.
+    let mut work: Vec<(usize, usize, usize)> = vec![(0, 0, order.len())];
+    while let Some((ni, s, e)) = work.pop() {
+        match split_range(prims, &mut order[s..e], &mut nodes[ni], offset + s) {
+            None => {}
+            Some(mid) => {
+                let left = nodes.len();
+                nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
+                nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
+                nodes[ni].start = left as u32;
+                nodes[ni].count = 0;
+                work.push((left + 1, s + mid, e));
+                work.push((left, s, s + mid));
+            }
+        }
+    }
+    nodes
+}
+
+/// Set `node`'s bounds over `range`; make it a leaf (start = `first`) when small, else partition
+/// `range` by the best binned-SAH split and return the split point.
+fn split_range(prims: &[BuildTri], range: &mut [u32], node: &mut Node, first: usize) -> Option<usize> {
+    {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        let mut clo = [f32::INFINITY; 3];
+        let mut chi = [f32::NEG_INFINITY; 3];
+        for &i in range.iter() {
+            let p = &prims[i as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(p.lo[k]);
+                hi[k] = hi[k].max(p.hi[k]);
+                clo[k] = clo[k].min(p.c[k]);
+                chi[k] = chi[k].max(p.c[k]);
+            }
+        }
+        node.lo = lo;
+        node.hi = hi;
+        let n = range.len();
+        if n <= LEAF_SIZE {
+            node.start = first as u32;
+            node.count = n as u32;
+            return None;
+        }
+        let ext = [chi[0] - clo[0], chi[1] - clo[1], chi[2] - clo[2]];
+        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
+        let mid = if ext[axis] > 0.0 {
+            // Bin centroids along the axis and take the split with the least SAH cost.
+            let scale = BINS as f32 / ext[axis];
+            let bin_of = |i: u32| -> usize { (((prims[i as usize].c[axis] - clo[axis]) * scale) as usize).min(BINS - 1) };
+            let mut cnt = [0usize; BINS];
+            let mut blo = [[f32::INFINITY; 3]; BINS];
+            let mut bhi = [[f32::NEG_INFINITY; 3]; BINS];
+            for &i in range.iter() {
+                let b = bin_of(i);
+                cnt[b] += 1;
+                let p = &prims[i as usize];
+                for k in 0..3 {
+                    blo[b][k] = blo[b][k].min(p.lo[k]);
+                    bhi[b][k] = bhi[b][k].max(p.hi[k]);
+                }
+            }
+            let area = |lo: [f32; 3], hi: [f32; 3]| -> f32 {
+                if lo[0] > hi[0] {
+                    return 0.0;
+                }
+                let d = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+                d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+            };
+            // Sweep from the right to get suffix areas.
+            let mut right_area = [0f32; BINS];
+            let mut right_cnt = [0usize; BINS];
+            let (mut rlo, mut rhi, mut rc) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3], 0usize);
+            for b in (1..BINS).rev() {
+                for k in 0..3 {
+                    rlo[k] = rlo[k].min(blo[b][k]);
+                    rhi[k] = rhi[k].max(bhi[b][k]);
+                }
+                rc += cnt[b];
+                right_area[b] = area(rlo, rhi);
+                right_cnt[b] = rc;
+            }
+            let (mut llo, mut lhi, mut lc) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3], 0usize);
+            let mut best = (f32::INFINITY, 0usize);
+            for b in 0..BINS - 1 {
+                for k in 0..3 {
+                    llo[k] = llo[k].min(blo[b][k]);
+                    lhi[k] = lhi[k].max(bhi[b][k]);
+                }
+                lc += cnt[b];
+                if lc == 0 || right_cnt[b + 1] == 0 {
+                    continue;
+                }
+                let cost = area(llo, lhi) * lc as f32 + right_area[b + 1] * right_cnt[b + 1] as f32;
+                if cost < best.0 {
+                    best = (cost, b);
+                }
+            }
+            if best.0.is_finite() {
+                let split = best.1;
+                let mut l = 0;
+                for r in 0..range.len() {
+                    if bin_of(range[r]) <= split {
+                        range.swap(l, r);
+                        l += 1;
+                    }
+                }
+                l
+            } else {
+                n / 2
+            }
+        } else {
+            // All centroids coincide: split by position in the list.
+            n / 2
+        };
+        Some(if mid == 0 || mid == n { n / 2 } else { mid })
+    }
+}
+
+/// Every proper edge of every face as (sorted vertex pair packed in a u64, face * 3 + corner),
+/// sorted, so the faces around one edge are adjacent in the list.
+fn sorted_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
+    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(3 * triangles.len());
+    for (f, t) in triangles.iter().enumerate() {
+        for j in 0..3 {
+            let (a, b) = (t[j], t[(j + 1) % 3]);
+            if a != b {
+                let (a, b) = (a.min(b) as u64, a.max(b) as u64);
+                edges.push(((a << 32) | b, (3 * f + j) as u32));
+            }
+        }
+    }
+    edges.par_sort_unstable();
+    edges
+}
+
+/// Runs of equal edges in a [`sorted_edges`] list, as index ranges.
+fn edge_runs(edges: &[(u64, u32)]) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        if i >= edges.len() {
+            return None;
+        }
+        let mut j = i + 1;
+        while j < edges.len() && edges[j].0 == edges[i].0 {
+            j += 1;
+        }
+        let r = i..j;
+        i = j;
+        Some(r)
+    })
+}
+
+/// A fast non-cryptographic hasher for integer keys (FxHash's mixing step).
+#[derive(Default)]
+struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+/// Weld equal positions (bitwise, with -0.0 == 0.0): (an index per vertex, numbered in order of
+/// first use; the first vertex of each index).
+pub fn weld_positions(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u32>) {
+    let mut ids: std::collections::HashMap<[u32; 3], u32, std::hash::BuildHasherDefault<FxHasher>> = Default::default();
+    ids.reserve(positions.len());
+    let mut first = Vec::new();
+    let weld = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let key = p.map(|x| (x + 0.0).to_bits());
+            let next = ids.len() as u32;
+            let id = *ids.entry(key).or_insert(next);
+            if id == next {
+                first.push(i as u32);
+            }
+            id
+        })
+        .collect();
+    (weld, first)
+}
+
+/// Seam edges: edges (by welded vertex index, `welded`) whose faces do not all use the same two
+/// split vertices (`split`, corner for corner): UV seams, hard edges, material borders. Returns
+/// for each (in edge order) [a, b, face, other face] with a < b, the first two faces using it.
+pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
+    assert_eq!(welded.len(), split.len());
+    let edges = sorted_edges(welded);
+    let split_key = |e: u32| -> u64 {
+        let (f, j) = ((e / 3) as usize, (e % 3) as usize);
+        let (wa, wb) = (welded[f][j], welded[f][(j + 1) % 3]);
+        let (sa, sb) = (split[f][j], split[f][(j + 1) % 3]);
+        // Orient the split pair like the sorted welded pair.
+        let (sa, sb) = if wa <= wb { (sa, sb) } else { (sb, sa) };
+        ((sa as u64) << 32) | sb as u64
+    };
+    let mut out = Vec::new();
+    for run in edge_runs(&edges) {
+        if run.len() < 2 {
+            continue;
+        }
+        let k0 = split_key(edges[run.start].1);
+        if edges[run.clone()].iter().any(|e| split_key(e.1) != k0) {
+            let key = edges[run.start].0;
+            out.push([(key >> 32) as u32, key as u32, edges[run.start].1 / 3, edges[run.start + 1].1 / 3]);
+        }
+    }
+    out
+}
+
+/// No neighbour (an open border, a non-manifold edge, or a key change).
+pub const NO_FACE: u32 = u32::MAX;
+
+/// For each face and corner j, the face across edge (corner j, corner j+1): the one other face
+/// using the same two vertex indices with the same key, or [`NO_FACE`].
+pub fn face_adjacency(triangles: &[[u32; 3]], keys: &[u32]) -> Vec<[u32; 3]> {
+    assert_eq!(triangles.len(), keys.len(), "one key per triangle");
+    let edges = sorted_edges(triangles);
+    let mut adj = vec![[NO_FACE; 3]; triangles.len()];
+    for run in edge_runs(&edges) {
+        if run.len() == 2 {
+            let (a, b) = (edges[run.start].1, edges[run.start + 1].1);
+            let (fa, fb) = (a / 3, b / 3);
+            if fa != fb && keys[fa as usize] == keys[fb as usize] {
+                adj[fa as usize][(a % 3) as usize] = fb;
+                adj[fb as usize][(b % 3) as usize] = fa;
+            }
+        }
+    }
+    adj
+}
+
+/// Closest point to `p` found by walking over faces from `start`: move to the neighbour (per
+/// `adjacency`) whose closest point is strictly nearer until none is; when the closest point is a
+/// corner, all faces around that corner are neighbours (an edge walk alone stalls there, since
+/// the faces beside it have the same closest point). The walk stays in the connected region of
+/// `start` (one side of a seam, one chart), so near a seam it finds the point on `start`'s side
+/// even when the other side is nearer. Returns (face, squared distance, bary).
+pub fn walk_closest(positions: &[[f32; 3]], triangles: &[[u32; 3]], adjacency: &[[u32; 3]], start: u32, p: [f64; 3]) -> (u32, f64, [f64; 3]) {
+    let eval = |f: u32| {
+        let t = triangles[f as usize];
+        closest_on_triangle(p, v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]))
+    };
+    let mut cur = start;
+    let (mut d, mut bary) = eval(cur);
+    // Strictly decreasing distance: the walk cannot cycle; the cap only bounds pathological input.
+    for _ in 0..1_000_000 {
+        let mut next: Option<(u32, [f64; 3])> = None;
+        let consider = |n: u32, d: &mut f64, next: &mut Option<(u32, [f64; 3])>| {
+            let (dn, bn) = eval(n);
+            if dn < *d {
+                *d = dn;
+                *next = Some((n, bn));
+            }
+        };
+        for &n in &adjacency[cur as usize] {
+            if n != NO_FACE {
+                consider(n, &mut d, &mut next);
+            }
+        }
+        if next.is_none() {
+            if let Some(k) = bary.iter().position(|&b| b == 1.0) {
+                for_each_around(triangles, adjacency, cur, k, |n| consider(n, &mut d, &mut next));
+            }
+        }
+        match next {
+            Some((n, bn)) => {
+                cur = n;
+                bary = bn;
+            }
+            None => break,
+        }
+    }
+    (cur, d, bary)
+}
+
+/// Calls `f` for the faces around corner `k` of face `start` (other than `start`), found by
+/// crossing the edges at that corner both ways round until a border or back at `start`.
+fn for_each_around(triangles: &[[u32; 3]], adjacency: &[[u32; 3]], start: u32, k: usize, mut f: impl FnMut(u32)) {
+    let v = triangles[start as usize][k];
+    // The two edges of `start` at corner k: edge k (k -> k+1) and edge k+2 (k+2 -> k).
+    for first_edge in [k, (k + 2) % 3] {
+        let mut prev = start;
+        let mut cur = adjacency[start as usize][first_edge];
+        let mut steps = 0;
+        while cur != NO_FACE && cur != start && steps < 256 {
+            f(cur);
+            let t = triangles[cur as usize];
+            let Some(kc) = t.iter().position(|&x| x == v) else { break };
+            // Leave by the edge at corner kc that does not lead back.
+            let (e1, e2) = (kc, (kc + 2) % 3);
+            let out = if adjacency[cur as usize][e1] == prev { e2 } else { e1 };
+            prev = cur;
+            cur = adjacency[cur as usize][out];
+            steps += 1;
+        }
+        if cur == start {
+            break; // went all the way round: the other direction sees the same faces
+        }
+    }
+}
+
+/// [`walk_closest`] for many (start, point) pairs in parallel.
+pub fn walk_closest_many(positions: &[[f32; 3]], triangles: &[[u32; 3]], adjacency: &[[u32; 3]], starts: &[u32], points: &[[f32; 3]]) -> Vec<(u32, f64, [f64; 3])> {
+    assert_eq!(starts.len(), points.len());
+    let mut out = vec![(0u32, 0f64, [0f64; 3]); points.len()];
+    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, dst)| {
+        for (j, o) in dst.iter_mut().enumerate() {
+            let i = c * CHUNK + j;
+            *o = walk_closest(positions, triangles, adjacency, starts[i], v3(points[i]));
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Small deterministic generator (SplitMix64) so the tests need no crate.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn v(&mut self, s: f64) -> V3 {
+            [(self.next() * 2.0 - 1.0) * s, (self.next() * 2.0 - 1.0) * s, (self.next() * 2.0 - 1.0) * s]
+        }
+    }
+
+    fn at(t: &[V3; 3], b: [f64; 3]) -> V3 {
+        [0, 1, 2].map(|k| b[0] * t[0][k] + b[1] * t[1][k] + b[2] * t[2][k])
+    }
+
+    /// A unit cube [0,1]^3, outward-facing, 12 triangles, shared corners.
+    fn cube(offset: [f32; 3]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let mut p = Vec::new();
+        for i in 0..8u32 {
+            p.push([(i & 1) as f32 + offset[0], ((i >> 1) & 1) as f32 + offset[1], ((i >> 2) & 1) as f32 + offset[2]]);
+        }
+        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+        let mut t = Vec::new();
+        for q in quads {
+            t.push([q[0], q[1], q[2]]);
+            t.push([q[0], q[2], q[3]]);
+        }
+        (p, t)
+    }
+
+    /// A cube whose faces are n x n grids (so it has interior vertices and many triangles).
+    fn grid_cube(n: u32, offset: [f32; 3]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let mut p = Vec::new();
+        let mut t = Vec::new();
+        for axis in 0..3 {
+            for side in 0..2 {
+                let base = p.len() as u32;
+                for i in 0..=n {
+                    for j in 0..=n {
+                        let mut q = [0f32; 3];
+                        q[axis] = side as f32;
+                        q[(axis + 1) % 3] = i as f32 / n as f32;
+                        q[(axis + 2) % 3] = j as f32 / n as f32;
+                        p.push([q[0] + offset[0], q[1] + offset[1], q[2] + offset[2]]);
+                    }
+                }
+                for i in 0..n {
+                    for j in 0..n {
+                        let v = |a: u32, b: u32| base + a * (n + 1) + b;
+                        t.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+                        t.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+                    }
+                }
+            }
+        }
+        (p, t)
+    }
+
+    #[test]
+    fn closest_point_matches_brute_force() {
+        let mut rng = Rng(7);
+        for case in 0..2000 {
+            let tri = [rng.v(1.0), rng.v(1.0), rng.v(1.0)];
+            let p = if case % 3 == 0 { at(&tri, [0.2, 0.3, 0.5]) } else { rng.v(2.0) };
+            let (dd, bary) = closest_on_triangle(p, tri[0], tri[1], tri[2]);
+            assert!(bary.iter().all(|&b| (-1e-12..=1.0 + 1e-12).contains(&b)), "{bary:?}");
+            assert!((bary.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+            assert!((d2(p, at(&tri, bary)) - dd).abs() < 1e-9);
+            // Brute force: the minimum over a fine barycentric grid is never (meaningfully)
+            // below the exact answer, and the exact answer is not above the grid's.
+            let n = 120;
+            let mut brute = f64::INFINITY;
+            for i in 0..=n {
+                for j in 0..=n - i {
+                    let b = [i as f64 / n as f64, j as f64 / n as f64, (n - i - j) as f64 / n as f64];
+                    brute = brute.min(d2(p, at(&tri, b)));
+                }
+            }
+            assert!(dd <= brute + 1e-12, "case {case}: exact {dd} > grid {brute}");
+            let longest = d2(tri[0], tri[1]).max(d2(tri[1], tri[2])).max(d2(tri[2], tri[0])).sqrt();
+            assert!(brute.sqrt() - dd.sqrt() <= longest / n as f64 + 1e-12, "case {case}");
+        }
+    }
+
+    #[test]
+    fn closest_point_on_degenerate_triangles() {
+        let a = [0.0, 0.0, 0.0];
+        let b = [1.0, 0.0, 0.0];
+        let c = [2.0, 0.0, 0.0]; // collinear
+        let (dd, bary) = closest_on_triangle([1.5, 1.0, 0.0], a, b, c);
+        assert!((dd - 1.0).abs() < 1e-12, "{dd}");
+        assert!((at(&[a, b, c], bary)[0] - 1.5).abs() < 1e-12);
+        let (dd, _) = closest_on_triangle([0.0, 0.0, 2.0], a, a, a);
+        assert!((dd - 4.0).abs() < 1e-12);
+    }
+
+    fn brute_closest(p: V3, pos: &[[f32; 3]], tris: &[[u32; 3]]) -> f64 {
+        tris.iter()
+            .map(|t| closest_on_triangle(p, v3(pos[t[0] as usize]), v3(pos[t[1] as usize]), v3(pos[t[2] as usize])).0)
+            .fold(f64::INFINITY, f64::min)
+            .sqrt()
+    }
+
+    fn box_distance(p: V3) -> f64 {
+        // Distance to the surface of [0,1]^3.
+        let outside = [0, 1, 2].map(|k| (-p[k]).max(p[k] - 1.0).max(0.0));
+        let o = dot(outside, outside).sqrt();
+        if o > 0.0 {
+            o
+        } else {
+            [0, 1, 2].map(|k| p[k].min(1.0 - p[k])).into_iter().fold(f64::INFINITY, f64::min)
+        }
+    }
+
+    #[test]
+    fn distance_to_unit_cube() {
+        for (pos, tris) in [cube([0.0; 3]), grid_cube(7, [0.0; 3])] {
+            let bvh = Bvh::build(&pos, &tris).unwrap();
+            let mut rng = Rng(11);
+            let pts: Vec<[f32; 3]> = (0..3000).map(|_| rng.v(1.5).map(|x| (x + 0.5) as f32)).collect();
+            let hits = bvh.closest_many(&pts, None);
+            for (p, h) in pts.iter().zip(&hits) {
+                let p = v3(*p);
+                let h = h.unwrap();
+                let want = box_distance(p);
+                assert!((h.distance - want).abs() < 1e-9, "{p:?}: {} vs {want}", h.distance);
+                assert!((h.distance - brute_closest(p, &pos, &tris)).abs() < 1e-12);
+                // The reported triangle and barycentrics give a point at that distance.
+                let t = tris[h.triangle as usize];
+                let tri = [v3(pos[t[0] as usize]), v3(pos[t[1] as usize]), v3(pos[t[2] as usize])];
+                assert!((d2(p, at(&tri, h.bary)).sqrt() - h.distance).abs() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn bvh_agrees_with_brute_force_on_a_random_soup() {
+        let mut rng = Rng(3);
+        let pos: Vec<[f32; 3]> = (0..3000).map(|_| rng.v(5.0).map(|x| x as f32)).collect();
+        let tris: Vec<[u32; 3]> = (0..1000).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        // Shrink triangles so the soup is not one big tangle.
+        let pos: Vec<[f32; 3]> = pos.chunks(3).flat_map(|c| { let a = c[0]; c.iter().map(move |p| [0, 1, 2].map(|k| a[k] + 0.2 * (p[k] - a[k]))).collect::<Vec<_>>() }).collect();
+        let bvh = Bvh::build(&pos, &tris).unwrap();
+        assert!(bvh.depth() < 40, "depth {}", bvh.depth());
+        for i in 0..500 {
+            let p = rng.v(6.0);
+            let h = bvh.closest(p, if i % 2 == 0 { Some(i as u32) } else { None }).unwrap();
+            assert!((h.distance - brute_closest(p, &pos, &tris)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn hausdorff_of_a_mesh_to_itself_is_zero() {
+        let (pos, tris) = grid_cube(6, [0.0; 3]);
+        let bvh = Bvh::build(&pos, &tris).unwrap();
+        let d = bvh.directed_hausdorff(&pos, &tris, 0.02, 1, 1 << 24).unwrap();
+        assert!(d.max < 1e-6, "{d:?}");
+        assert!(d.samples > 1000);
+    }
+
+    #[test]
+    fn hausdorff_of_a_translated_copy_is_the_translation() {
+        let t = 0.1f32;
+        let (pa, ta) = grid_cube(5, [0.0; 3]);
+        let (pb, tb) = grid_cube(5, [t, 0.0, 0.0]);
+        let (ba, bb) = (Bvh::build(&pa, &ta).unwrap(), Bvh::build(&pb, &tb).unwrap());
+        for d in [bb.directed_hausdorff(&pa, &ta, 0.05, 2, 1 << 24).unwrap(), ba.directed_hausdorff(&pb, &tb, 0.05, 2, 1 << 24).unwrap()] {
+            assert!((d.max - t as f64).abs() < 1e-6, "{d:?}");
+        }
+        // The same through the coarse cube (12 triangles) with a sample budget that forces a
+        // wider spacing: corners are always sampled, and they carry the maximum here.
+        let (pc, tc) = cube([t, 0.0, 0.0]);
+        let bc = Bvh::build(&pc, &tc).unwrap();
+        let d = bc.directed_hausdorff(&pa, &ta, 0.01, 1, 5000).unwrap();
+        assert!(d.samples <= 5000 && d.spacing > 0.01, "{d:?}");
+        assert!((d.max - t as f64).abs() < 1e-6, "{d:?}");
+    }
+
+    #[test]
+    fn hausdorff_finds_an_interior_maximum() {
+        // A flat grid over [0,1]^2 with a square hole [0.3,0.5]^2, and one big triangle over it:
+        // the triangle's corners lie on the grid (distance 0); its farthest point is the hole's
+        // centre (0.4, 0.4), 0.1 from the hole's rim.
+        let n = 40;
+        let mut pos = Vec::new();
+        let mut tris = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                pos.push([i as f32 / n as f32, j as f32 / n as f32, 0.0]);
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                if (12..20).contains(&i) && (12..20).contains(&j) {
+                    continue;
+                }
+                let v = |a: u32, b: u32| a * (n + 1) + b;
+                tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+                tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+            }
+        }
+        let holed = Bvh::build(&pos, &tris).unwrap();
+        let big = vec![[0.05, 0.05, 0.0], [0.95, 0.05, 0.0], [0.05, 0.95, 0.0]];
+        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 0.004, 1, 1 << 20).unwrap();
+        assert!(d.max <= 0.1 + 1e-7 && d.max > 0.1 - 0.004, "{d:?}");
+        // Corners only (spacing larger than the triangle) miss it entirely.
+        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 10.0, 1, 1 << 20).unwrap();
+        assert!(d.max < 1e-7 && d.samples == 3, "{d:?}");
+    }
+
+    #[test]
+    fn adjacency_and_walks_stay_on_their_side() {
+        // A strip of quads along x, cut between x = 2 and x = 3 by split vertices (a seam):
+        // vertices 0..=5 on y = 0, 6..=11 on y = 1, and copies 12, 13 of vertices 3, 9.
+        let mut pos: Vec<[f32; 3]> = (0..6).map(|i| [i as f32, 0.0, 0.0]).collect();
+        pos.extend((0..6).map(|i| [i as f32, 1.0, 0.0]));
+        pos.push([3.0, 0.0, 0.0]);
+        pos.push([3.0, 1.0, 0.0]);
+        let mut tris = Vec::new();
+        for i in 0..5u32 {
+            let (a, b) = if i == 2 { (12, 13) } else { (i + 1, i + 7) }; // right side of quad 2 uses the copies
+            tris.push([i, a, b]);
+            tris.push([i, b, i + 6]);
+        }
+        let keys = vec![0; tris.len()];
+        let adj = face_adjacency(&tris, &keys);
+        // Interior edge of quad 0 (corner 1 -> 2 of face 0 is vertices 1, 7 = shared with face 2? no:
+        // face 0 = [0, 1, 7], face 1 = [0, 7, 6]: they share edge (0, 7).
+        assert_eq!(adj[0][2], 1);
+        assert_eq!(adj[1][0], 0);
+        // The seam edge (12, 13) / (3, 9) has no neighbour.
+        assert_eq!(adj[4][1], NO_FACE);
+        // From the left side, a point beyond the seam stops at the seam (x = 3); from the
+        // right, it is found where it is.
+        let (f, d, _) = walk_closest(&pos, &tris, &adj, 0, [3.5, 0.5, 0.0]);
+        assert!(f == 4 || f == 5, "{f}");
+        assert!((d.sqrt() - 0.5).abs() < 1e-12);
+        let (f, d, _) = walk_closest(&pos, &tris, &adj, 9, [3.5, 0.5, 0.0]);
+        assert!(f == 6 || f == 7, "{f}");
+        assert!(d < 1e-20);
+        let many = walk_closest_many(&pos, &tris, &adj, &[0, 9], &[[3.5, 0.5, 0.0], [3.5, 0.5, 0.0]]);
+        assert_eq!(many.len(), 2);
+        assert!((many[0].1.sqrt() - 0.5).abs() < 1e-12 && many[1].1 < 1e-20);
+    }
+
+    #[test]
+    fn parallel_build_agrees_with_brute_force() {
+        // Enough triangles for the tree to be built in parallel pieces and spliced.
+        let mut rng = Rng(9);
+        let mut pos = Vec::new();
+        for _ in 0..3 * PARALLEL_BUILD {
+            let a = rng.v(10.0);
+            for _ in 0..3 {
+                let d = rng.v(0.1);
+                pos.push([0, 1, 2].map(|k| (a[k] + d[k]) as f32));
+            }
+        }
+        let tris: Vec<[u32; 3]> = (0..pos.len() as u32 / 3).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        let bvh = Bvh::build(&pos, &tris).unwrap();
+        assert!(bvh.depth() < 64, "depth {}", bvh.depth());
+        let mut seen = vec![false; tris.len()];
+        for n in &bvh.nodes {
+            for s in n.start..n.start + n.count {
+                assert!(!seen[s as usize], "slot {s} in two leaves");
+                seen[s as usize] = true;
+            }
+        }
+        assert!(seen.iter().all(|&x| x), "every triangle in a leaf");
+        for _ in 0..100 {
+            let p = rng.v(11.0);
+            let h = bvh.closest(p, None).unwrap();
+            assert!((h.distance - brute_closest(p, &pos, &tris)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn weld_and_seam_edges_of_a_split_box() {
+        // grid_cube gives each face its own vertices: 12 box edges of n segments are seams.
+        let n = 5;
+        let (pos, tris) = grid_cube(n, [0.0; 3]);
+        let (weld, first) = weld_positions(&pos);
+        assert_eq!(first.len(), 6 * (n as usize - 1).pow(2) + 12 * (n as usize - 1) + 8);
+        for (id, &f) in first.iter().enumerate() {
+            assert_eq!(weld[f as usize] as usize, id);
+            assert!(weld[..f as usize].iter().all(|&w| w as usize != id), "first use");
+        }
+        let welded: Vec<[u32; 3]> = tris.iter().map(|t| t.map(|i| weld[i as usize])).collect();
+        let seams = seam_edges(&welded, &tris);
+        assert_eq!(seams.len(), 12 * n as usize);
+        for [a, b, f, g] in seams {
+            assert!(a < b && f != g);
+            let (pa, pb) = (pos[first[a as usize] as usize], pos[first[b as usize] as usize]);
+            // On a box edge: two coordinates in {0, 1}.
+            let on = |p: [f32; 3]| p.iter().filter(|&&x| x == 0.0 || x == 1.0).count() >= 2;
+            assert!(on(pa) && on(pb));
+        }
+        // Welded, the box is closed: every edge has a neighbour.
+        let adj = face_adjacency(&welded, &vec![0; tris.len()]);
+        assert!(adj.iter().flatten().all(|&f| f != NO_FACE));
+        // Unwelded, the box faces' border edges have none.
+        let adj = face_adjacency(&tris, &vec![0; tris.len()]);
+        assert_eq!(adj.iter().flatten().filter(|&&f| f == NO_FACE).count(), 6 * 4 * n as usize);
+    }
+
+    #[test]
+    fn walks_reach_the_point_across_corner_fans() {
+        // A flat grid: from any face, the walk must end at distance 0 for any point on it.
+        let n = 12u32;
+        let mut pos = Vec::new();
+        let mut tris = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                pos.push([i as f32, j as f32, 0.0]);
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let v = |a: u32, b: u32| a * (n + 1) + b;
+                // Alternate diagonals so vertices have fans of 4, 6 and 8 faces.
+                if (i + j) % 2 == 0 {
+                    tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+                    tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+                } else {
+                    tris.push([v(i, j), v(i + 1, j), v(i, j + 1)]);
+                    tris.push([v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
+                }
+            }
+        }
+        let adj = face_adjacency(&tris, &vec![0; tris.len()]);
+        let mut rng = Rng(5);
+        for _ in 0..2000 {
+            let p = [rng.next() * n as f64, rng.next() * n as f64, 0.0];
+            let start = (rng.next() * tris.len() as f64) as u32;
+            let (_, d, _) = walk_closest(&pos, &tris, &adj, start, p);
+            assert!(d < 1e-18, "{p:?} from {start}: {d}");
+            // Grid vertices themselves (the stalling case).
+            let q = [p[0].round(), p[1].round(), 0.5];
+            let (_, d, _) = walk_closest(&pos, &tris, &adj, start, q);
+            assert!((d - 0.25).abs() < 1e-12, "{q:?} from {start}: {d}");
+        }
+    }
+}

@@ -1,0 +1,92 @@
+//! Scene IR -> pack: interleave vertices into the GPU layout, group triangles into submeshes,
+//! and lay out the data blob.
+
+use crate::ir::{LodIr, SceneIr};
+use pack::{Mesh, MeshLod, Pack, PackBuilder, Submesh, Vertex};
+
+/// Build the pack for a scene. Errors name the object that is inconsistent.
+pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
+    let mut b = PackBuilder::new(&scene.source, cooker);
+    for t in &scene.textures {
+        let mips = t.mips.iter().map(|m| b.push_bytes(m)).collect();
+        b.manifest.textures.push(pack::Texture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips });
+    }
+    for (i, mesh) in scene.meshes.iter().enumerate() {
+        let what = format!("mesh {i} '{}'", mesh.name);
+        let Some(base) = mesh.lods.first() else { return Err(format!("{what}: no LODs")) };
+        let (bounds_min, bounds_max) = bounds(&base.positions);
+        let mut lods = Vec::with_capacity(mesh.lods.len());
+        for (l, lod) in mesh.lods.iter().enumerate() {
+            let what = format!("{what} LOD {l}");
+            lod.validate(&what)?;
+            lods.push(write_lod(lod, &mut b).map_err(|e| format!("{what}: {e}"))?);
+        }
+        b.manifest.meshes.push(Mesh { name: mesh.name.clone(), lods, bounds_min, bounds_max, is_static: mesh.is_static });
+    }
+    b.manifest.materials = scene.materials.clone();
+    b.manifest.nodes = scene.nodes.clone();
+    b.manifest.lights = scene.lights.clone();
+    b.manifest.spawns = scene.spawns.clone();
+    b.manifest.sky = scene.sky;
+    b.manifest.lightmap = scene.lightmap.clone();
+    let pack = b.finish();
+    // The pack crate's own consistency check, so a cooker bug is caught here and not at load.
+    pack.manifest.validate(pack.data.len() as u64).map_err(|e| e.to_string())?;
+    Ok(pack)
+}
+
+fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    if positions.is_empty() {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for p in positions {
+        for c in 0..3 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    (lo, hi)
+}
+
+fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
+    let n = lod.positions.len();
+    let vertices: Vec<Vertex> = (0..n)
+        .map(|i| Vertex {
+            position: lod.positions[i],
+            normal: lod.normals.as_ref().map_or([0.0, 0.0, 1.0], |v| v[i]),
+            tangent: lod.tangents.as_ref().map_or([1.0, 0.0, 0.0, 1.0], |v| v[i]),
+            uv0: lod.uv0.as_ref().map_or([0.0; 2], |v| v[i]),
+            uv1: lod.uv1.as_ref().map_or([0.0; 2], |v| v[i]),
+            color: lod.colors.as_ref().map_or([255; 4], |v| v[i]),
+            _pad: 0,
+        })
+        .collect();
+    // One submesh per (material, lightmap page); a stable sort keeps the authored triangle order
+    // within each, which keeps the output deterministic.
+    let key = |t: usize| (lod.materials[t], lod.lightmap_pages.as_ref().map(|p| p[t]));
+    let mut order: Vec<usize> = (0..lod.triangles.len()).collect();
+    order.sort_by_key(|&t| key(t));
+    let mut indices: Vec<u32> = Vec::with_capacity(order.len() * 3);
+    let mut submeshes: Vec<Submesh> = Vec::new();
+    for &t in &order {
+        let (material, lightmap_page) = key(t);
+        match submeshes.last_mut() {
+            Some(s) if s.material == material && s.lightmap_page == lightmap_page => s.index_count += 3,
+            _ => submeshes.push(Submesh { first_index: indices.len() as u32, index_count: 3, material, lightmap_page }),
+        }
+        indices.extend_from_slice(&lod.triangles[t]);
+    }
+    let too_big = || format!("more than {} vertices or indices", u32::MAX);
+    let vertex_count = u32::try_from(n).map_err(|_| too_big())?;
+    let index_count = u32::try_from(indices.len()).map_err(|_| too_big())?;
+    let index_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+    Ok(MeshLod {
+        vertices: b.push_bytes(Vertex::slice_as_bytes(&vertices)),
+        vertex_count,
+        indices: b.push_bytes(&index_bytes),
+        index_count,
+        submeshes,
+        error: lod.error,
+    })
+}

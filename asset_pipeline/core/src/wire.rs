@@ -1,0 +1,292 @@
+//! The crossing between Python's scene IR (`asset_pipeline/ir.py`) and `SceneIr`: JSON metadata
+//! in which every array is replaced by an index into a list of raw arrays (numpy dtype string,
+//! shape, little-endian bytes). See `to_wire` / `from_wire` in ir.py for the other side.
+
+use crate::ir::{LodIr, MeshIr, SceneIr, TextureIr};
+use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// One numpy array as it crosses: `dtype` is numpy's `dtype.str` (e.g. "<f4", "|u1").
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawArray {
+    pub dtype: String,
+    pub shape: Vec<usize>,
+    pub bytes: Vec<u8>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireScene {
+    name: String,
+    source: String,
+    meshes: Vec<WireMesh>,
+    materials: Vec<Material>,
+    textures: Vec<WireTexture>,
+    nodes: Vec<Node>,
+    #[serde(default)]
+    lights: Vec<pack::Light>,
+    #[serde(default)]
+    spawns: Vec<Spawn>,
+    #[serde(default)]
+    sky: Option<Sky>,
+    #[serde(default)]
+    lightmap: Option<LightmapLayout>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireMesh {
+    name: String,
+    #[serde(rename = "static", default)]
+    is_static: bool,
+    lods: Vec<WireLod>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireLod {
+    attributes: BTreeMap<String, usize>,
+    triangles: usize,
+    materials: usize,
+    #[serde(default)]
+    lightmap_pages: Option<usize>,
+    #[serde(default)]
+    error: f32,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireTexture {
+    name: String,
+    width: u32,
+    height: u32,
+    format: TextureFormat,
+    mips: Vec<usize>,
+}
+
+/// A scalar type that can cross as a numpy dtype.
+trait Elem: Copy + Default {
+    const DTYPE: &'static str;
+    const SIZE: usize;
+    fn read(b: &[u8]) -> Self;
+    fn write(self, out: &mut Vec<u8>);
+}
+
+macro_rules! elem {
+    ($t:ty, $dtype:expr) => {
+        impl Elem for $t {
+            const DTYPE: &'static str = $dtype;
+            const SIZE: usize = std::mem::size_of::<$t>();
+            fn read(b: &[u8]) -> Self {
+                <$t>::from_le_bytes(b.try_into().unwrap())
+            }
+            fn write(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    };
+}
+elem!(f32, "<f4");
+elem!(u32, "<u4");
+elem!(u16, "<u2");
+elem!(u8, "|u1");
+
+struct Reader<'a> {
+    arrays: &'a [RawArray],
+}
+
+impl Reader<'_> {
+    fn get(&self, index: usize, what: &str) -> Result<&RawArray, String> {
+        self.arrays.get(index).ok_or_else(|| format!("{what}: array {index} does not exist ({} arrays)", self.arrays.len()))
+    }
+
+    /// An (n, K) array of T as `Vec<[T; K]>`; (n,) arrays when K == 1 go through `scalars`.
+    fn rows<T: Elem, const K: usize>(&self, index: usize, what: &str) -> Result<Vec<[T; K]>, String> {
+        let a = self.get(index, what)?;
+        if a.dtype != T::DTYPE || a.shape.len() != 2 || a.shape[1] != K || a.bytes.len() != a.shape[0] * K * T::SIZE {
+            return Err(format!("{what}: expected a {}(n, {K}) array, got {}{:?} ({} bytes)", T::DTYPE, a.dtype, a.shape, a.bytes.len()));
+        }
+        Ok(a.bytes
+            .chunks_exact(K * T::SIZE)
+            .map(|row| {
+                let mut out = [T::default(); K];
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = T::read(&row[k * T::SIZE..(k + 1) * T::SIZE]);
+                }
+                out
+            })
+            .collect())
+    }
+
+    fn scalars<T: Elem>(&self, index: usize, what: &str) -> Result<Vec<T>, String> {
+        let a = self.get(index, what)?;
+        if a.dtype != T::DTYPE || a.shape.len() != 1 || a.bytes.len() != a.shape[0] * T::SIZE {
+            return Err(format!("{what}: expected a {}(n,) array, got {}{:?}", T::DTYPE, a.dtype, a.shape));
+        }
+        Ok(a.bytes.chunks_exact(T::SIZE).map(T::read).collect())
+    }
+}
+
+/// Decode the wire form into a `SceneIr`, checking every array's dtype and shape.
+pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
+    let w: WireScene = serde_json::from_str(json).map_err(|e| format!("scene metadata: {e}"))?;
+    let r = Reader { arrays };
+    let mut meshes = Vec::with_capacity(w.meshes.len());
+    for (i, m) in w.meshes.iter().enumerate() {
+        let mut lods = Vec::with_capacity(m.lods.len());
+        for (l, wl) in m.lods.iter().enumerate() {
+            let what = format!("mesh {i} '{}' LOD {l}", m.name);
+            let attr = |name: &str| wl.attributes.get(name).copied();
+            for name in wl.attributes.keys() {
+                if !["position", "normal", "tangent", "uv0", "uv1", "color", "joints", "weights"].contains(&name.as_str()) {
+                    return Err(format!("{what}: unknown attribute '{name}'"));
+                }
+            }
+            let pos = attr("position").ok_or_else(|| format!("{what}: no position attribute"))?;
+            let opt3 = |n: &str| attr(n).map(|i| r.rows::<f32, 3>(i, &format!("{what} {n}"))).transpose();
+            let opt4 = |n: &str| attr(n).map(|i| r.rows::<f32, 4>(i, &format!("{what} {n}"))).transpose();
+            let opt2 = |n: &str| attr(n).map(|i| r.rows::<f32, 2>(i, &format!("{what} {n}"))).transpose();
+            let lod = LodIr {
+                positions: r.rows::<f32, 3>(pos, &format!("{what} position"))?,
+                normals: opt3("normal")?,
+                tangents: opt4("tangent")?,
+                uv0: opt2("uv0")?,
+                uv1: opt2("uv1")?,
+                colors: attr("color").map(|i| r.rows::<u8, 4>(i, &format!("{what} color"))).transpose()?,
+                joints: attr("joints").map(|i| r.rows::<u16, 4>(i, &format!("{what} joints"))).transpose()?,
+                weights: opt4("weights")?,
+                triangles: r.rows::<u32, 3>(wl.triangles, &format!("{what} triangles"))?,
+                materials: r.scalars::<u32>(wl.materials, &format!("{what} materials"))?,
+                lightmap_pages: wl.lightmap_pages.map(|i| r.scalars::<u32>(i, &format!("{what} lightmap_pages"))).transpose()?,
+                error: wl.error,
+            };
+            lod.validate(&what)?;
+            lods.push(lod);
+        }
+        meshes.push(MeshIr { name: m.name.clone(), is_static: m.is_static, lods });
+    }
+    let mut textures = Vec::with_capacity(w.textures.len());
+    for (i, t) in w.textures.iter().enumerate() {
+        let mut mips = Vec::with_capacity(t.mips.len());
+        for (l, &index) in t.mips.iter().enumerate() {
+            let a = r.get(index, &format!("texture {i} '{}' mip {l}", t.name))?;
+            let want = ((t.width >> l).max(1) as u64) * ((t.height >> l).max(1) as u64) * t.format.bytes_per_texel();
+            if a.bytes.len() as u64 != want {
+                return Err(format!("texture {i} '{}' mip {l}: {} bytes, expected {want}", t.name, a.bytes.len()));
+            }
+            mips.push(a.bytes.clone());
+        }
+        textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips });
+    }
+    Ok(SceneIr {
+        name: w.name,
+        source: w.source,
+        meshes,
+        materials: w.materials,
+        textures,
+        nodes: w.nodes,
+        lights: w.lights,
+        spawns: w.spawns,
+        sky: w.sky,
+        lightmap: w.lightmap,
+    })
+}
+
+struct Writer {
+    arrays: Vec<RawArray>,
+}
+
+impl Writer {
+    fn rows<T: Elem, const K: usize>(&mut self, rows: &[[T; K]]) -> usize {
+        let mut bytes = Vec::with_capacity(rows.len() * K * T::SIZE);
+        rows.iter().flatten().for_each(|v| v.write(&mut bytes));
+        self.push(T::DTYPE, vec![rows.len(), K], bytes)
+    }
+    fn scalars<T: Elem>(&mut self, v: &[T]) -> usize {
+        let mut bytes = Vec::with_capacity(v.len() * T::SIZE);
+        v.iter().for_each(|x| x.write(&mut bytes));
+        self.push(T::DTYPE, vec![v.len()], bytes)
+    }
+    fn push(&mut self, dtype: &str, shape: Vec<usize>, bytes: Vec<u8>) -> usize {
+        self.arrays.push(RawArray { dtype: dtype.into(), shape, bytes });
+        self.arrays.len() - 1
+    }
+}
+
+/// Encode a `SceneIr` for Python. Texture mips cross as (h, w, 4) uint8 arrays (or float16 for
+/// HDR formats).
+pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
+    let mut w = Writer { arrays: Vec::new() };
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|m| WireMesh {
+            name: m.name.clone(),
+            is_static: m.is_static,
+            lods: m
+                .lods
+                .iter()
+                .map(|l| {
+                    let mut attributes = BTreeMap::new();
+                    attributes.insert("position".to_string(), w.rows(&l.positions));
+                    if let Some(v) = &l.normals {
+                        attributes.insert("normal".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.tangents {
+                        attributes.insert("tangent".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.uv0 {
+                        attributes.insert("uv0".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.uv1 {
+                        attributes.insert("uv1".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.colors {
+                        attributes.insert("color".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.joints {
+                        attributes.insert("joints".into(), w.rows(v));
+                    }
+                    if let Some(v) = &l.weights {
+                        attributes.insert("weights".into(), w.rows(v));
+                    }
+                    WireLod {
+                        attributes,
+                        triangles: w.rows(&l.triangles),
+                        materials: w.scalars(&l.materials),
+                        lightmap_pages: l.lightmap_pages.as_ref().map(|p| w.scalars(p)),
+                        error: l.error,
+                    }
+                })
+                .collect(),
+        })
+        .collect();
+    let textures = scene
+        .textures
+        .iter()
+        .map(|t| {
+            let (dtype, channel_bytes) = match t.format {
+                TextureFormat::Rgba16Float => ("<f2", 2),
+                _ => ("|u1", 1),
+            };
+            let mips = (0..t.mips.len())
+                .map(|l| {
+                    let shape = vec![(t.height >> l).max(1) as usize, (t.width >> l).max(1) as usize, 4];
+                    debug_assert_eq!(shape.iter().product::<usize>() * channel_bytes, t.mips[l].len());
+                    w.push(dtype, shape, t.mips[l].clone())
+                })
+                .collect();
+            WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips }
+        })
+        .collect();
+    let doc = WireScene {
+        name: scene.name.clone(),
+        source: scene.source.clone(),
+        meshes,
+        materials: scene.materials.clone(),
+        textures,
+        nodes: scene.nodes.clone(),
+        lights: scene.lights.clone(),
+        spawns: scene.spawns.clone(),
+        sky: scene.sky,
+        lightmap: scene.lightmap.clone(),
+    };
+    (serde_json::to_string(&doc).expect("the IR always serialises"), w.arrays)
+}

@@ -1,0 +1,281 @@
+"""The scene IR: what the cooker's stages pass to each other.
+
+A scene is plain dataclasses holding numpy arrays. Every stage is a function
+``stage(scene_or_part, settings) -> new value`` that does not mutate its input, so stages can
+be cached by a hash of their inputs (see ``cache.py``). The Rust core imports glTF into this IR
+and writes the pack from it (``to_wire`` / ``from_wire`` are the crossing); Python never writes
+pack bytes itself.
+
+Units and conventions: metres, right-handed, +Y up (glTF's). Colours are linear. Transforms are
+column-major 4x4 (as glTF and glam).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Per-vertex attributes a mesh may carry: name -> (dtype, components). "position" is required.
+# Colours are linear RGBA in 8-bit UNORM; joints index a skin's joint list.
+ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
+    "position": (np.dtype(np.float32), 3),
+    "normal": (np.dtype(np.float32), 3),
+    "tangent": (np.dtype(np.float32), 4),
+    "uv0": (np.dtype(np.float32), 2),
+    "uv1": (np.dtype(np.float32), 2),  # lightmap UVs, in [0,1] of the triangle's lightmap page
+    "color": (np.dtype(np.uint8), 4),
+    "joints": (np.dtype(np.uint16), 4),
+    "weights": (np.dtype(np.float32), 4),
+}
+
+
+class IrError(ValueError):
+    """An IR value breaks its invariants (a cooker bug or bad data from a stage)."""
+
+
+@dataclass
+class Lod:
+    """One level of detail: its own vertices and triangles. LOD 0 is the full mesh."""
+
+    attributes: dict[str, np.ndarray]  # name -> (n, k) array, dtypes as ATTRIBUTES
+    triangles: np.ndarray  # (m, 3) uint32 indices into the attributes
+    materials: np.ndarray  # (m,) uint32 material index per triangle
+    lightmap_pages: np.ndarray | None = None  # (m,) uint32 atlas page per triangle, after uv2
+    error: float = 0.0  # geometric error to LOD 0 in metres, object space (0 for LOD 0)
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.attributes["position"])
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.triangles)
+
+    def validate(self, what: str) -> None:
+        if "position" not in self.attributes:
+            raise IrError(f"{what}: no position attribute")
+        n = self.vertex_count
+        for name, a in self.attributes.items():
+            if name not in ATTRIBUTES:
+                raise IrError(f"{what}: unknown attribute '{name}'")
+            dtype, k = ATTRIBUTES[name]
+            if a.dtype != dtype or a.ndim != 2 or a.shape != (n, k):
+                raise IrError(f"{what}: attribute '{name}' is {a.dtype}{a.shape}, expected {dtype}({n}, {k})")
+        m = len(self.triangles)
+        if self.triangles.dtype != np.uint32 or self.triangles.shape != (m, 3):
+            raise IrError(f"{what}: triangles are {self.triangles.dtype}{self.triangles.shape}, expected uint32(m, 3)")
+        if m and int(self.triangles.max()) >= n:
+            raise IrError(f"{what}: a triangle index is >= the vertex count {n}")
+        for name, arr in (("materials", self.materials), ("lightmap_pages", self.lightmap_pages)):
+            if arr is not None and (arr.dtype != np.uint32 or arr.shape != (m,)):
+                raise IrError(f"{what}: {name} is {arr.dtype}{arr.shape}, expected uint32({m},)")
+
+
+@dataclass
+class Mesh:
+    name: str
+    lods: list[Lod]  # lods[0] is the full-detail mesh; the lod stage appends the rest
+    static: bool = True  # static level geometry: gets lightmap UVs and is baked
+    texels_per_metre: float | None = None  # per-object override of the level's lightmap density
+
+    @property
+    def base(self) -> Lod:
+        return self.lods[0]
+
+
+@dataclass
+class Material:
+    name: str = "default"
+    base_color: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    base_color_texture: int | None = None
+    metallic: float = 0.0
+    roughness: float = 1.0
+    emissive: tuple[float, float, float] = (0.0, 0.0, 0.0)  # linear radiance factor
+    alpha_mode: str = "Opaque"  # Opaque | Mask | Blend
+    alpha_cutoff: float = 0.5
+    double_sided: bool = False
+
+
+@dataclass
+class Texture:
+    name: str
+    width: int
+    height: int
+    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float
+    mips: list[np.ndarray]  # level 0 first; (h, w, 4) uint8, or float16 for Rgba16Float
+
+
+@dataclass
+class Node:
+    name: str
+    parent: int | None = None  # parents precede children
+    local: tuple[float, ...] = (1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1)
+    mesh: int | None = None
+
+
+@dataclass
+class Light:
+    """Lights in physical units: sun in lux (illuminance at normal incidence), point and spot in
+    candela (intensity), rect in nits (luminance of the emitting face). `color` is a linear
+    tint multiplied by `intensity`."""
+
+    name: str
+    kind: str  # sun | point | spot | rect
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    direction: tuple[float, float, float] = (0.0, -1.0, 0.0)  # the way the light travels
+    range: float | None = None  # metres; None = physically unbounded
+    inner_cone: float = 0.0  # spot: radians from the axis
+    outer_cone: float = 0.7853982
+    size: tuple[float, float] = (1.0, 1.0)  # rect: width, height in metres
+    angular_radius: float = 0.00465  # sun: radians (the real sun's)
+
+
+@dataclass
+class Spawn:
+    name: str
+    kind: str  # player | character | boids | particles
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)  # quaternion xyzw
+    params: dict = field(default_factory=dict)  # kind-specific: asset, count, radius, rate, ...
+
+
+@dataclass
+class Sky:
+    color: tuple[float, float, float] = (0.5, 0.7, 1.0)  # linear
+    intensity: float = 1.0  # luminance scale in nits
+
+
+@dataclass
+class LightmapLayout:
+    texels_per_metre: float
+    pages: list[tuple[int, int]]  # (width, height) in texels of each atlas page
+    padding: int = 2  # texels between charts
+
+
+@dataclass
+class Scene:
+    name: str
+    source: str
+    meshes: list[Mesh] = field(default_factory=list)
+    materials: list[Material] = field(default_factory=list)
+    textures: list[Texture] = field(default_factory=list)
+    nodes: list[Node] = field(default_factory=list)
+    lights: list[Light] = field(default_factory=list)
+    spawns: list[Spawn] = field(default_factory=list)
+    sky: Sky | None = None
+    lightmap: LightmapLayout | None = None
+
+    def validate(self) -> None:
+        for i, m in enumerate(self.meshes):
+            if not m.lods:
+                raise IrError(f"mesh {i} '{m.name}': no LODs")
+            for l, lod in enumerate(m.lods):
+                lod.validate(f"mesh {i} '{m.name}' LOD {l}")
+                if len(lod.materials) and int(lod.materials.max()) >= len(self.materials):
+                    raise IrError(f"mesh {i} '{m.name}' LOD {l}: material index out of range")
+        for i, n in enumerate(self.nodes):
+            if n.parent is not None and not 0 <= n.parent < i:
+                raise IrError(f"node {i} '{n.name}': parent {n.parent} does not precede it")
+            if n.mesh is not None and not 0 <= n.mesh < len(self.meshes):
+                raise IrError(f"node {i} '{n.name}': mesh {n.mesh} does not exist")
+
+
+# ---- crossing to and from the Rust core -------------------------------------------------------
+# The wire form is (JSON text, list of arrays): every numpy array in the scene is replaced in the
+# JSON by its index into the list, so the Rust side reads metadata with serde and arrays without
+# copying through Python objects.
+
+
+def _lod_doc(l: Lod, put) -> dict:
+    return {
+        "attributes": {k: put(v) for k, v in l.attributes.items()},
+        "triangles": put(l.triangles),
+        "materials": put(l.materials),
+        "lightmap_pages": None if l.lightmap_pages is None else put(l.lightmap_pages),
+        "error": float(l.error),
+    }
+
+
+def _lod_from_doc(d: dict, arrays: list[np.ndarray]) -> Lod:
+    pages = d.get("lightmap_pages")
+    return Lod(
+        attributes={k: arrays[i] for k, i in d["attributes"].items()},
+        triangles=arrays[d["triangles"]],
+        materials=arrays[d["materials"]],
+        lightmap_pages=None if pages is None else arrays[pages],
+        error=d.get("error", 0.0),
+    )
+
+
+def lods_to_wire(lods: list[Lod]) -> tuple[list[dict], list[np.ndarray]]:
+    """A list of LODs alone (a stage's output) as (docs, arrays)."""
+    arrays: list[np.ndarray] = []
+
+    def put(a: np.ndarray) -> int:
+        arrays.append(np.ascontiguousarray(a))
+        return len(arrays) - 1
+
+    return [_lod_doc(l, put) for l in lods], arrays
+
+
+def lods_from_wire(docs: list[dict], arrays: list[np.ndarray]) -> list[Lod]:
+    return [_lod_from_doc(d, arrays) for d in docs]
+
+
+def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
+    scene.validate()
+    arrays: list[np.ndarray] = []
+
+    def put(a: np.ndarray) -> int:
+        arrays.append(np.ascontiguousarray(a))
+        return len(arrays) - 1
+
+    def lod(l: Lod) -> dict:
+        return _lod_doc(l, put)
+
+    doc = {
+        "name": scene.name,
+        "source": scene.source,
+        "meshes": [{"name": m.name, "static": m.static, "texels_per_metre": m.texels_per_metre, "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
+        "materials": [dataclasses.asdict(m) for m in scene.materials],
+        "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "mips": [put(m) for m in t.mips]} for t in scene.textures],
+        "nodes": [dataclasses.asdict(n) for n in scene.nodes],
+        "lights": [dataclasses.asdict(l) for l in scene.lights],
+        "spawns": [dataclasses.asdict(s) for s in scene.spawns],
+        "sky": None if scene.sky is None else dataclasses.asdict(scene.sky),
+        "lightmap": None if scene.lightmap is None else dataclasses.asdict(scene.lightmap),
+    }
+    return json.dumps(doc), arrays
+
+
+def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
+    doc = json.loads(text)
+
+    def lod(d: dict) -> Lod:
+        return _lod_from_doc(d, arrays)
+
+    def tup(d: dict, cls):
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: (tuple(v) if isinstance(v, list) and k != "pages" else v) for k, v in d.items() if k in names})
+
+    scene = Scene(
+        name=doc["name"],
+        source=doc["source"],
+        meshes=[Mesh(name=m["name"], static=m.get("static", True), texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]]) for m in doc["meshes"]],
+        materials=[tup(m, Material) for m in doc["materials"]],
+        textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]]) for t in doc["textures"]],
+        nodes=[tup(n, Node) for n in doc["nodes"]],
+        lights=[tup(l, Light) for l in doc.get("lights", [])],
+        spawns=[tup(s, Spawn) for s in doc.get("spawns", [])],
+        sky=None if doc.get("sky") is None else tup(doc["sky"], Sky),
+    )
+    if doc.get("lightmap"):
+        lm = doc["lightmap"]
+        scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2))
+    scene.validate()
+    return scene

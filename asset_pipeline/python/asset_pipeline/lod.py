@@ -1,0 +1,417 @@
+"""The LOD stage: a chain of simplified meshes per mesh, each with its measured geometric error.
+
+``build_lods(lod0, settings) -> [LOD1, LOD2, ...]`` is a pure function: the same LOD 0 and settings
+give the same arrays, bit for bit (the orchestrator caches it by content hash).
+
+How a level is made
+-------------------
+1. **Weld by position.** glTF and CSG meshes split vertices wherever an attribute changes (UV seams,
+   hard normals, material borders): same position, different attributes. Simplifying that mesh
+   would let the two sides of a seam move independently and open cracks, so positions are welded
+   (bitwise equality) into one connected surface, and the chain is simplified in that welded space
+   only. A crack needs two copies of a position; there are none.
+2. **Simplify** the previous level (the chain is built level on level, as meshoptimizer advises) to
+   half its triangles with ``fast_simplification.simplify(..., return_collapses=True)`` (quadric
+   error metric; vertices move to the quadric optimum). Seams on smooth surfaces are kept as chains
+   of edges (see ``_simplify``: "flaps" make their vertices fast-simplification borders);
+   seams on creases (hard edges of a box) need no help, the quadrics of the two faces keep them.
+3. **Track faces through the collapses.** The collapse list ``(i0, i1)`` says ``i1`` merged into
+   ``i0``; following it gives each input vertex its surviving vertex, and fast-simplification never
+   creates triangles: it deletes the ones that degenerate, keeps the others in order with their
+   corner order, and numbers the referenced vertices in order. So every output triangle is a LOD 0
+   triangle whose corners moved, and corner j of it descends from corner j of that LOD 0 triangle.
+   (``replay_simplification`` computes the same mapping, but replays every collapse and runs a
+   Python loop per dropped vertex: about as slow as the simplification itself at 1M triangles.
+   The mapping here is checked against fast-simplification's own output on every call.)
+4. **Split vertices and carry attributes by walking LOD 0.** For each output corner, walk over
+   LOD 0 from the triangle the corner's face descends from toward the corner's (moved) position,
+   crossing only edges whose split vertices both faces share (same UV island, smoothing group,
+   material and lightmap page), to the closest point reachable that way; the corner's attributes
+   are LOD 0's, interpolated there (barycentric). Staying on the start triangle's side means a
+   corner gets the values of *its face's* side of a seam: the two copies of a seam vertex get each
+   side's values, a pole of a lat-long sphere gets one copy per face, and a face the simplifier
+   pushed across a seam gets its own side's values clamped at the seam rather than the other
+   side's (which would smear the whole texture across it). Corners that reach the same point of
+   LOD 0 share an output vertex; elsewhere a position gets one output vertex per side, like LOD 0.
+   Then normals are renormalised, tangents re-orthonormalised (handedness from the nearest corner),
+   colours rounded, and skin weights blended per joint over the three corners, the four largest
+   kept and renormalised to sum 1 (joints stay indices LOD 0 used). Faces keep their material and
+   lightmap page.
+5. **Measure the error**: the symmetric Hausdorff distance between the level and LOD 0, estimated
+   by dense sampling both ways in Rust (``MeshBvh.directed_hausdorff``: every triangle of each mesh
+   on a barycentric grid, corners included, no coarser than LOD 0's mean edge length and at least
+   ``min_subdivisions`` per edge, each sample's exact distance to the other mesh). Stored error =
+   that maximum x (1 + ``error_safety``) + 1e-6 of the bounding-box diagonal (float32 resolution),
+   in metres, object space, and never below the previous level's.
+
+Stop rules: each level targets half the previous triangle count (never below the floor); the chain
+stops when a step saves less than ``min_saving`` of the triangles, at the floor, at ``max_lods``, or
+before a level whose error exceeds ``max_error_fraction`` of LOD 0's bounding-box diagonal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import fast_simplification
+import numpy as np
+
+from asset_pipeline import ir
+from asset_pipeline._core import MeshBvh, face_adjacency, seam_edges, walk_closest, weld_positions
+
+
+@dataclass(frozen=True)
+class LodSettings:
+    """Settings of the LOD stage (part of its cache key)."""
+
+    floor_triangles: int = 64  # no level below this many triangles
+    floor_fraction: float = 0.0  # ... nor below this fraction of LOD 0's triangles (the larger floor wins)
+    min_saving: float = 0.25  # a level must have at most (1 - min_saving) x the previous level's triangles
+    max_error_fraction: float = 0.05  # stop before a level whose error exceeds this x LOD 0's bbox diagonal
+    max_lods: int = 12  # LOD 1..max_lods at most
+    aggressiveness: float = 7.0  # fast-simplification's `agg` (its default; lower = slower, better)
+    # Seams (UV, normal, material, page) whose faces meet at less than this dihedral angle are kept
+    # as edge chains; sharper ones are creases the quadrics keep anyway. 0 = keep none: lower
+    # geometric error, but UVs near seams get clamped where the simplifier crosses them.
+    seam_angle_deg: float = 30.0
+    error_safety: float = 0.05  # stored error = sampled Hausdorff maximum x (1 + error_safety)
+    sample_spacing: float = 1.0  # Hausdorff sample spacing, in LOD 0 mean edge lengths
+    min_subdivisions: int = 3  # grid subdivisions per edge of a level's triangles (3 puts a sample at the centroid)
+
+
+def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.Lod]:
+    """LOD 1..n of `lod0` (not including it), each with `.error` in metres. Pure and deterministic."""
+    lod0.validate("lod0")
+    s = settings
+    if not (0.0 < s.min_saving < 1.0) or s.max_lods < 0 or s.floor_triangles < 1:
+        raise ValueError(f"bad LodSettings: {s}")
+    pos0 = lod0.attributes["position"]
+    m0 = lod0.triangle_count
+    floor = max(int(s.floor_triangles), math.ceil(s.floor_fraction * m0))
+    if m0 <= floor or s.max_lods == 0:
+        return []
+    if not np.isfinite(pos0).all():
+        raise ir.IrError("lod0: a position is not finite")
+
+    ctx = _Lod0(lod0)
+    used = pos0[np.unique(lod0.triangles)].astype(np.float64)
+    diag = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+    limit = s.max_error_fraction * diag
+    spacing = s.sample_spacing * ctx.mean_edge
+
+    lods: list[ir.Lod] = []
+    level = ctx.level0
+    error = 0.0
+    while len(lods) < s.max_lods and level.triangle_count > floor:
+        target = max(level.triangle_count // 2, floor)
+        new = _simplify(level, target, s.aggressiveness, s.seam_angle_deg)
+        if new is None or new.triangle_count > (1.0 - s.min_saving) * level.triangle_count:
+            break
+        level = new
+        lod = _split_and_carry(ctx, level)
+        level.split = lod.triangles  # the next level finds its seams in this level's splits
+        measured = _hausdorff(ctx, lod, spacing, s.min_subdivisions)
+        error = max(error, measured * (1.0 + s.error_safety) + 1e-6 * diag)
+        if error > limit:
+            break
+        lod.error = error
+        lods.append(lod)
+    return lods
+
+
+# ---- LOD 0 ------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Level:
+    """A level in welded form, and where its faces came from in LOD 0."""
+
+    points: np.ndarray  # (n, 3) float64
+    faces: np.ndarray  # (m, 3) int32; corner j of a face descends from corner j of its LOD 0 face
+    face_origin: np.ndarray  # (m,) the LOD 0 face each face descends from
+    seamy: np.ndarray  # (n,) bool: a LOD 0 vertex with several split copies was merged into it
+    split: np.ndarray | None = None  # (m, 3) uint32 split vertex of each corner (equal ids: equal attributes)
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.faces)
+
+
+class _Lod0:
+    """What every level needs from LOD 0: its welded level, face adjacency, a BVH."""
+
+    def __init__(self, lod0: ir.Lod):
+        self.lod = lod0
+        pos = np.ascontiguousarray(lod0.attributes["position"])
+        tri = np.ascontiguousarray(lod0.triangles)
+        weld, first = weld_positions(pos)  # welded ids in order of first use: the input's locality
+        wf = weld[tri]
+        ok = (wf[:, 0] != wf[:, 1]) & (wf[:, 1] != wf[:, 2]) & (wf[:, 0] != wf[:, 2])
+        # A welded vertex is on a seam when faces use more than one split copy of it.
+        used = np.zeros(len(pos), dtype=bool)
+        used[tri.ravel()] = True
+        copies = np.bincount(weld[used], minlength=len(first))
+        # Zero-area faces (two corners at one position) go: simplification has no use for them.
+        self.level0 = _Level(
+            points=pos[first].astype(np.float64),
+            faces=np.ascontiguousarray(wf[ok].astype(np.int32)),
+            face_origin=np.flatnonzero(ok),
+            seamy=copies > 1,
+            split=tri[ok],
+        )
+        # Walks cross edges whose split vertices both faces share, between faces of one material
+        # and lightmap page: they stay within a region where attributes are continuous.
+        key = lod0.materials
+        if lod0.lightmap_pages is not None:
+            pages = int(lod0.lightmap_pages.max(initial=0)) + 1
+            if int(key.max(initial=0)) < (1 << 32) // pages:
+                key = key * np.uint32(pages) + lod0.lightmap_pages
+            else:
+                key = np.unique(np.stack([key, lod0.lightmap_pages], 1), axis=0, return_inverse=True)[1]
+        self.adjacency = face_adjacency(tri, np.ascontiguousarray(key, dtype=np.uint32).ravel())
+        self.bvh = MeshBvh(pos, tri)
+        a, b, c = (pos[tri[:, k]].astype(np.float64) for k in range(3))
+        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+        # Edge of an equilateral triangle of the mean area: LOD 0's sampling scale.
+        self.mean_edge = math.sqrt(4.0 * area / (math.sqrt(3.0) * max(int(ok.sum()), 1))) if area > 0 else 0.0
+
+
+# ---- one level --------------------------------------------------------------------------------
+
+
+def _simplify(level: _Level, target: int, agg: float, seam_angle_deg: float) -> _Level | None:
+    """Simplify a welded level to about `target` triangles, keeping its smooth seams as seams.
+
+    Seams (edges where the faces on either side have different split vertices) on a smooth surface
+    are invisible to the quadrics, so the simplifier would happily collapse across them, and the
+    faces it leaves straddle the seam: their corners then get clamped UVs (see
+    ``_split_and_carry``), which stretches the texture near the seam. fast-simplification has no
+    vertex locks, but it never collapses a border vertex with a non-border one, and finds borders
+    once, before it starts. So each such seam edge (a, b) gets a *flap*: a triangle (a, b, x) with
+    a new vertex x above the edge's midpoint along the surface normal. That makes a and b border
+    vertices; from then on they only collapse with border vertices (along their seam, to an end
+    point or the midpoint; junctions of three or more seams are left free), and the flap's plane, perpendicular to the surface through the seam,
+    adds the boundary-constraint quadric of Garland & Heckbert against cutting a curved seam's
+    corners. The flap is free to remove (x lies on every plane it has), so it collapses in the
+    first pass; flaps that remain are dropped from the output. Creases (sharper than
+    `seam_angle_deg`) get no flap: their two face planes already make crossing them cost error,
+    and border vertices of two creases meeting at a corner could collapse into each other.
+    """
+    points, faces = level.points, level.faces
+    n, m = len(points), len(faces)
+    seams = seam_edges(faces.view(np.uint32), level.split).astype(np.int64)
+    edges = seams[:, :2]
+    fn = np.cross(points[faces[:, 1]] - points[faces[:, 0]], points[faces[:, 2]] - points[faces[:, 0]])[seams[:, 2:]]
+    normals = (fn / np.maximum(np.linalg.norm(fn, axis=2, keepdims=True), 1e-300)).sum(axis=1)
+    # Two unit normals at dihedral angle t sum to length 2 cos(t / 2).
+    smooth = np.linalg.norm(normals, axis=1) > 2.0 * math.cos(math.radians(seam_angle_deg) / 2.0)
+    # Only seam chains: where three or more seam edges meet (a pole of a lat-long UV sphere, where
+    # every edge is a seam; seams crossing), flaps would make a whole fan of vertices borders that
+    # can then hardly collapse at all.
+    valence = np.bincount(edges.ravel(), minlength=n)
+    chain = (valence[edges[:, 0]] <= 2) & (valence[edges[:, 1]] <= 2)
+    edges, normals = edges[smooth & chain], normals[smooth & chain]
+    if len(edges):
+        pa, pb = points[edges[:, 0]], points[edges[:, 1]]
+        up = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+        tips = 0.5 * (pa + pb) + 0.5 * np.linalg.norm(pb - pa, axis=1, keepdims=True) * up
+        points = np.concatenate([points, tips])
+        flaps = np.stack([edges[:, 0], edges[:, 1], n + np.arange(len(edges))], 1)
+        faces = np.concatenate([faces, flaps.astype(np.int32)])
+    out_points, out_faces, collapses = fast_simplification.simplify(
+        np.ascontiguousarray(points), np.ascontiguousarray(faces), target_count=int(target), agg=float(agg), return_collapses=True
+    )
+    # Where each vertex ended up: follow the collapse chains (i1 -> i0) by pointer jumping.
+    root = np.arange(len(points), dtype=np.int64)
+    if len(collapses):
+        root[collapses[:, 1]] = collapses[:, 0]
+        while True:
+            nxt = root[root]
+            if np.array_equal(nxt, root):
+                break
+            root = nxt
+    mapped = root[faces]
+    alive = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+    used = np.zeros(len(points), dtype=bool)
+    used[mapped[alive].ravel()] = True
+    number = np.cumsum(used) - 1
+    if not np.array_equal(number[mapped[alive]], out_faces):
+        # fast-simplification's numbering changed: the face tracking would be wrong.
+        raise RuntimeError("lod: fast_simplification's output does not match its collapse list")
+    # The real faces (flaps were appended after them) and the vertices they use. (A flap tip that
+    # absorbed a real vertex stands in for it, at its position: it is just a vertex.)
+    keep = alive[:m]
+    real = mapped[:m][keep]
+    if len(real) == 0:
+        return None
+    used_real = np.zeros(len(points), dtype=bool)
+    used_real[real.ravel()] = True
+    renumber = np.cumsum(used_real) - 1
+    roots = np.flatnonzero(used_real)
+    seamy = np.bincount(root[:n], weights=level.seamy, minlength=len(points)) > 0
+    return _Level(
+        points=np.ascontiguousarray(out_points[number[roots]], dtype=np.float64),
+        faces=np.ascontiguousarray(renumber[real], dtype=np.int32),
+        face_origin=level.face_origin[keep],
+        seamy=seamy[roots],
+    )
+
+
+def _split_and_carry(ctx: _Lod0, level: _Level) -> ir.Lod:
+    """The output LOD: split vertices and their attributes (see the module docstring, step 4).
+
+    A vertex none of whose merged LOD 0 vertices was on a seam lies inside one region of
+    continuous attributes, so all its corners would walk to the same point: it is walked once (from
+    its first corner's face) and becomes one output vertex. Only corners of vertices near seams
+    are walked one by one and merged by where they arrive."""
+    lod0 = ctx.lod
+    tri0 = lod0.triangles
+    origin = level.face_origin
+    v = level.faces.astype(np.int64).ravel()  # corner -> level vertex
+    nv, nc = len(level.points), len(v)
+    points = level.points.astype(np.float32)
+    first_corner = np.full(nv, nc, dtype=np.int64)
+    np.minimum.at(first_corner, v, np.arange(nc))
+    plain = np.flatnonzero(~level.seamy)  # one output vertex each
+    edge = np.flatnonzero(level.seamy[v])  # corners walked one by one
+    start = np.concatenate([origin[first_corner[plain] // 3], origin[edge // 3]]).astype(np.uint32)
+    target = np.concatenate([points[plain], points[v[edge]]])
+    tri, _, bary = walk_closest(lod0.attributes["position"], tri0, ctx.adjacency, start, target)
+
+    # Corners near seams that reached the same point of LOD 0 share an output vertex. The key
+    # (vertex, split vertices with nonzero weight in id order, weights to 2^-20) is canonical:
+    # corners that end on a shared edge or corner name the same split vertices whichever face
+    # they stopped in.
+    k = len(plain)
+    ids = tri0[tri[k:]].astype(np.int64)
+    q = np.rint(bary[k:] * (1 << 20)).astype(np.int64)
+    ids = np.where(q > 0, ids, -1)
+    q = np.maximum(q, 0)
+    order = np.argsort(ids, axis=1, kind="stable")
+    key = np.concatenate([v[edge][:, None], np.take_along_axis(ids, order, 1), np.take_along_axis(q, order, 1)], 1)
+    first, group = _unique_rows(key)
+
+    corner_out = np.zeros(nv, dtype=np.int64)
+    corner_out[plain] = np.arange(k)
+    corner_out = corner_out[v]
+    corner_out[edge] = k + group
+    pick = np.concatenate([np.arange(k), k + first])  # the walk that gives each output vertex
+    corners = tri0[tri[pick]].astype(np.int64)  # (k, 3) LOD 0 split vertices of each output vertex
+    bary = bary[pick]
+    attributes = {"position": points[np.concatenate([plain, v[edge][first]])]}
+    for name, values in lod0.attributes.items():
+        if name not in ("position", "joints", "weights"):
+            attributes[name] = _interpolate(name, values, corners, bary)
+    if "normal" in attributes and "tangent" in attributes:
+        attributes["tangent"] = _orthonormalise(attributes["tangent"], attributes["normal"], lod0.attributes["tangent"], corners, bary)
+    if "joints" in lod0.attributes and "weights" in lod0.attributes:
+        attributes["joints"], attributes["weights"] = _blend_skin(lod0.attributes["joints"], lod0.attributes["weights"], corners, bary)
+    elif "joints" in lod0.attributes or "weights" in lod0.attributes:
+        name = "joints" if "joints" in lod0.attributes else "weights"
+        attributes[name] = lod0.attributes[name][_dominant(corners, bary)]
+
+    return ir.Lod(
+        attributes={k: attributes[k] for k in lod0.attributes},  # the input's attribute order
+        triangles=corner_out.reshape(-1, 3).astype(np.uint32),
+        materials=lod0.materials[origin].astype(np.uint32),
+        lightmap_pages=None if lod0.lightmap_pages is None else lod0.lightmap_pages[origin].astype(np.uint32),
+    )
+
+
+# Odd 64-bit multipliers for hashing rows of up to 7 int64 columns.
+_HASH = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93, 0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53, 0x94D049BB133111EB], dtype=np.uint64)
+
+
+def _unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique rows of an int64 array, numbered in order of first occurrence: (first row of each
+    unique, each row's unique). Hashes each row to one integer (a fast 1-D unique), checks the
+    hash told rows apart exactly, and falls back to a row sort when it did not."""
+    with np.errstate(over="ignore"):
+        h = (rows.astype(np.uint64) * _HASH[: rows.shape[1]]).sum(axis=1, dtype=np.uint64)
+        h ^= h >> np.uint64(29)
+    _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
+    if not np.array_equal(rows[first][inverse], rows):
+        _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    by_first = np.argsort(first, kind="stable")
+    rank = np.empty_like(by_first)
+    rank[by_first] = np.arange(len(by_first))
+    return first[by_first], rank[inverse]
+
+
+def _dominant(corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """The LOD 0 vertex with the largest barycentric weight, per row."""
+    return corners[np.arange(len(corners)), np.argmax(bary, axis=1)]
+
+
+def _interpolate(name: str, values: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    v = values[corners].astype(np.float64)  # (k, 3, c)
+    out = np.einsum("kj,kjc->kc", bary.astype(np.float64), v)
+    if name == "normal":
+        length = np.linalg.norm(out, axis=1, keepdims=True)
+        fallback = values[_dominant(corners, bary)].astype(np.float64)
+        out = np.where(length > 1e-12, out / np.maximum(length, 1e-300), fallback)
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+    elif name == "color":
+        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+    return out.astype(ir.ATTRIBUTES[name][0])
+
+
+def _orthonormalise(tangent: np.ndarray, normal: np.ndarray, tangent0: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Gram-Schmidt the interpolated tangent against the normal; w (handedness) from the nearest corner."""
+    n = normal.astype(np.float64)
+    t = tangent[:, :3].astype(np.float64)
+    t -= n * np.einsum("kc,kc->k", t, n)[:, None]
+    length = np.linalg.norm(t, axis=1)
+    bad = length < 1e-9
+    if bad.any():
+        # Any unit vector perpendicular to the normal: cross with the axis it is least aligned to.
+        axis = np.eye(3)[np.argmin(np.abs(n[bad]), axis=1)]
+        t[bad] = np.cross(n[bad], axis)
+        length[bad] = np.linalg.norm(t[bad], axis=1)
+    t /= length[:, None]
+    w = np.where(tangent0[_dominant(corners, bary), 3] < 0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
+
+
+def _blend_skin(joints0: np.ndarray, weights0: np.ndarray, corners: np.ndarray, bary: np.ndarray):
+    """Skin weights at a point inside a triangle: each corner's weights scaled by its barycentric
+    weight and summed per joint; the four largest joints kept and renormalised to sum 1."""
+    k = len(corners)
+    j = joints0[corners].reshape(k, 12).astype(np.int64)
+    w = (weights0[corners].astype(np.float64) * bary.astype(np.float64)[:, :, None]).reshape(k, 12)
+    same = j[:, :, None] == j[:, None, :]  # (k, 12, 12)
+    total = np.einsum("kab,kb->ka", same, w)  # summed weight of each candidate's joint
+    # Keep the first occurrence of each joint; later duplicates drop out of the ranking.
+    earlier = np.tril(np.ones((12, 12), dtype=bool), -1)
+    duplicate = (same & earlier).any(axis=2)
+    total = np.where(duplicate, -1.0, total)
+    top = np.argsort(-total, axis=1, kind="stable")[:, :4]
+    out_j = np.take_along_axis(j, top, axis=1)
+    out_w = np.clip(np.take_along_axis(total, top, axis=1), 0.0, None)
+    s = out_w.sum(axis=1, keepdims=True)
+    empty = s[:, 0] <= 0.0
+    if empty.any():  # the input had no weight here at all: keep the nearest corner's skin as is
+        d = _dominant(corners[empty], bary[empty])
+        out_j[empty] = joints0[d]
+        out_w[empty] = weights0[d]
+        s[empty] = np.maximum(out_w[empty].sum(axis=1, keepdims=True), 1e-30)
+    out_w = out_w / s
+    out_j = np.where(out_w > 0, out_j, 0)  # unused slots: joint 0, weight 0 (glTF's convention)
+    return out_j.astype(np.uint16), out_w.astype(np.float32)
+
+
+# ---- error ------------------------------------------------------------------------------------
+
+
+def _hausdorff(ctx: _Lod0, lod: ir.Lod, spacing: float, min_subdiv: int) -> float:
+    """Sampled symmetric Hausdorff distance between `lod` and LOD 0, in metres."""
+    pos, tri = lod.attributes["position"], lod.triangles
+    lod0 = ctx.lod
+    bvh = MeshBvh(pos, tri)
+    # LOD 0 -> level: LOD 0's triangles are small; their corners plus a grid at `spacing`.
+    a, _, _ = bvh.directed_hausdorff(lod0.attributes["position"], lod0.triangles, spacing, 1)
+    # Level -> LOD 0: big triangles, so a grid with at least `min_subdiv` cells per edge.
+    b, _, _ = ctx.bvh.directed_hausdorff(pos, tri, spacing, min_subdiv)
+    return max(a, b)

@@ -1,0 +1,267 @@
+"""The cook: source -> scene IR -> lightmap UVs -> LOD chains -> pack + report.
+
+Each stage is a pure function of its inputs and settings, cached by a hash of both and the
+cooker's code (cache.py). The whole cook also has a key: when the output already exists and was
+made from the same key, nothing runs and no file is touched.
+
+Stage order: lightmap UVs come before LODs, so every LOD carries LOD 0's lightmap UVs as an
+attribute and one baked lightmap serves the whole chain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset_pipeline import ir
+from asset_pipeline._core import CookError
+from asset_pipeline.cache import Hasher, StageCache
+from asset_pipeline.gltf_import import import_gltf, write_pack
+from asset_pipeline.progress import Progress
+from asset_pipeline.report import write_report
+
+
+@dataclass
+class CookSettings:
+    lod: "object | None" = None  # asset_pipeline.lod.LodSettings; None = defaults
+    uv2: "object | None" = None  # asset_pipeline.uv2.Uv2Settings; None = defaults (density from the level)
+    lods: bool = True
+    lightmap_uvs: bool = True
+    force: bool = False  # ignore every cache entry and rebuild
+    cache_dir: Path | None = None  # default: .cook-cache beside the output
+    report: bool = True
+
+
+@dataclass
+class StageRecord:
+    name: str
+    seconds: float = 0.0
+    items: int = 0
+    cached: int = 0
+
+
+@dataclass
+class CookResult:
+    summary: dict
+    up_to_date: bool
+    stages: list[StageRecord] = field(default_factory=list)
+    report: Path | None = None
+
+
+def _settings_doc(obj) -> object:
+    return dataclasses.asdict(obj) if dataclasses.is_dataclass(obj) else obj
+
+
+# ---- the source stage: glTF import or CSG level -----------------------------------------------
+
+
+def _source_files(source: Path) -> list[Path]:
+    """Every file the source depends on: itself plus files it names (level textures and props,
+    glTF external buffers and images)."""
+    files = [source]
+    base = source.parent
+    names: list[str] = []
+    try:
+        if source.suffix.lower() == ".toml":
+            def walk(v):
+                if isinstance(v, str):
+                    names.append(v)
+                elif isinstance(v, dict):
+                    for x in v.values():
+                        walk(x)
+                elif isinstance(v, list):
+                    for x in v:
+                        walk(x)
+
+            walk(tomllib.loads(source.read_text()))
+        elif source.suffix.lower() == ".gltf":
+            doc = json.loads(source.read_text())
+            names = [x["uri"] for k in ("buffers", "images") for x in doc.get(k, []) if isinstance(x.get("uri"), str) and not x["uri"].startswith("data:")]
+    except (OSError, ValueError, UnicodeDecodeError):
+        pass  # the stage itself reports a malformed source, with the reason
+    for n in names:
+        p = base / n
+        if len(n) < 512 and p.is_file() and p != source:
+            files.append(p)
+    return files
+
+
+def _load_source(source: Path) -> ir.Scene:
+    if source.suffix.lower() == ".toml":
+        from asset_pipeline.csg import build_level
+        from asset_pipeline.level import load_level
+
+        return build_level(load_level(source), source.parent)
+    return import_gltf(source)
+
+
+def _world_scales(scene: ir.Scene) -> list[float]:
+    """Per mesh, the uniform scale of the first node placing it (lightmap density is in world
+    metres; a mesh scaled by 2 needs twice the texels per object-space metre)."""
+    world: list[np.ndarray] = []
+    scale = [1.0] * len(scene.meshes)
+    seen = set()
+    for n in scene.nodes:
+        local = np.array(n.local, dtype=np.float64).reshape(4, 4).T  # column-major -> row-major
+        w = world[n.parent] @ local if n.parent is not None else local
+        world.append(w)
+        if n.mesh is not None and n.mesh not in seen:
+            seen.add(n.mesh)
+            scale[n.mesh] = float(abs(np.linalg.det(w[:3, :3])) ** (1.0 / 3.0)) or 1.0
+    return scale
+
+
+def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None, progress: Progress | None = None) -> CookResult:
+    """Cook `source` (.gltf, .glb or a level .toml) into the pack `out` (written atomically) and
+    a report beside it. Raises CookError on bad input, naming the file and the problem."""
+    settings = settings or CookSettings()
+    progress = progress or Progress(enabled=False)
+    source, out = Path(source), Path(out)
+    if not source.is_file():
+        raise CookError(f"{source}: no such file")
+    if not out.parent.is_dir():
+        raise CookError(f"{out}: output directory '{out.parent}' does not exist")
+    cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
+    stages: list[StageRecord] = []
+
+    settings_doc = {k: _settings_doc(v) for k, v in dataclasses.asdict(settings).items() if k not in ("force", "cache_dir", "report")}
+    source_key = Hasher("source")
+    for f in _source_files(source):
+        source_key.file(f)
+    source_key = source_key.key()
+    cook_key = Hasher("cook").text(source_key).settings(settings_doc).key()
+    stamp = cache.root / "outputs" / (Hasher("output").text(os.fspath(out.resolve())).key()[:24] + ".json")
+
+    # Up to date: the output exists, is the file this key produced, and nothing is forced.
+    if not settings.force and out.exists() and stamp.exists():
+        try:
+            recorded = json.loads(stamp.read_text())
+            st = out.stat()
+            if recorded["key"] == cook_key and recorded["size"] == st.st_size and recorded["mtime_ns"] == st.st_mtime_ns:
+                return CookResult(summary=recorded["summary"], up_to_date=True)
+        except (OSError, ValueError, KeyError):
+            pass
+
+    # Stage 1: source -> scene.
+    rec = StageRecord("import" if source.suffix.lower() != ".toml" else "level")
+    t0 = time.perf_counter()
+    with progress.stage(rec.name, 1) as bar:
+        hit = cache.load("source", source_key)
+        if hit is not None:
+            scene = ir.from_wire(hit[0]["scene"], hit[1])
+            rec.cached = 1
+        else:
+            scene = _load_source(source)
+            text, arrays = ir.to_wire(scene)
+            cache.store("source", source_key, {"scene": text}, arrays)
+        bar.advance()
+    rec.items, rec.seconds = 1, time.perf_counter() - t0
+    stages.append(rec)
+
+    uv2_stats: dict = {}
+    if settings.lightmap_uvs and any(m.static for m in scene.meshes):
+        scene, uv2_stats, rec = _uv2_stage(scene, settings, cache, progress)
+        stages.append(rec)
+    if settings.lods:
+        scene, rec = _lod_stage(scene, settings, cache, progress)
+        stages.append(rec)
+
+    rec = StageRecord("write", items=1)
+    t0 = time.perf_counter()
+    with progress.stage("write", 1) as bar:
+        summary = write_pack(scene, out)
+        bar.advance()
+    rec.seconds = time.perf_counter() - t0
+    stages.append(rec)
+
+    report = None
+    if settings.report:
+        report = write_report(out, scene, summary, stages, uv2_stats)
+    st = out.stat()
+    stamp.parent.mkdir(parents=True, exist_ok=True)
+    tmp = stamp.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"key": cook_key, "size": st.st_size, "mtime_ns": st.st_mtime_ns, "summary": summary}))
+    os.replace(tmp, stamp)
+    return CookResult(summary=summary, up_to_date=False, stages=stages, report=report)
+
+
+# ---- lightmap UVs -------------------------------------------------------------------------------
+
+
+def _uv2_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    from asset_pipeline.uv2 import Uv2Settings, lightmap_uvs
+
+    uv2 = settings.uv2 or Uv2Settings(**({"texels_per_metre": scene.lightmap.texels_per_metre} if scene.lightmap else {}))
+    static = [i for i, m in enumerate(scene.meshes) if m.static]
+    scales = _world_scales(scene)
+    key = Hasher("uv2").settings(_settings_doc(uv2))
+    for i in static:
+        m = scene.meshes[i]
+        key.text(f"{scales[i]}:{m.texels_per_metre}")
+        for name in sorted(m.base.attributes):
+            key.text(name).array(m.base.attributes[name])
+        key.array(m.base.triangles).array(m.base.materials)
+    key = key.key()
+
+    rec = StageRecord("uv2", items=len(static))
+    t0 = time.perf_counter()
+    with progress.stage("uv2", len(static)) as bar:
+        hit = cache.load("uv2", key)
+        if hit is not None:
+            meta, arrays = hit
+            new_lods = ir.lods_from_wire(meta["lods"], arrays)
+            layout = ir.LightmapLayout(meta["layout"]["texels_per_metre"], [tuple(p) for p in meta["layout"]["pages"]], meta["layout"]["padding"])
+            stats = meta["stats"]
+            rec.cached = len(static)
+        else:
+            inputs = [(scene.meshes[i].base, scales[i], scene.meshes[i].texels_per_metre) for i in static]
+            names = [scene.meshes[i].name for i in static]
+            # The per-mesh chart cache lets an edit to one mesh re-chart only that mesh.
+            new_lods, layout, stats = lightmap_uvs(inputs, uv2, names=names, cache=cache)
+            docs, arrays = ir.lods_to_wire(new_lods)
+            cache.store("uv2", key, {"lods": docs, "layout": dataclasses.asdict(layout), "stats": stats}, arrays)
+        bar.advance(len(static))
+    meshes = list(scene.meshes)
+    for i, lod in zip(static, new_lods):
+        meshes[i] = dataclasses.replace(meshes[i], lods=[lod])
+    rec.seconds = time.perf_counter() - t0
+    return dataclasses.replace(scene, meshes=meshes, lightmap=layout), stats, rec
+
+
+# ---- LOD chains ---------------------------------------------------------------------------------
+
+
+def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    from asset_pipeline.lod import LodSettings, build_lods
+
+    lod_settings = settings.lod or LodSettings()
+    doc = _settings_doc(lod_settings)
+    rec = StageRecord("lod", items=len(scene.meshes))
+    t0 = time.perf_counter()
+    meshes = []
+    with progress.stage("lod", len(scene.meshes)) as bar:
+        for m in scene.meshes:
+            base = m.base
+            key = Hasher("lod").settings(doc)
+            for name in sorted(base.attributes):
+                key.text(name).array(base.attributes[name])
+            key = key.array(base.triangles).array(base.materials).array(base.lightmap_pages).key()
+            hit = cache.load("lod", key)
+            if hit is not None:
+                chain = ir.lods_from_wire(hit[0]["lods"], hit[1])
+                rec.cached += 1
+            else:
+                chain = build_lods(base, lod_settings)
+                docs, arrays = ir.lods_to_wire(chain)
+                cache.store("lod", key, {"lods": docs}, arrays)
+            meshes.append(dataclasses.replace(m, lods=[base, *chain]))
+            bar.advance()
+    rec.seconds = time.perf_counter() - t0
+    return dataclasses.replace(scene, meshes=meshes), rec

@@ -1,0 +1,61 @@
+"""The cook report: a Markdown file beside the pack (`<name>.report.md`) with what each stage
+made and what it cost, and PNG previews of the lightmap atlas pages."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from asset_pipeline import ir
+
+
+def _row(*cells) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict) -> Path:
+    path = out.with_suffix(".report.md")
+    lines = [f"# Cook report: {out.name}", "", f"Source: `{scene.source}`", ""]
+    lines += [
+        f"{summary['meshes']} meshes, {summary['triangles']} triangles at LOD 0, {summary['materials']} materials, "
+        f"{summary['textures']} textures, {len(scene.lights)} lights, {len(scene.spawns)} spawn points; "
+        f"pack {summary['bytes']} bytes.",
+        "",
+        "## Stages",
+        "",
+        _row("stage", "items", "from cache", "seconds"),
+        _row("---", "---:", "---:", "---:"),
+    ]
+    lines += [_row(s.name, s.items, s.cached, f"{s.seconds:.3f}") for s in stages]
+    lines += ["", "## Meshes and LODs", "", "Error: upper bound of the two-sided Hausdorff distance to LOD 0, metres, object space.", ""]
+    lines += [_row("mesh", "static", "LOD", "triangles", "vertices", "error (m)"), _row("---", "---", "---:", "---:", "---:", "---:")]
+    for m in scene.meshes:
+        for i, lod in enumerate(m.lods):
+            lines.append(_row(m.name if i == 0 else "", "yes" if m.static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
+    if scene.lightmap is not None:
+        lm = scene.lightmap
+        lines += ["", "## Lightmap atlas", "", f"Requested density {lm.texels_per_metre:g} texels/m, padding {lm.padding} texels, {len(lm.pages)} page(s).", ""]
+        for k, v in sorted(uv2_stats.items()):
+            if not isinstance(v, (list, dict)):
+                lines.append(f"- {k}: {v:.4g}" if isinstance(v, float) else f"- {k}: {v}")
+        previews = _previews(out, scene)
+        for i, (w, h) in enumerate(lm.pages):
+            lines += ["", f"Page {i}: {w} x {h}"]
+            if i < len(previews):
+                lines.append(f"![UV2 page {i}]({os.path.relpath(previews[i], path.parent)})")
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def _previews(out: Path, scene: ir.Scene) -> list[Path]:
+    """PNG per atlas page showing every chart, drawn by the uv2 stage's rasteriser."""
+    from asset_pipeline import uv2
+
+    render = getattr(uv2, "write_previews", None)
+    if render is None:
+        return []
+    folder = out.with_suffix(".report")
+    folder.mkdir(exist_ok=True)
+    return list(render(scene, folder))

@@ -1,0 +1,216 @@
+//! Python face of `cook_core::measure`: closest-point queries on a triangle mesh (`MeshBvh`),
+//! sampled one-sided Hausdorff distances, face adjacency and walks over it. Arrays are read in place (numpy,
+//! no copies when C-contiguous) and the work runs without the GIL.
+
+use cook_core::measure::{self, Bvh, MeshError, NO_FACE};
+use numpy::{Element, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use std::borrow::Cow;
+
+fn value_error(what: &str, e: MeshError) -> PyErr {
+    PyValueError::new_err(format!("{what}: {e}"))
+}
+
+/// An (n, 3) array as rows, borrowed when C-contiguous, copied otherwise.
+fn rows3<'a, T: Element + Copy>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; 3]]>> {
+    let shape = a.shape();
+    if shape[1] != 3 {
+        return Err(PyValueError::new_err(format!("{what}: expected shape (n, 3), got {shape:?}")));
+    }
+    Ok(match a.as_slice() {
+        // SAFETY: [T; 3] has the size of three T and T's alignment, so a contiguous slice of
+        // 3n T is exactly n rows; the borrow keeps the array alive and unaliased for writes.
+        Ok(flat) => Cow::Borrowed(unsafe { std::slice::from_raw_parts(flat.as_ptr() as *const [T; 3], flat.len() / 3) }),
+        Err(_) => Cow::Owned(a.as_array().rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()),
+    })
+}
+
+fn vec1<'a, T: Element + Copy>(a: &'a PyReadonlyArray1<'_, T>) -> Cow<'a, [T]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
+/// A BVH over a triangle mesh for closest-point queries.
+///
+/// `MeshBvh(positions: float32 (n, 3), triangles: uint32 (m, 3))`.
+#[pyclass(frozen, name = "MeshBvh", module = "asset_pipeline._core")]
+pub struct PyMeshBvh {
+    bvh: Bvh,
+}
+
+#[pymethods]
+impl PyMeshBvh {
+    #[new]
+    fn new(py: Python<'_>, positions: PyReadonlyArray2<'_, f32>, triangles: PyReadonlyArray2<'_, u32>) -> PyResult<Self> {
+        let pos = rows3(&positions, "positions")?;
+        let tri = rows3(&triangles, "triangles")?;
+        let bvh = py.detach(|| Bvh::build(&pos, &tri)).map_err(|e| value_error("MeshBvh", e))?;
+        Ok(PyMeshBvh { bvh })
+    }
+
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.bvh.triangle_count()
+    }
+
+    /// Closest points on the mesh to `points` (float32 (k, 3)): returns
+    /// `(distance float64 (k,), triangle uint32 (k,), bary float64 (k, 3))` where the closest point
+    /// is `bary @ corners of triangle`. `hints` (uint32 (k,), a triangle per point, 0xFFFFFFFF for
+    /// none) only speed the search up. An empty mesh gives distance inf and triangle 0xFFFFFFFF.
+    #[pyo3(signature = (points, hints=None))]
+    #[allow(clippy::type_complexity)]
+    fn closest<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        hints: Option<PyReadonlyArray1<'py, u32>>,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<u32>>, Bound<'py, PyArray2<f64>>)> {
+        let pts = rows3(&points, "points")?;
+        let hints = hints.as_ref().map(vec1);
+        if let Some(h) = &hints {
+            if h.len() != pts.len() {
+                return Err(PyValueError::new_err(format!("closest: {} hints for {} points", h.len(), pts.len())));
+            }
+            let m = self.bvh.triangle_count() as u32;
+            if let Some(i) = h.iter().position(|&x| x != u32::MAX && x >= m) {
+                return Err(PyValueError::new_err(format!("closest: hint {i} is not a triangle index")));
+            }
+        }
+        if pts.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
+            return Err(PyValueError::new_err("closest: a point is not finite"));
+        }
+        let (dist, tri, bary) = py.detach(|| {
+            let hits = self.bvh.closest_many(&pts, hints.as_deref());
+            let mut dist = Vec::with_capacity(hits.len());
+            let mut tri = Vec::with_capacity(hits.len());
+            let mut bary = Vec::with_capacity(3 * hits.len());
+            for h in hits {
+                match h {
+                    Some(h) => {
+                        dist.push(h.distance);
+                        tri.push(h.triangle);
+                        bary.extend(h.bary);
+                    }
+                    None => {
+                        dist.push(f64::INFINITY);
+                        tri.push(u32::MAX);
+                        bary.extend([0f64; 3]);
+                    }
+                }
+            }
+            (dist, tri, bary)
+        });
+        let n = dist.len();
+        let bary = PyArray1::from_vec(py, bary).reshape([n, 3])?;
+        Ok((PyArray1::from_vec(py, dist), PyArray1::from_vec(py, tri), bary))
+    }
+
+    /// One-sided Hausdorff distance from the mesh (positions, triangles) to this one, sampled on
+    /// a barycentric grid per triangle with at most `spacing` between samples (at least
+    /// `min_subdiv` subdivisions per edge; spacing widened if the samples would exceed
+    /// `max_samples`). Returns `(max distance, samples taken, spacing used)`.
+    #[pyo3(signature = (positions, triangles, spacing, min_subdiv=1, max_samples=50_000_000))]
+    fn directed_hausdorff(
+        &self,
+        py: Python<'_>,
+        positions: PyReadonlyArray2<'_, f32>,
+        triangles: PyReadonlyArray2<'_, u32>,
+        spacing: f64,
+        min_subdiv: u32,
+        max_samples: u64,
+    ) -> PyResult<(f64, u64, f64)> {
+        let pos = rows3(&positions, "positions")?;
+        let tri = rows3(&triangles, "triangles")?;
+        let d = py
+            .detach(|| self.bvh.directed_hausdorff(&pos, &tri, spacing, min_subdiv, max_samples))
+            .map_err(|e| value_error("directed_hausdorff", e))?;
+        Ok((d.max, d.samples, d.spacing))
+    }
+}
+
+/// For each face (uint32 (m, 3)) and corner j, the face across edge (corner j, corner j+1)
+/// sharing both vertex indices and its key (uint32 (m,)), or 0xFFFFFFFF (uint32 (m, 3)).
+#[pyfunction]
+fn face_adjacency<'py>(py: Python<'py>, triangles: PyReadonlyArray2<'py, u32>, keys: PyReadonlyArray1<'py, u32>) -> PyResult<Bound<'py, PyArray2<u32>>> {
+    let tri = rows3(&triangles, "triangles")?;
+    let keys = vec1(&keys);
+    if keys.len() != tri.len() {
+        return Err(PyValueError::new_err(format!("face_adjacency: {} keys for {} triangles", keys.len(), tri.len())));
+    }
+    let adj = py.detach(|| measure::face_adjacency(&tri, &keys));
+    let m = adj.len();
+    Ok(PyArray1::from_vec(py, adj.into_iter().flatten().collect()).reshape([m, 3])?)
+}
+
+/// Closest points found by walking over faces (see `cook_core::measure::walk_closest`): from face
+/// `starts[i]` (uint32 (k,)) toward `points[i]` (float32 (k, 3)) across `adjacency` (from
+/// `face_adjacency`). Returns `(triangle uint32 (k,), distance float64 (k,), bary float64 (k, 3))`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn walk_closest<'py>(
+    py: Python<'py>,
+    positions: PyReadonlyArray2<'py, f32>,
+    triangles: PyReadonlyArray2<'py, u32>,
+    adjacency: PyReadonlyArray2<'py, u32>,
+    starts: PyReadonlyArray1<'py, u32>,
+    points: PyReadonlyArray2<'py, f32>,
+) -> PyResult<(Bound<'py, PyArray1<u32>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+    let pos = rows3(&positions, "positions")?;
+    let tri = rows3(&triangles, "triangles")?;
+    let adj = rows3(&adjacency, "adjacency")?;
+    let starts = vec1(&starts);
+    let pts = rows3(&points, "points")?;
+    measure::check_mesh(&pos, &tri).map_err(|e| value_error("walk_closest", e))?;
+    let m = tri.len() as u32;
+    if adj.len() != tri.len() || adj.iter().flatten().any(|&f| f != NO_FACE && f >= m) {
+        return Err(PyValueError::new_err("walk_closest: adjacency does not fit the triangles"));
+    }
+    if starts.len() != pts.len() || starts.iter().any(|&f| f >= m) {
+        return Err(PyValueError::new_err("walk_closest: need one start triangle (a valid index) per point"));
+    }
+    if pts.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
+        return Err(PyValueError::new_err("walk_closest: a point is not finite"));
+    }
+    let hits = py.detach(|| measure::walk_closest_many(&pos, &tri, &adj, &starts, &pts));
+    let k = hits.len();
+    let tri_out: Vec<u32> = hits.iter().map(|h| h.0).collect();
+    let dist: Vec<f64> = hits.iter().map(|h| h.1.sqrt()).collect();
+    let bary: Vec<f64> = hits.iter().flat_map(|h| h.2).collect();
+    Ok((PyArray1::from_vec(py, tri_out), PyArray1::from_vec(py, dist), PyArray1::from_vec(py, bary).reshape([k, 3])?))
+}
+
+/// Weld equal positions (float32 (n, 3), bitwise, -0.0 == 0.0): returns `(ids uint32 (n,), first
+/// uint32 (k,))`, ids numbered in order of first use and `first[id]` the first vertex with it.
+#[pyfunction]
+fn weld_positions<'py>(py: Python<'py>, positions: PyReadonlyArray2<'py, f32>) -> PyResult<(Bound<'py, PyArray1<u32>>, Bound<'py, PyArray1<u32>>)> {
+    let pos = rows3(&positions, "positions")?;
+    let (ids, first) = py.detach(|| measure::weld_positions(&pos));
+    Ok((PyArray1::from_vec(py, ids), PyArray1::from_vec(py, first)))
+}
+
+/// Seam edges of a mesh given twice, corner for corner: by welded vertex (`welded`, uint32
+/// (m, 3)) and by split vertex (`split`, uint32 (m, 3)). An edge is a seam when its faces do not
+/// all use the same two split vertices. Returns uint32 (k, 4): [a, b, face, other face], a < b.
+#[pyfunction]
+fn seam_edges<'py>(py: Python<'py>, welded: PyReadonlyArray2<'py, u32>, split: PyReadonlyArray2<'py, u32>) -> PyResult<Bound<'py, PyArray2<u32>>> {
+    let w = rows3(&welded, "welded")?;
+    let s = rows3(&split, "split")?;
+    if w.len() != s.len() {
+        return Err(PyValueError::new_err(format!("seam_edges: {} welded and {} split triangles", w.len(), s.len())));
+    }
+    let edges = py.detach(|| measure::seam_edges(&w, &s));
+    let k = edges.len();
+    Ok(PyArray1::from_vec(py, edges.into_iter().flatten().collect()).reshape([k, 4])?)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyMeshBvh>()?;
+    m.add_function(wrap_pyfunction!(face_adjacency, m)?)?;
+    m.add_function(wrap_pyfunction!(walk_closest, m)?)?;
+    m.add_function(wrap_pyfunction!(weld_positions, m)?)?;
+    m.add_function(wrap_pyfunction!(seam_edges, m)?)?;
+    Ok(())
+}

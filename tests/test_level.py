@@ -1,0 +1,565 @@
+"""Levels authored as CSG: spec validation (level.py) and brushes -> closed meshes (csg.py)."""
+
+from __future__ import annotations
+
+import re
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asset_pipeline import CookError, ir
+from asset_pipeline.csg import build_level
+from asset_pipeline.level import load_level
+
+REPO = Path(__file__).resolve().parent.parent
+TEMPLE = REPO / "content" / "levels" / "temple.toml"
+
+HEADER = """
+[[materials]]
+name = "stone"
+uv_scale = 2.0
+
+[[materials]]
+name = "plaster"
+uv_scale = 0.5
+"""
+
+
+def write(tmp_path: Path, body: str, name: str = "level.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(body))
+    return p
+
+
+def build(tmp_path: Path, body: str) -> ir.Scene:
+    return build_level(load_level(write(tmp_path, HEADER + textwrap.dedent(body))))
+
+
+def check_closed(lod: ir.Lod, what: str) -> float:
+    """Weld by position; require a closed, consistently and outwardly oriented surface. Returns the volume."""
+    pos = lod.attributes["position"]
+    _, weld = np.unique(pos, axis=0, return_inverse=True)
+    t = weld.reshape(-1)[lod.triangles]
+    assert (t[:, 0] != t[:, 1]).all() and (t[:, 1] != t[:, 2]).all() and (t[:, 2] != t[:, 0]).all(), f"{what}: degenerate triangle"
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    _, n_undirected = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    assert (n_undirected == 2).all(), f"{what}: {(n_undirected != 2).sum()} edges not shared by exactly two triangles"
+    _, n_directed = np.unique(directed, axis=0, return_counts=True)
+    assert (n_directed == 1).all(), f"{what}: {(n_directed != 1).sum()} directed edges repeated (inconsistent orientation)"
+    p = pos.astype(np.float64)[lod.triangles]
+    volume = float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6)
+    assert volume > 0, f"{what}: volume {volume} (inside out)"
+    return volume
+
+
+def check_shading(lod: ir.Lod, what: str) -> None:
+    a = lod.attributes
+    n, t = a["normal"].astype(np.float64), a["tangent"].astype(np.float64)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5), f"{what}: normals not unit length"
+    assert np.allclose(np.linalg.norm(t[:, :3], axis=1), 1, atol=1e-5), f"{what}: tangents not unit length"
+    assert np.isin(t[:, 3], (-1.0, 1.0)).all(), f"{what}: tangent w is not a handedness sign"
+    assert np.abs(np.sum(n * t[:, :3], axis=1)).max() < 1e-4, f"{what}: tangent not perpendicular to normal"
+    assert (a["color"] == 255).all()
+    # every corner's normal faces the same way as its triangle
+    p = a["position"].astype(np.float64)[lod.triangles]
+    fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert (np.einsum("ij,ikj->ik", fn, n[lod.triangles]) > 0).all(), f"{what}: a vertex normal faces away from its triangle"
+    # tangents follow uv0: dP/du of each triangle, from its positions and uvs
+    uv = a["uv0"].astype(np.float64)[lod.triangles]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-9
+    dpdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2])[ok] / det[ok, None]
+    dpdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1])[ok] / det[ok, None]
+    dpdu /= np.linalg.norm(dpdu, axis=1, keepdims=True)
+    tri_t = t[lod.triangles][ok]
+    agree = np.einsum("ij,ikj->ik", dpdu, tri_t[:, :, :3])
+    flat = np.einsum("ij,ikj->ik", fn[ok] / np.linalg.norm(fn[ok], axis=1, keepdims=True), n[lod.triangles][ok]) > 1 - 1e-6
+    assert (agree[flat] > 0.999).all(), f"{what}: tangent is not dP/du on a flat face"
+    assert (agree > 0.5).all(), f"{what}: tangent does not follow dP/du"  # smooth corners turn with their normal
+    # glTF handedness: bitangent = cross(N, T) * w points towards decreasing v
+    bit = np.cross(n[lod.triangles][ok], tri_t[:, :, :3]) * tri_t[:, :, 3:]
+    assert (np.einsum("ij,ikj->ik", -dpdv, bit) > 0).all(), f"{what}: tangent handedness disagrees with uv0"
+
+
+# ---- the demo level -----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def temple() -> ir.Scene:
+    return build_level(load_level(TEMPLE))
+
+
+def test_temple_meshes_are_closed_and_outward(temple):
+    assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
+    for m in temple.meshes:
+        check_closed(m.base, m.name)
+        check_shading(m.base, m.name)
+        assert m.static and m.texels_per_metre is None
+    assert temple.lightmap.texels_per_metre == 16 and temple.lightmap.pages == []
+
+
+def test_temple_contents(temple):
+    temple.validate()
+    ir.from_wire(*ir.to_wire(temple))  # the Rust crossing accepts it
+    assert {l.kind for l in temple.lights} == {"sun", "point", "spot", "rect"}
+    assert {s.kind for s in temple.spawns} == {"player", "character", "boids", "particles"}
+    assert temple.sky is not None and temple.sky.intensity > 0
+    assert any(max(m.emissive) > 0 for m in temple.materials)
+    assert all(t.format == "Rgba8Srgb" and t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
+    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes) < 50_000
+    # every mesh sits at the world origin: positions are world space
+    assert all(n.local == ir.Node(n.name).local for n in temple.nodes)
+    # the hall is open to the sky: straight down through the oculus the first surface is the floor
+    lod = temple.meshes[[m.name for m in temple.meshes].index("temple")].base
+    p = lod.attributes["position"].astype(np.float64)[lod.triangles]
+    a, b, c = (p[:, k][:, [0, 2]] - [0.0, -8.0] for k in range(3))
+    cross = lambda u, v: u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    s = np.sign(np.stack([cross(a, b), cross(b, c), cross(c, a)], axis=1))
+    over = ((s >= 0).all(axis=1) | (s <= 0).all(axis=1)) & (np.abs(s).sum(axis=1) > 0)
+    assert over.any() and p[over][:, :, 1].max() <= 0.6 + 1e-5
+
+
+# ---- small specs: shapes and booleans --------------------------------------------------------
+
+
+@pytest.mark.parametrize("brush", [
+    'kind = "box"\nsize = [1, 2, 3]\nrotation = [10, 20, 30]',
+    'kind = "cylinder"\nradius = 0.5\nheight = 2\nsegments = 24\nrotation = [90, 0, 0]',
+    'kind = "cylinder"\nradius = 0.5\nradius_top = 0\nheight = 1',
+    'kind = "sphere"\nradius = 1\nsegments = 16\nscale = [1, 2, 1]',
+    'kind = "extrude"\npoints = [[0, 0], [0, 2], [1, 2], [1, 1], [2, 1], [2, 0]]\nheight = 0.5',  # clockwise L
+    'kind = "box"\nsize = [1, 1, 1]\nrepeat = { count = 3, step = [0.5, 0, 0] }',
+])
+def test_each_brush_kind_is_closed(tmp_path, brush):
+    scene = build(tmp_path, f"""
+        [[brushes]]
+        name = "b"
+        material = "stone"
+        translation = [3, 1, -2]
+        {brush}
+
+        [[objects]]
+        name = "o"
+        op = "union"
+        operands = ["b"]
+    """.replace("\n        ", "\n"))
+    check_closed(scene.meshes[0].base, "o")
+    check_shading(scene.meshes[0].base, "o")
+
+
+BOX_MINUS_BOX = """
+    [[brushes]]
+    name = "outer"
+    kind = "box"
+    size = [4, 3, 4]
+    material = "stone"
+
+    [[brushes]]
+    name = "hole"
+    kind = "box"
+    size = [2, 5, 2]
+    translation = [0.5, 0, 0]
+    material = "plaster"
+
+    [[objects]]
+    name = "room"
+    op = "difference"
+    operands = ["outer", "hole"]
+"""
+
+
+def test_box_minus_box_materials_follow_the_brush(tmp_path):
+    """Rule: a triangle has the material of the brush whose surface it lies on, so the faces a
+    cutter leaves (the hole's walls) have the cutter's material."""
+    scene = build(tmp_path, BOX_MINUS_BOX)
+    lod = scene.meshes[0].base
+    assert check_closed(lod, "room") == pytest.approx(4 * 3 * 4 - 2 * 3 * 2)
+    names = [m.name for m in scene.materials]
+    p = lod.attributes["position"][lod.triangles].astype(np.float64)
+    c = p.mean(axis=1)
+    in_hole = (np.abs(c[:, 0] - 0.5) < 1.0 + 1e-6) & (np.abs(c[:, 2]) < 1.0 + 1e-6)
+    mats = np.array(names)[lod.materials]
+    assert (mats[in_hole] == "plaster").all() and in_hole.sum() == 8
+    assert (mats[~in_hole] == "stone").all()
+
+
+def test_normals_crisp_on_boxes_smooth_on_cylinders(tmp_path):
+    scene = build(tmp_path, BOX_MINUS_BOX + """
+        [[brushes]]
+        name = "pillar"
+        kind = "cylinder"
+        radius = 0.5
+        height = 3
+        segments = 32
+        translation = [10, 0, 0]
+        material = "stone"
+
+        [[objects]]
+        name = "pillar_obj"
+        op = "union"
+        operands = ["pillar"]
+    """)
+    room, pillar = (m.base for m in scene.meshes)
+    n = room.attributes["normal"]
+    assert np.allclose(np.sort(np.abs(n), axis=1), [0, 0, 1], atol=1e-6), "box normals are face normals"
+    n, p = pillar.attributes["normal"].astype(np.float64), pillar.attributes["position"].astype(np.float64)
+    side = np.abs(n[:, 1]) < 0.5
+    radial = (p[side] - [10, 0, 0]) * [1, 0, 1]
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    assert np.einsum("ij,ij->i", n[side], radial).min() > 0.999, "cylinder side normals are radial (smooth)"
+    # smooth: split vertices at one position (uv seams) still share one normal
+    _, first, at = np.unique(p[side], axis=0, return_index=True, return_inverse=True)
+    assert np.abs(n[side] - n[side][first][at.reshape(-1)]).max() < 1e-6
+
+
+def test_uv0_tiles_at_the_materials_scale(tmp_path):
+    scene = build(tmp_path, BOX_MINUS_BOX)
+    lod = scene.meshes[0].base
+    p, uv, n = (lod.attributes[k].astype(np.float64) for k in ("position", "uv0", "normal"))
+    scale = np.array([m.uv_scale for m in load_level(tmp_path / "level.toml").materials])
+    vert_mat = np.zeros(len(p), dtype=int)
+    vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
+    s = scale[vert_mat]
+    up = n[:, 1] > 0.9  # top faces: u = x / uv_scale, v = z / uv_scale
+    assert np.allclose(uv[up] * s[up, None], p[up][:, [0, 2]], atol=1e-5)
+    east = n[:, 0] > 0.9  # +X faces: u = -z, v = -y
+    assert np.allclose(uv[east] * s[east, None], -p[east][:, [2, 1]], atol=1e-5)
+    assert set(np.round(s, 3)) == {2.0, 0.5}  # both materials' scales are in use
+
+
+def test_nested_objects_and_intersection(tmp_path):
+    scene = build(tmp_path, """
+        [[brushes]]
+        name = "ball"
+        kind = "sphere"
+        radius = 1
+        material = "stone"
+
+        [[brushes]]
+        name = "cube"
+        kind = "box"
+        size = [1.5, 1.5, 1.5]
+        material = "plaster"
+
+        [[brushes]]
+        name = "drill"
+        kind = "cylinder"
+        radius = 0.3
+        height = 4
+        rotation = [0, 0, 90]
+        material = "plaster"
+
+        [[objects]]
+        name = "rounded"
+        op = "intersection"
+        operands = ["ball", "cube"]
+
+        [[objects]]
+        name = "drilled"
+        op = "difference"
+        operands = ["rounded", "drill"]
+    """)
+    assert [m.name for m in scene.meshes] == ["drilled"], "objects used as operands are not output"
+    v = check_closed(scene.meshes[0].base, "drilled")
+    assert 1.5 ** 3 * 0.5 < v < 1.5 ** 3
+    assert set(scene.meshes[0].base.materials.tolist()) == {0, 1}
+
+
+def test_object_settings(tmp_path):
+    scene = build(tmp_path, """
+        [level]
+        texels_per_metre = 8
+
+        [[brushes]]
+        name = "b"
+        kind = "box"
+        size = [1, 1, 1]
+        material = "stone"
+
+        [[objects]]
+        name = "static_default"
+        op = "union"
+        operands = ["b"]
+
+        [[objects]]
+        name = "dense"
+        op = "union"
+        operands = ["b"]
+        texels_per_metre = 64
+
+        [[objects]]
+        name = "moving"
+        op = "union"
+        operands = ["b"]
+        static = false
+    """)
+    by = {m.name: m for m in scene.meshes}
+    assert scene.lightmap.texels_per_metre == 8 and scene.lightmap.pages == []
+    assert by["static_default"].texels_per_metre is None and by["dense"].texels_per_metre == 64
+    assert not by["moving"].static
+
+
+def test_props_are_merged_under_a_placed_node(tmp_path):
+    (tmp_path / "statue.glb").write_bytes(b"glTF")  # only its existence is checked here
+    lod = ir.Lod(attributes={"position": np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)},
+                 triangles=np.array([[0, 1, 2]], np.uint32), materials=np.array([1], np.uint32))
+    prop = ir.Scene(name="statue", source="statue.glb", meshes=[ir.Mesh("body", [lod], static=True)],
+                    materials=[ir.Material("a"), ir.Material("b", base_color_texture=0)],
+                    textures=[ir.Texture("t", 1, 1, "Rgba8Srgb", [np.zeros((1, 1, 4), np.uint8)])],
+                    nodes=[ir.Node("root"), ir.Node("child", parent=0, mesh=0)],
+                    lights=[ir.Light("lamp", "point", position=(0, 1, 0))])
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent("""
+        [[brushes]]
+        name = "b"
+        kind = "box"
+        size = [1, 1, 1]
+        material = "stone"
+
+        [[objects]]
+        name = "o"
+        op = "union"
+        operands = ["b"]
+
+        [[props]]
+        name = "statue"
+        gltf = "statue.glb"
+        translation = [5, 0, 0]
+        rotation = [0, 90, 0]
+    """)))
+    seen = []
+    scene = build_level(spec, import_gltf=lambda p: seen.append(p) or prop)
+    assert seen == [tmp_path / "statue.glb"]
+    assert [m.name for m in scene.meshes] == ["o", "body"] and not scene.meshes[1].static
+    assert scene.meshes[1].base.materials.tolist() == [2 + 1]  # after the level's two materials
+    assert scene.materials[3].base_color_texture == 0 and len(scene.textures) == 1
+    assert [n.name for n in scene.nodes] == ["o", "statue", "statue/root", "statue/child"]
+    assert [n.parent for n in scene.nodes] == [None, None, 1, 2] and scene.nodes[3].mesh == 1
+    local = np.array(scene.nodes[1].local).reshape(4, 4, order="F")
+    assert np.allclose(local[:3, 3], [5, 0, 0]) and np.allclose(local[:3, :3] @ [1, 0, 0], [0, 0, -1])
+    assert scene.lights[-1].name == "statue/lamp" and np.allclose(scene.lights[-1].position, [5, 1, 0])
+    assert prop.meshes[0].base.materials.tolist() == [1] and prop.nodes[0].parent is None  # prop untouched
+    spec_static = load_level(tmp_path / "level.toml")
+    spec_static.props[0].static = True
+    assert build_level(spec_static, import_gltf=lambda p: prop).meshes[1].static
+
+
+def test_lights_and_spawns_in_physical_units(tmp_path):
+    scene = build(tmp_path, """
+        [[brushes]]
+        name = "b"
+        kind = "box"
+        size = [1, 1, 1]
+        material = "stone"
+
+        [[objects]]
+        name = "o"
+        op = "union"
+        operands = ["b"]
+
+        [[lights]]
+        name = "spot"
+        kind = "spot"
+        position = [0, 3, 0]
+        direction = [0, -2, 0]
+        intensity = 500
+        inner_cone_deg = 10
+        outer_cone_deg = 30
+
+        [[spawns]]
+        name = "npc"
+        kind = "character"
+        rotation = [0, 90, 0]
+        params = { animation = "idle" }
+    """)
+    spot = scene.lights[0]
+    assert spot.direction == (0.0, -1.0, 0.0) and spot.intensity == 500
+    assert spot.inner_cone == pytest.approx(np.radians(10)) and spot.outer_cone == pytest.approx(np.radians(30))
+    q = scene.spawns[0].rotation
+    assert np.allclose(q, [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)])
+
+
+# ---- errors name the file, the line and the key ----------------------------------------------
+
+OK_OBJECT = """
+[[brushes]]
+name = "b"
+kind = "box"
+size = [1, 1, 1]
+material = "stone"
+
+[[objects]]
+name = "o"
+op = "union"
+operands = ["b"]
+"""
+
+
+def error_of(tmp_path: Path, body: str, build_too: bool = False) -> str:
+    path = write(tmp_path, HEADER + textwrap.dedent(body))
+    with pytest.raises(CookError) as e:
+        spec = load_level(path)
+        if build_too:
+            build_level(spec)
+    msg = str(e.value)
+    assert msg.startswith(str(path)), msg
+    assert "\n" not in msg
+    return msg
+
+
+def line_of(tmp_path: Path, needle: str) -> int:
+    lines = (tmp_path / "level.toml").read_text().splitlines()
+    return next(i + 1 for i, l in enumerate(lines) if needle in l)
+
+
+def test_error_unknown_key(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT + """
+        [[brushes]]
+        name = "c"
+        kind = "box"
+        size = [1, 1, 1]
+        colour = "red"
+        material = "stone"
+    """)
+    assert f":{line_of(tmp_path, 'colour')}: brushes[1].colour: unknown key 'colour'" in msg
+
+
+def test_error_unknown_key_for_the_kind(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('size = [1, 1, 1]', 'size = [1, 1, 1]\nradius = 2'))
+    assert f":{line_of(tmp_path, 'radius')}: brushes[0].radius: unknown key 'radius' for a box brush" in msg
+
+
+def test_error_bad_operand(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "nope"]'))
+    assert f":{line_of(tmp_path, 'operands')}: objects[0].operands[1]: 'nope' is not a brush or an object" in msg
+
+
+def test_error_operand_defined_later(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["later"]') + """
+        [[objects]]
+        name = "later"
+        op = "union"
+        operands = ["b"]
+    """)
+    assert "objects[0].operands[0]" in msg and "defined before" in msg
+
+
+def test_error_unknown_op(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('op = "union"', 'op = "xor"'))
+    assert f":{line_of(tmp_path, 'xor')}: objects[0].op: unknown value 'xor'" in msg
+
+
+def test_error_empty_result(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "far"]').replace('"union"', '"intersection"') + """
+        [[brushes]]
+        name = "far"
+        kind = "box"
+        size = [1, 1, 1]
+        translation = [10, 0, 0]
+        material = "stone"
+    """, build_too=True)
+    assert f":{line_of(tmp_path, 'intersection')}: objects[0].op: object 'o': the intersection of b, far is empty" in msg
+
+
+def test_error_touching_brushes(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "edge"]') + """
+        [[brushes]]
+        name = "edge"
+        kind = "box"
+        size = [1, 1, 1]
+        translation = [1, 1, 0]
+        material = "stone"
+    """, build_too=True)
+    assert "objects[0]: object 'o': surfaces touch without merging" in msg
+
+
+def test_error_toml_syntax(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT + '\n[[brushes]]\nname = "x\n')
+    line = line_of(tmp_path, 'name = "x')
+    assert re.search(rf":{line}:\d+: ", msg), msg
+
+
+def test_error_negative_size(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace("size = [1, 1, 1]", "size = [1, -2, 1]"))
+    assert f":{line_of(tmp_path, 'size')}: brushes[0].size: must be > 0, got -2" in msg
+
+
+def test_error_zero_segments(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('kind = "box"\nsize = [1, 1, 1]', 'kind = "cylinder"\nradius = 1\nheight = 1\nsegments = 0'))
+    assert "brushes[0].segments: must be >= 3, got 0" in msg
+
+
+def test_error_unknown_material(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('material = "stone"', 'material = "granite"'))
+    assert f":{line_of(tmp_path, 'granite')}: brushes[0].material: unknown material 'granite'" in msg
+
+
+def test_error_missing_prop_file(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT + """
+        [[props]]
+        name = "statue"
+        gltf = "props/statue.glb"
+    """)
+    assert f":{line_of(tmp_path, 'statue.glb')}: props[0].gltf: prop file 'props/statue.glb' not found" in msg
+
+
+def test_error_missing_texture_file(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n')
+    assert f":{line_of(tmp_path, 'wall.png')}: materials[2].texture: texture file 'wall.png' not found" in msg
+
+
+def test_error_wrong_type_and_unknown_section(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('name = "o"', 'name = "o"\nstatic = "yes"'))
+    assert f":{line_of(tmp_path, 'yes')}: objects[0].static: expected true or false, got a string" in msg
+    msg = error_of(tmp_path, OK_OBJECT + "\n[[brushs]]\nname = 'x'\n")
+    assert f":{line_of(tmp_path, '[[brushs]]')}: brushs: unknown key 'brushs'" in msg
+
+
+def test_error_duplicate_name_and_spawn_param(tmp_path):
+    msg = error_of(tmp_path, OK_OBJECT.replace('name = "o"', 'name = "b"'))
+    assert "objects[0].name: 'b' is already the name of brushes[0]" in msg
+    msg = error_of(tmp_path, OK_OBJECT + '\n[[spawns]]\nname = "p"\nkind = "boids"\nparams = { count = 3, colour = 1 }\n')
+    assert f":{line_of(tmp_path, 'colour')}: spawns[0].params.colour: unknown parameter 'colour' for a boids spawn" in msg
+
+
+def test_png_texture(tmp_path):
+    from PIL import Image
+
+    Image.new("RGBA", (4, 2), (10, 20, 30, 255)).save(tmp_path / "wall.png")
+    spec = load_level(write(tmp_path, HEADER + OK_OBJECT + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n'))
+    tex = build_level(spec).textures[0]
+    assert (tex.width, tex.height, tex.format) == (4, 2, "Rgba8Srgb") and tuple(tex.mips[0][0, 0]) == (10, 20, 30, 255)
+
+
+@pytest.mark.parametrize("kind", ["checker", "bricks", "planks", "flagstones"])
+def test_procedural_textures_tile(kind):
+    from asset_pipeline.procedural_textures import procedural_texture
+
+    p = {"procedural": kind, "size": 64, "count": 4, "mortar": 0.1, "colors": [(0.8, 0.7, 0.6), (0.3, 0.3, 0.3)], "seed": 7}
+    img = procedural_texture(p)
+    assert img.shape == (64, 64, 4) and img.dtype == np.uint8 and (img[..., 3] == 255).all()
+    assert np.array_equal(img, procedural_texture(p)), "deterministic"
+    # seamless: the jump across the wrap is no bigger than jumps inside the image
+    f = img[..., :3].astype(np.int32)
+    inner = max(np.abs(np.diff(f, axis=0)).mean(axis=(1, 2)).max(), np.abs(np.diff(f, axis=1)).mean(axis=(0, 2)).max())
+    assert np.abs(f[0] - f[-1]).mean() <= inner and np.abs(f[:, 0] - f[:, -1]).mean() <= inner
+
+
+def test_real_gltf_prop(tmp_path, gltf_samples):
+    box = gltf_samples / "BoxTextured" / "BoxTextured.gltf"
+    if not box.is_file():
+        pytest.skip(f"{box} missing")
+    scene = build_level(load_level(write(tmp_path, HEADER + OK_OBJECT + f"""
+[[props]]
+name = "crate"
+gltf = "{box}"
+translation = [0, 0.5, 3]
+static = true
+""")))
+    scene.validate()
+    assert [m.name for m in scene.meshes][0] == "o" and len(scene.meshes) == 2 and scene.meshes[1].static
+    assert scene.materials[2].base_color_texture == 0 and len(scene.textures) == 1
+    assert scene.nodes[1].name == "crate" and scene.nodes[2].parent == 1

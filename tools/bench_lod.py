@@ -1,0 +1,233 @@
+"""Benchmark of the LOD stage (not a test): run it by hand, it prints a table.
+
+    .venv/bin/python tools/bench_lod.py [--subdiv N] [--repeat R]
+
+On a ~1M-triangle displaced cube-sphere with uv0 (one UV chart per cube face: seams on a smooth
+surface), normals, tangents and colours:
+
+1. Time: ``build_lods`` against ``fast_simplification.simplify`` alone for the same target counts,
+   in the same run (interleaved, best of R). The raw chain simplifies the position-welded mesh
+   level on level exactly as the stage does (same targets, same aggressiveness), so the ratio is
+   what carrying attributes, keeping seams and measuring errors cost on top. The stage's time is
+   also split into its phases (LOD 0 preparation, simplification incl. seam flaps, split + attribute
+   carrying, error measurement) so the attribute-carrying overhead alone can be read off.
+2. Error at equal triangle count against meshoptimizer's simplifier (PyPI ``meshoptimizer``,
+   ``simplify`` on the same split mesh, which makes it seam-aware, from LOD 0 to each of the stage's
+   triangle counts, error limit off). Both results are measured by the same sampled symmetric
+   Hausdorff distance (the stage's own measure, ``MeshBvh.directed_hausdorff``), in metres.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import fast_simplification
+import numpy as np
+
+from asset_pipeline import ir, lod
+from asset_pipeline._core import MeshBvh
+
+
+def cube_sphere(n: int, bump: float = 0.02) -> ir.Lod:
+    """A cube with n x n quads per face, pushed onto a bumpy sphere of radius ~1. Each cube face
+    has its own vertices and a [0,1]^2 UV chart, so the cube's 12 edges are UV seams on a smooth
+    surface (and its 8 corners are where three seams meet). 12 n^2 triangles."""
+    g = np.linspace(-1.0, 1.0, n + 1)
+    U, V = np.meshgrid(g, g, indexing="ij")
+    pos, uv, tris = [], [], []
+    base = 0
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = np.zeros((n + 1, n + 1, 3))
+            p[..., axis] = sign
+            p[..., (axis + 1) % 3] = U
+            p[..., (axis + 2) % 3] = V
+            pos.append(p.reshape(-1, 3))
+            uv.append(np.stack([(U + 1) / 2, (V + 1) / 2], -1).reshape(-1, 2))
+            idx = base + np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+            a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+            t = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+            tris.append(t if sign > 0 else t[:, ::-1])
+            base += (n + 1) ** 2
+    p = np.concatenate(pos)
+    d = p / np.linalg.norm(p, axis=1, keepdims=True)
+    r = 1.0 + bump * (np.sin(9 * d[:, 0]) * np.sin(7 * d[:, 1] + 1.0) * np.sin(8 * d[:, 2] + 2.0) + 0.3 * np.sin(31 * d[:, 0] + 17 * d[:, 2]))
+    p = (d * r[:, None]).astype(np.float32)  # cube-edge copies are bitwise equal: same inputs
+    t = np.concatenate(tris)
+    uv = np.concatenate(uv)
+    # Smooth normals over the welded surface (area-weighted face normals), tangents along dP/du.
+    _, weld = np.unique(p, axis=0, return_inverse=True)
+    weld = weld.ravel()
+    p64 = p.astype(np.float64)
+    fn = np.cross(p64[t[:, 1]] - p64[t[:, 0]], p64[t[:, 2]] - p64[t[:, 0]])
+    acc = np.zeros((weld.max() + 1, 3))
+    for k in range(3):
+        np.add.at(acc, weld[t[:, k]], fn)
+    normal = acc[weld]
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    du = np.zeros_like(p64)
+    e1, e2 = p64[t[:, 1]] - p64[t[:, 0]], p64[t[:, 2]] - p64[t[:, 0]]
+    w1, w2 = uv[t[:, 1]] - uv[t[:, 0]], uv[t[:, 2]] - uv[t[:, 0]]
+    det = w1[:, 0] * w2[:, 1] - w2[:, 0] * w1[:, 1]
+    tf = (e1 * w2[:, 1:2] - e2 * w1[:, 1:2]) / np.where(np.abs(det) > 1e-20, det, 1.0)[:, None]
+    for k in range(3):
+        np.add.at(du, t[:, k], tf)
+    du -= normal * np.einsum("ij,ij->i", du, normal)[:, None]
+    du /= np.maximum(np.linalg.norm(du, axis=1, keepdims=True), 1e-20)
+    tangent = np.concatenate([du, np.ones((len(p), 1))], 1)
+    color = np.concatenate([np.clip((d * 0.5 + 0.5) * 255, 0, 255), np.full((len(p), 1), 255)], 1)
+    return ir.Lod(
+        attributes={
+            "position": p,
+            "normal": normal.astype(np.float32),
+            "tangent": tangent.astype(np.float32),
+            "uv0": uv.astype(np.float32),
+            "color": color.astype(np.uint8),
+        },
+        triangles=t.astype(np.uint32),
+        materials=np.zeros(len(t), np.uint32),
+    )
+
+
+class Phases:
+    """Wall time of the stage's internal phases (wraps lod's module-level functions)."""
+
+    names = {"_Lod0": "prepare LOD 0", "_simplify": "simplify (+ flaps)", "_split_and_carry": "split + carry attributes", "_hausdorff": "measure error"}
+
+    def __init__(self):
+        self.seconds = {k: 0.0 for k in self.names}
+        self.targets: list[int] = []
+        self._orig = {k: getattr(lod, k) for k in self.names}
+        for k, fn in self._orig.items():
+            setattr(lod, k, self._wrap(k, fn))
+
+    def _wrap(self, name, fn):
+        def timed(*args, **kwargs):
+            if name == "_simplify":
+                self.targets.append(int(args[1]))
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[name] += time.perf_counter() - t
+
+        return timed
+
+    def reset(self):
+        self.seconds = {k: 0.0 for k in self.names}
+        self.targets = []
+
+
+def welded(lod0: ir.Lod) -> tuple[np.ndarray, np.ndarray]:
+    """LOD 0 welded by position, as fast-simplification wants it (float64 points, int32 faces)."""
+    ctx_level = lod._Lod0(lod0).level0
+    return np.ascontiguousarray(ctx_level.points), np.ascontiguousarray(ctx_level.faces)
+
+
+def raw_chain(points: np.ndarray, faces: np.ndarray, targets: list[int], agg: float) -> tuple[float, list[tuple[np.ndarray, np.ndarray]]]:
+    """fast_simplification.simplify alone, level on level, for the given targets."""
+    out = []
+    t = time.perf_counter()
+    p, f = points, faces
+    for target in targets:
+        p, f = fast_simplification.simplify(p, f, target_count=target, agg=agg)
+        out.append((p, f))
+    return time.perf_counter() - t, out
+
+
+def hausdorff(lod0: ir.Lod, bvh0: MeshBvh, pos: np.ndarray, tri: np.ndarray, spacing: float, min_subdiv: int) -> float:
+    """The stage's own symmetric sampled Hausdorff measure, for any mesh against LOD 0."""
+    pos = np.ascontiguousarray(pos, dtype=np.float32)
+    tri = np.ascontiguousarray(tri, dtype=np.uint32)
+    a, _, _ = MeshBvh(pos, tri).directed_hausdorff(lod0.attributes["position"], lod0.triangles, spacing, 1)
+    b, _, _ = bvh0.directed_hausdorff(pos, tri, spacing, min_subdiv)
+    return max(a, b)
+
+
+def meshopt_at(lod0: ir.Lod, triangles: int):
+    """meshoptimizer's simplify on LOD 0's split mesh to about `triangles` triangles (no error
+    limit): returns (positions, triangles) of the result, or None when meshoptimizer is missing."""
+    try:
+        import meshoptimizer
+    except ImportError:
+        return None
+    idx = lod0.triangles.ravel().astype(np.uint32)
+    dst = np.zeros_like(idx)
+    count = meshoptimizer.simplify(dst, idx, lod0.attributes["position"], target_index_count=3 * triangles, target_error=1.0)
+    return lod0.attributes["position"], dst[:count].reshape(-1, 3)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--subdiv", type=int, default=289, help="quads per cube-face edge (12 n^2 triangles; 289 -> 1.0M)")
+    ap.add_argument("--repeat", type=int, default=3, help="timed runs of each side (best is reported)")
+    ap.add_argument("--max-lods", type=int, default=LodDefaults.max_lods)
+    args = ap.parse_args()
+
+    lod0 = cube_sphere(args.subdiv)
+    settings = lod.LodSettings(max_lods=args.max_lods)
+    print(f"mesh: displaced cube-sphere, {lod0.triangle_count:,} triangles, {lod0.vertex_count:,} vertices "
+          f"(attributes: {', '.join(lod0.attributes)}); settings: {settings}")
+
+    phases = Phases()
+    points, faces = welded(lod0)
+    stage_times, raw_times, phase_runs = [], [], []
+    chain = None
+    for _ in range(args.repeat):  # interleaved, so both see the same machine state
+        phases.reset()
+        t = time.perf_counter()
+        chain = lod.build_lods(lod0, settings)
+        stage_times.append(time.perf_counter() - t)
+        phase_runs.append(dict(phases.seconds))
+        targets = list(phases.targets[: len(chain)])
+        seconds, raw = raw_chain(points, faces, targets, settings.aggressiveness)
+        raw_times.append(seconds)
+
+    best = int(np.argmin(stage_times))
+    stage, raw_best, ph = stage_times[best], min(raw_times), phase_runs[best]
+    carry = ph["_Lod0"] + ph["_simplify"] + ph["_split_and_carry"]
+    print()
+    print("time (best of %d)                          seconds   vs raw" % args.repeat)
+    print(f"  fast_simplification.simplify alone     {raw_best:8.3f}    1.00x")
+    print(f"  build_lods                             {stage:8.3f}   {stage / raw_best:5.2f}x")
+    for k, name in Phases.names.items():
+        print(f"    {name:<36} {ph[k]:8.3f}")
+    print(f"  build_lods without error measurement   {carry:8.3f}   {carry / raw_best:5.2f}x   <- attribute carrying vs the raw call (goal <= 1.20x)")
+
+    # Error at equal triangle counts: the stage, raw fast-simplification, meshoptimizer.
+    bvh0 = MeshBvh(lod0.attributes["position"], lod0.triangles)
+    spacing = settings.sample_spacing * lod._Lod0(lod0).mean_edge
+    _, raw = raw_chain(points, faces, targets, settings.aggressiveness)
+    have_meshopt = meshopt_at(lod0, 64) is not None
+    print()
+    print("error at equal triangle count (sampled symmetric Hausdorff to LOD 0, metres; stage = measured, before its safety factor)")
+    print(f"  {'LOD':>3} {'triangles':>10} {'stage':>10} {'stored':>10} {'fs raw':>10} {'meshopt tris':>12} {'meshopt':>10} {'stage/meshopt':>13}")
+    ratios = []
+    for i, (level, (rp, rf)) in enumerate(zip(chain, raw), 1):
+        ours = hausdorff(lod0, bvh0, level.attributes["position"], level.triangles, spacing, settings.min_subdivisions)
+        fs_err = hausdorff(lod0, bvh0, rp, rf, spacing, settings.min_subdivisions)
+        row = f"  {i:>3} {level.triangle_count:>10,} {ours:>10.3g} {level.error:>10.3g} {fs_err:>10.3g}"
+        if have_meshopt:
+            mp, mt = meshopt_at(lod0, level.triangle_count)
+            mo = hausdorff(lod0, bvh0, mp, mt, spacing, settings.min_subdivisions)
+            ratios.append(ours / mo)
+            row += f" {len(mt):>12,} {mo:>10.3g} {ours / mo:>13.2f}"
+        print(row)
+    print()
+    print(f"ratio 1 (time): build_lods / fast_simplification alone = {stage / raw_best:.2f}x; "
+          f"without the error measurement = {carry / raw_best:.2f}x")
+    if have_meshopt:
+        gm = math.exp(np.mean(np.log(ratios)))
+        print(f"ratio 2 (error): stage / meshoptimizer at equal triangle count = {gm:.2f}x (geometric mean over {len(ratios)} LODs)")
+    else:
+        print("ratio 2 (error): meshoptimizer is not installed (pip install --pre meshoptimizer==0.2.30a0)")
+    return 0
+
+
+LodDefaults = lod.LodSettings()
+
+if __name__ == "__main__":
+    sys.exit(main())
