@@ -70,6 +70,8 @@ pub(crate) fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyD
 mod scene;
 mod uv_raster;
 mod measure;
+mod bake;
+mod lightmap_post;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -80,5 +82,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     scene::register(m)?;
     uv_raster::register(m)?;
     measure::register(m)?;
+    bake::register(m)?;
+    lightmap_post::register(m)?;
     Ok(())
 }

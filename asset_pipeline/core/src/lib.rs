@@ -6,6 +6,7 @@
 
 mod accessor;
 mod error;
+pub mod bake;
 pub mod ir;
 mod load;
 mod material;
@@ -15,6 +16,7 @@ pub mod pack_build;
 mod scene;
 pub mod uv_raster;
 pub mod wire;
+pub mod lightmap_post; pub mod exr_io;
 
 pub use error::CookError;
 pub use pack;

@@ -1,0 +1,18 @@
+//! The lightmap baker: ray queries ([`bvh`]), samplers ([`sampling`]), analytic lights in
+//! physical units ([`lights`]) and the path-tracing integrator ([`integrator`]), which computes
+//! B = H/pi per surface point.
+
+pub mod bvh;
+pub mod integrator;
+pub mod lights;
+pub mod sampling;
+
+/// Run `f` on a rayon pool of `threads` workers (None or 0: one per core), so callers (the
+/// bindings) need not depend on rayon themselves.
+pub fn with_threads<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> Result<R, String> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| format!("thread pool: {e}"))?;
+    Ok(pool.install(f))
+}
+
+#[cfg(test)]
+mod tests;
