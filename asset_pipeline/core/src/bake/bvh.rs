@@ -3,6 +3,9 @@
 //! - Build: binned surface-area heuristic (16 bins per axis over centroid bounds). A node becomes
 //!   a leaf when splitting does not pay (and it has at most `MAX_LEAF` triangles); when every
 //!   centroid falls in one bin (duplicates, degenerate soups) it is split by count instead.
+//! - Pre-splitting ([`presplit`], early split clipping): triangles much longer than the scene's
+//!   size / 32 are given several references with the boxes of their clipped parts, up to 2x as
+//!   many references as triangles in all; a triangle can then be tested in several leaves.
 //! - Layout: depth-first; an interior node's left child is the next node, `offset` is the right
 //!   child. Leaves hold `count` triangles starting at `offset` in the reordered triangle array.
 //! - Traversal: explicit stack; at an interior node both child boxes are tested, the nearer is
@@ -24,6 +27,11 @@ const BINS: usize = 16;
 /// Cost of a box-pair test relative to one triangle test, in the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
 const STACK: usize = 96;
+/// Pre-splitting: references' boxes are halved while longer than this fraction of the scene's
+/// largest extent, to at most `PRESPLIT_BUDGET` references per triangle on average.
+const PRESPLIT_EXTENT: f32 = 1.0 / 32.0;
+const PRESPLIT_BUDGET: usize = 2;
+const PRESPLIT_DEPTH: u32 = 12;
 /// Below this depth the SAH decides; deeper nodes split by count, so the tree depth (and the
 /// traversal stack) stays bounded even for adversarial soups: at most 48 + 32 < STACK.
 const SAH_DEPTH: usize = 48;
@@ -42,6 +50,28 @@ pub struct Node {
 }
 
 const _: () = assert!(std::mem::size_of::<Node>() == 32);
+
+/// Box and triangle test counters of the current thread (test builds only), for the benchmark.
+#[cfg(test)]
+pub mod stats {
+    use std::cell::Cell;
+    thread_local!(static C: Cell<(u64, u64)> = const { Cell::new((0, 0)) });
+    pub fn add(boxes: u64, prims: u64) {
+        C.with(|c| {
+            let (a, b) = c.get();
+            c.set((a + boxes, b + prims))
+        });
+    }
+    /// (box tests, triangle tests) since the last call.
+    pub fn take() -> (u64, u64) {
+        C.with(|c| c.replace((0, 0)))
+    }
+}
+#[cfg(not(test))]
+mod stats {
+    #[inline(always)]
+    pub fn add(_: u64, _: u64) {}
+}
 
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
@@ -118,6 +148,7 @@ impl Bvh {
                 Some(Prim { bounds: b, centroid, id: i as u32 })
             })
             .collect();
+        presplit(&mut prims, positions, triangles);
         let mut nodes = Vec::with_capacity(prims.len().max(1));
         if prims.is_empty() {
             // An inverted box that no ray enters.
@@ -196,22 +227,27 @@ impl Bvh {
         let mut stack = [(0u32, 0f32); STACK];
         let mut sp = 0usize;
         let root = &self.nodes[0];
+        // SAFETY (the unchecked loads below): the build makes every child index and leaf range
+        // valid (children follow their parent in `nodes`, leaves index into `tris`).
+        let node = |i: usize| unsafe { self.nodes.get_unchecked(i) };
         if r.enter(root, *tmax).is_none() {
             return;
         }
         let mut at = 0usize;
         loop {
-            let n = &self.nodes[at];
+            let n = node(at);
             if n.count > 0 {
                 let s = n.offset as usize;
                 let e = s + n.count as usize;
-                if leaf((s..e).zip(self.tris[s..e].iter()), tmin, tmax) {
+                stats::add(0, (e - s) as u64);
+                if leaf((s..e).zip(unsafe { self.tris.get_unchecked(s..e) }.iter()), tmin, tmax) {
                     return;
                 }
             } else {
                 let (a, b) = (at + 1, n.offset as usize);
-                let ta = r.enter(&self.nodes[a], *tmax);
-                let tb = r.enter(&self.nodes[b], *tmax);
+                stats::add(2, 0);
+                let ta = r.enter(node(a), *tmax);
+                let tb = r.enter(node(b), *tmax);
                 match (ta, tb) {
                     (Some(ta), Some(tb)) => {
                         let (near, far, tfar) = if ta <= tb { (a, b, tb) } else { (b, a, ta) };
@@ -252,6 +288,8 @@ impl Bvh {
 struct Prepared {
     org: [f32; 3],
     inv: [f32; 3],
+    /// Direction sign bits (near plane is the box's max on negative axes).
+    neg: [bool; 3],
     tmin: f32,
     // Woop et al.: axis permutation and shear that make the ray +z from the origin.
     k: [usize; 3],
@@ -276,6 +314,7 @@ impl Prepared {
         Prepared {
             org: ray.origin,
             inv,
+            neg: d.map(|x| x.is_sign_negative()),
             tmin: ray.tmin,
             k: [kx, ky, kz],
             shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
@@ -288,11 +327,14 @@ impl Prepared {
         let mut lo = self.tmin;
         let mut hi = tmax;
         for k in 0..3 {
-            let t0 = (n.min[k] - self.org[k]) * self.inv[k];
-            let t1 = (n.max[k] - self.org[k]) * self.inv[k];
-            // NaN (origin on the slab plane, direction 0 on this axis) is dropped by max/min.
-            lo = lo.max(t0.min(t1));
-            hi = hi.min(t0.max(t1) * ROBUST);
+            // Near and far planes by the direction's sign (sign bit, so -0 counts as negative).
+            let (pn, pf) = if self.neg[k] { (n.max[k], n.min[k]) } else { (n.min[k], n.max[k]) };
+            let t0 = (pn - self.org[k]) * self.inv[k];
+            let t1 = (pf - self.org[k]) * self.inv[k] * ROBUST;
+            // NaN (origin on the slab plane, direction 0 on this axis) fails the comparison and
+            // leaves the bound as it was: conservative.
+            lo = if t0 > lo { t0 } else { lo };
+            hi = if t1 < hi { t1 } else { hi };
         }
         (lo <= hi).then_some(lo)
     }
@@ -303,7 +345,9 @@ impl Prepared {
 fn intersect(r: &Prepared, tri: &[[f32; 3]; 3], tmin: f32, tmax: f32) -> Option<f32> {
     let [kx, ky, kz] = r.k;
     let [sx, sy, sz] = r.shear;
-    let rel = |p: &[f32; 3]| [p[kx] - r.org[kx], p[ky] - r.org[ky], p[kz] - r.org[kz]];
+    // SAFETY: kx, ky, kz are a permutation of 0..3 (Prepared::new).
+    let at = |p: &[f32; 3], k: usize| unsafe { *p.get_unchecked(k) };
+    let rel = |p: &[f32; 3]| [at(p, kx) - at(&r.org, kx), at(p, ky) - at(&r.org, ky), at(p, kz) - at(&r.org, kz)];
     let (a, b, c) = (rel(&tri[0]), rel(&tri[1]), rel(&tri[2]));
     let (ax, ay) = (a[0] - sx * a[2], a[1] - sy * a[2]);
     let (bx, by) = (b[0] - sx * b[2], b[1] - sy * b[2]);
@@ -326,7 +370,11 @@ fn intersect(r: &Prepared, tri: &[[f32; 3]; 3], tmin: f32, tmax: f32) -> Option<
     }
     let t_scaled = sz * (u * a[2] + v * b[2] + w * c[2]);
     let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
-    if ts <= tmin * d || ts >= tmax * d {
+    // Cheap rejection before the division; the far bound is widened (conservative) so the
+    // exact `t < tmax` below decides, and a hit is kept or not whatever tmax earlier triangles
+    // left (otherwise a hit a rounding under tmax could be lost, making the closest hit depend
+    // on the order triangles are tested in).
+    if ts <= tmin * d || ts > tmax * d * ROBUST {
         return None;
     }
     let t = ts / d;
@@ -433,6 +481,100 @@ fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<No
     let right = build_node(r, first + mid, depth + 1, nodes);
     nodes[me].offset = right as u32;
     me
+}
+
+/// Early split clipping (Ernst & Greiner 2007): a triangle whose box is large next to the scene
+/// is split into several references, each with the box of the part of the triangle inside a
+/// half of its box, so long thin triangles (walls, ground) do not make every box overlap. A
+/// triangle may then sit in several leaves; hits are unchanged (the same test, the same t).
+fn presplit(prims: &mut Vec<Prim>, positions: &[[f32; 3]], triangles: &[[u32; 3]]) {
+    let mut scene = Aabb::EMPTY;
+    prims.iter().for_each(|p| scene.join(&p.bounds));
+    let ext = [0, 1, 2].map(|k| scene.max[k] - scene.min[k]);
+    let limit = ext[0].max(ext[1]).max(ext[2]) * PRESPLIT_EXTENT;
+    if !(limit > 0.0) || !limit.is_finite() {
+        return;
+    }
+    let budget = prims.len() * PRESPLIT_BUDGET;
+    let n = prims.len();
+    for i in 0..n {
+        if prims.len() >= budget {
+            break;
+        }
+        let b = prims[i].bounds;
+        if (0..3).all(|k| b.max[k] - b.min[k] <= limit) {
+            continue;
+        }
+        let id = prims[i].id;
+        let tri = triangles[id as usize].map(|v| positions[v as usize]);
+        let mut out = Vec::new();
+        split_ref(&tri, b, limit, 0, &mut out);
+        if out.is_empty() {
+            continue;
+        }
+        let mk = |bounds: Aabb| Prim { bounds, centroid: [0, 1, 2].map(|k| 0.5 * (bounds.min[k] + bounds.max[k])), id };
+        prims[i] = mk(out[0]);
+        prims.extend(out[1..].iter().map(|b| mk(*b)));
+    }
+}
+
+/// Boxes of the parts of `tri` inside `clip` (halving its longest side until under `limit`).
+fn split_ref(tri: &[[f32; 3]; 3], clip: Aabb, limit: f32, depth: u32, out: &mut Vec<Aabb>) {
+    let ext = [0, 1, 2].map(|k| clip.max[k] - clip.min[k]);
+    let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
+    if ext[axis] <= limit || depth >= PRESPLIT_DEPTH {
+        out.push(clip);
+        return;
+    }
+    let mid = 0.5 * (clip.min[axis] + clip.max[axis]);
+    for side in 0..2 {
+        let mut half = clip;
+        if side == 0 {
+            half.max[axis] = mid;
+        } else {
+            half.min[axis] = mid;
+        }
+        if let Some(b) = clipped_bounds(tri, &half) {
+            split_ref(tri, b, limit, depth + 1, out);
+        }
+    }
+}
+
+/// Bounds of the triangle clipped to the box `b` (Sutherland-Hodgman in f64), widened by a few
+/// ulps and cut to `b` (so a hit inside `b` is always inside); None if nothing is left.
+fn clipped_bounds(tri: &[[f32; 3]; 3], b: &Aabb) -> Option<Aabb> {
+    let mut poly: Vec<[f64; 3]> = tri.iter().map(|p| p.map(|x| x as f64)).collect();
+    for k in 0..3 {
+        for (side, plane) in [(0, b.min[k] as f64), (1, b.max[k] as f64)] {
+            let inside = |p: &[f64; 3]| if side == 0 { p[k] >= plane } else { p[k] <= plane };
+            let mut next = Vec::with_capacity(poly.len() + 2);
+            for i in 0..poly.len() {
+                let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+                if inside(&p) {
+                    next.push(p);
+                }
+                if inside(&p) != inside(&q) {
+                    let t = (plane - p[k]) / (q[k] - p[k]);
+                    let mut x = [0, 1, 2].map(|j| p[j] + t * (q[j] - p[j]));
+                    x[k] = plane;
+                    next.push(x);
+                }
+            }
+            poly = next;
+            if poly.is_empty() {
+                return None;
+            }
+        }
+    }
+    let mut out = Aabb::EMPTY;
+    for p in &poly {
+        for k in 0..3 {
+            let pad = p[k].abs() * 1e-6 + 1e-30;
+            out.min[k] = out.min[k].min(((p[k] - pad) as f32).max(b.min[k]));
+            out.max[k] = out.max[k].max(((p[k] + pad) as f32).min(b.max[k]));
+        }
+    }
+    Some(out)
 }
 
 fn partition<T>(v: &mut [T], pred: impl Fn(&T) -> bool) -> usize {

@@ -147,6 +147,34 @@ fn bvh_matches_brute_force_on_degenerate_soups() {
 }
 
 #[test]
+fn bvh_matches_brute_force_on_long_thin_triangles() {
+    // Slivers spanning the scene in every direction (pre-split into many references), a big
+    // ground quad and a fan sharing one vertex: the same closest t as brute force.
+    let mut r = Rng::for_sample(3, 0, 0);
+    let mut pos = vec![[-30.0, 0.0, -30.0], [30.0, 0.0, -30.0], [30.0, 0.0, 30.0], [-30.0, 0.0, 30.0]];
+    let mut tris = vec![[0, 1, 2], [0, 2, 3]];
+    for _ in 0..400 {
+        let a = rand3(&mut r, -25.0, 25.0);
+        let b = rand3(&mut r, -25.0, 25.0);
+        let c = add(a, rand3(&mut r, -0.05, 0.05));
+        let base = pos.len() as u32;
+        pos.extend([a, b, c]);
+        tris.push([base, base + 1, base + 2]);
+    }
+    let hub = pos.len() as u32;
+    pos.push([0.0, 5.0, 0.0]);
+    for i in 0..64 {
+        let (s0, c0) = (i as f32 * 0.1).sin_cos();
+        let (s1, c1) = ((i + 1) as f32 * 0.1).sin_cos();
+        let base = pos.len() as u32;
+        pos.extend([[28.0 * c0, 5.0, 28.0 * s0], [28.0 * c1, 5.0, 28.0 * s1]]);
+        tris.push([hub, base, base + 1]);
+    }
+    let rays = random_rays(&mut r, 20000, -28.0, 28.0);
+    check_against_brute(&pos, &tris, &rays);
+}
+
+#[test]
 fn empty_and_tiny_bvh() {
     let bvh = Bvh::build(&[], &[]);
     let ray = Ray { origin: [0.0; 3], dir: [0.0, 0.0, 1.0], tmin: 0.0, tmax: f32::INFINITY };
@@ -395,4 +423,45 @@ fn cancel_stops_the_bake() {
     let scene = s.scene(vec![], Some([1.0; 3]));
     let r = bake_points(&scene, &[[0.0; 3]; 10], &[[0.0, 1.0, 0.0]; 10], &settings(4, 1, 1), &|_, _| {}, &AtomicBool::new(true));
     assert_eq!(r, Err(Cancelled));
+}
+
+/// Benchmark on a raw scene (tools/bench_bvh.py --write-raw): `BVH_RAW=/tmp/temple.bin cargo
+/// test --release -p cook_core bvh_raw_bench -- --ignored --nocapture`. Prints rays/s on one
+/// thread and the box/triangle tests per ray.
+#[test]
+#[ignore]
+fn bvh_raw_bench() {
+    let Ok(path) = std::env::var("BVH_RAW") else { return };
+    let buf = std::fs::read(path).unwrap();
+    let u = |i: usize| u32::from_le_bytes(buf[4 * i..4 * i + 4].try_into().unwrap());
+    let f = |i: usize| f32::from_le_bytes(buf[4 * i..4 * i + 4].try_into().unwrap());
+    let (nv, nt, nr) = (u(0) as usize, u(1) as usize, u(2) as usize);
+    let mut w = 3;
+    let pos: Vec<V3> = (0..nv).map(|i| [f(w + 3 * i), f(w + 3 * i + 1), f(w + 3 * i + 2)]).collect();
+    w += 3 * nv;
+    let tris: Vec<[u32; 3]> = (0..nt).map(|i| [u(w + 3 * i), u(w + 3 * i + 1), u(w + 3 * i + 2)]).collect();
+    w += 3 * nt;
+    let org: Vec<V3> = (0..nr).map(|i| [f(w + 3 * i), f(w + 3 * i + 1), f(w + 3 * i + 2)]).collect();
+    w += 3 * nr;
+    let dir: Vec<V3> = (0..nr).map(|i| [f(w + 3 * i), f(w + 3 * i + 1), f(w + 3 * i + 2)]).collect();
+    let t0 = std::time::Instant::now();
+    let bvh = Bvh::build(&pos, &tris);
+    println!("build {:.1} ms, {} nodes", t0.elapsed().as_secs_f64() * 1e3, bvh.nodes().len());
+    let n = std::env::var("BVH_RAYS").ok().and_then(|s| s.parse().ok()).unwrap_or(nr).min(nr);
+    let rays: Vec<Ray> = (0..n).map(|i| Ray { origin: org[i], dir: dir[i], tmin: 0.0, tmax: f32::INFINITY }).collect();
+    let mut best = f64::INFINITY;
+    let mut hits = 0;
+    for _ in 0..3 {
+        let t0 = std::time::Instant::now();
+        hits = rays.iter().filter(|r| bvh.closest(r).is_some()).count();
+        best = best.min(t0.elapsed().as_secs_f64());
+    }
+    let (boxes, prims) = stats::take();
+    println!(
+        "{n} rays, hit {:.4}, {:.2} Mrays/s, per ray: {:.1} box tests, {:.1} triangle tests",
+        hits as f64 / n as f64,
+        n as f64 / best / 1e6,
+        boxes as f64 / (3 * n) as f64,
+        prims as f64 / (3 * n) as f64
+    );
 }
