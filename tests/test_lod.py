@@ -330,3 +330,65 @@ def test_lightmap_pages_and_uv1_are_carried():
     for lod in build_lods(lod0):
         lod.validate("lod")
         assert lod.lightmap_pages is not None and set(np.unique(lod.lightmap_pages)) <= {0, 1}
+
+
+def test_open_and_messy_input():
+    """An open patch (a border that must stay a border, not grow), with zero-area triangles, a
+    duplicated triangle and unused vertices in the input: valid LODs, no new border edges."""
+    n = 40
+    g = np.linspace(0.0, 1.0, n + 1)
+    X, Z = np.meshgrid(g, g, indexing="ij")
+    pos = np.stack([X, 0.1 * np.sin(4 * X) * np.cos(3 * Z), Z], -1).reshape(-1, 3)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    tris = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    extra = len(pos)
+    pos = np.concatenate([pos, pos[:3], [[5.0, 5.0, 5.0]]])  # copies of 3 vertices + an unused one
+    tris = np.concatenate([tris, [[0, extra, 1], [extra + 1, extra + 1, 2]], tris[:1]])  # degenerate x2, duplicate
+    lod0 = ir.Lod({"position": pos.astype(np.float32)}, tris.astype(np.uint32), np.zeros(len(tris), np.uint32))
+    lods = build_lods(lod0)
+    assert len(lods) >= 3
+    border0 = boundary_edges(lod0)
+    for i, lod in enumerate(lods, 1):
+        lod.validate(f"LOD{i}")
+        assert boundary_edges(lod) <= border0, f"LOD{i}"
+        assert np.isfinite(lod.error) and lod.error > 0
+
+
+def test_tiny_and_bad_input():
+    tri = ir.Lod({"position": np.eye(3, dtype=np.float32)}, np.array([[0, 1, 2]], np.uint32), np.zeros(1, np.uint32))
+    assert build_lods(tri) == []  # below the floor: nothing to do
+    bad = textured_sphere(10, 20)
+    bad.attributes["position"][5, 1] = np.nan
+    with pytest.raises(ir.IrError, match="not finite"):
+        build_lods(bad)
+    with pytest.raises(ValueError):
+        build_lods(textured_sphere(10, 20), LodSettings(min_saving=0.0))
+
+
+def test_without_seam_flaps_uvs_clamp_but_stay_on_their_side():
+    """seam_angle_deg=0 lets the simplifier cross UV seams (lower geometric error); corners across
+    a seam then get their face's side of it, so no triangle spans the texture."""
+    lod0 = textured_sphere()
+    for i, lod in enumerate(build_lods(lod0, LodSettings(seam_angle_deg=0.0)), 1):
+        uv = lod.attributes["uv0"][lod.triangles.astype(np.int64)]
+        span = uv[:, :, 0].max(axis=1) - uv[:, :, 0].min(axis=1)
+        assert span.max() < 0.5, f"LOD{i}: a triangle spans {span.max():.2f} of the texture in u"
+        assert boundary_edges(lod) == 0
+
+
+def test_closest_points_binding_matches_brute_force():
+    lod = textured_sphere(8, 16, bump=0.1)
+    p = lod.attributes["position"].astype(np.float64)
+    t = lod.triangles.astype(np.int64)
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(200, 3)).astype(np.float32) * 0.8
+    dist, tri, bary = MeshBvh(lod.attributes["position"], lod.triangles).closest(q, np.zeros(len(q), np.uint32))
+    # The reported point is on the reported triangle at the reported distance ...
+    at = np.einsum("kj,kjc->kc", bary, p[t[tri]])
+    np.testing.assert_allclose(np.linalg.norm(at - q, axis=1), dist, rtol=1e-9, atol=1e-9)
+    # ... and no triangle is closer (brute force over a fine barycentric grid of every triangle).
+    w = np.array([(i / 12, j / 12, 1 - (i + j) / 12) for i in range(13) for j in range(13 - i)])
+    cloud = np.einsum("gj,mjc->mgc", w, p[t]).reshape(-1, 3)
+    brute = np.sqrt(((q[:, None, :].astype(np.float64) - cloud[None]) ** 2).sum(-1)).min(1)
+    assert np.all(dist <= brute + 1e-9)

@@ -13,7 +13,7 @@ fn value_error(what: &str, e: MeshError) -> PyErr {
 }
 
 /// An (n, 3) array as rows, borrowed when C-contiguous, copied otherwise.
-fn rows3<'a, T: Element + Copy>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; 3]]>> {
+pub(crate) fn rows3<'a, T: Element + Copy>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; 3]]>> {
     let shape = a.shape();
     if shape[1] != 3 {
         return Err(PyValueError::new_err(format!("{what}: expected shape (n, 3), got {shape:?}")));
@@ -111,8 +111,11 @@ impl PyMeshBvh {
     /// One-sided Hausdorff distance from the mesh (positions, triangles) to this one, sampled on
     /// a barycentric grid per triangle with at most `spacing` between samples (at least
     /// `min_subdiv` subdivisions per edge; spacing widened if the samples would exceed
-    /// `max_samples`). Returns `(max distance, samples taken, spacing used)`.
-    #[pyo3(signature = (positions, triangles, spacing, min_subdiv=1, max_samples=50_000_000))]
+    /// `max_samples`), then refined by a local search around the largest samples.
+    /// `vertex_hints` (uint32 (n,), a triangle of this mesh near each vertex, 0xFFFFFFFF for
+    /// none) only speed it up. Returns `(max distance, samples taken, spacing used)`.
+    #[pyo3(signature = (positions, triangles, spacing, min_subdiv=1, max_samples=50_000_000, vertex_hints=None))]
+    #[allow(clippy::too_many_arguments)]
     fn directed_hausdorff(
         &self,
         py: Python<'_>,
@@ -121,11 +124,13 @@ impl PyMeshBvh {
         spacing: f64,
         min_subdiv: u32,
         max_samples: u64,
+        vertex_hints: Option<PyReadonlyArray1<'_, u32>>,
     ) -> PyResult<(f64, u64, f64)> {
         let pos = rows3(&positions, "positions")?;
         let tri = rows3(&triangles, "triangles")?;
+        let hints = vertex_hints.as_ref().map(vec1);
         let d = py
-            .detach(|| self.bvh.directed_hausdorff(&pos, &tri, spacing, min_subdiv, max_samples))
+            .detach(|| self.bvh.directed_hausdorff(&pos, &tri, spacing, min_subdiv, max_samples, hints.as_deref()))
             .map_err(|e| value_error("directed_hausdorff", e))?;
         Ok((d.max, d.samples, d.spacing))
     }

@@ -5,24 +5,23 @@
 //! - [`closest_on_triangle`]: exact closest point of a point to a triangle (Ericson, *Real-Time
 //!   Collision Detection* §5.1.5), in f64, with barycentric coordinates, robust to degenerate
 //!   (zero-area) triangles.
-//! - [`Bvh`]: a bounding-volume hierarchy over a mesh's triangles (binned SAH, leaves of at most
-//!   [`LEAF_SIZE`]) answering closest-point queries by best-first-ish depth-first traversal
-//!   (nearer child first, subtrees pruned by their box distance). A query may start from a hint
-//!   triangle (its distance is the initial bound, which prunes almost everything when the hint is
-//!   near).
-//! - [`Bvh::directed_hausdorff`]: `max over samples s of src: dist(s, target)`, samples on a
-//!   barycentric grid per source triangle (vertices included) with a spacing bound. Because only
-//!   the maximum is wanted, a sample is settled as soon as *any* target triangle is within the
-//!   running maximum ("early break", as in Taha & Hanbury 2015): usually the previous sample's
-//!   closest triangle already is, so most samples cost one point-triangle test. The result is
-//!   still the exact maximum over the sample set, independent of thread timing.
+//! - [`Bvh`]: a bounding-volume hierarchy over a mesh's triangles (a linear BVH: Morton order,
+//!   leaves of at most [`LEAF_SIZE`]) answering closest-point queries depth-first, nearer child
+//!   first, subtrees pruned by their box distance. A query may start from a hint triangle (its
+//!   distance is the initial bound, which prunes almost everything when the hint is near).
+//! - [`weld_positions`], [`seam_edges`]: welding by position; edges where split vertices differ.
+//! - [`Bvh::directed_hausdorff`]: `max over points s of src: dist(s, target)`, estimated from
+//!   barycentric grid samples of every source triangle, then a local search around the largest.
+//!   Only the maximum matters, so most samples are settled by showing that *some* triangle is
+//!   within a threshold ("early break", as in Taha & Hanbury 2015) with one or two point-triangle
+//!   tests: the previous sample's triangle, then a walk over its neighbours.
 //! - [`face_adjacency`] + [`walk_closest`]: closest point found by walking from a start face
 //!   across edges whose two faces share both vertex indices (and a key). With split vertices,
 //!   that walk stays on its side of every seam: the LOD stage's way to find a moved vertex's
 //!   attributes on the right side of a UV seam.
 //!
-//! Everything is deterministic: parallel work is split into fixed chunks (not per thread), and each
-//! chunk's result does not depend on when it runs.
+//! Everything is deterministic: parallel work is split into fixed chunks (not per thread), no
+//! result depends on when a chunk runs, and reductions are order-independent (max) or ordered.
 
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -152,10 +151,9 @@ impl Node {
     #[inline]
     fn dist2(&self, p: V3) -> f64 {
         let mut s = 0.0;
-        for k in 0..3 {
-            let lo = self.lo[k] as f64;
-            let hi = self.hi[k] as f64;
-            let d = if p[k] < lo { lo - p[k] } else if p[k] > hi { p[k] - hi } else { 0.0 };
+        for ((&x, &lo), &hi) in p.iter().zip(&self.lo).zip(&self.hi) {
+            let (lo, hi) = (lo as f64, hi as f64);
+            let d = if x < lo { lo - x } else if x > hi { x - hi } else { 0.0 };
             s += d * d;
         }
         s
@@ -215,15 +213,11 @@ struct BuildTri {
     c: [f32; 3],
 }
 
-const BINS: usize = 16;
 
 impl Bvh {
     /// Build over `triangles` (indices into `positions`).
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<Bvh, MeshError> {
-        let t0 = std::time::Instant::now();
-        let dbg = std::env::var("MEASURE_DEBUG").is_ok();
         check_mesh(positions, triangles)?;
-        if dbg { eprintln!("check {:?}", t0.elapsed()); }
         if triangles.len() >= u32::MAX as usize {
             return Err(MeshError("too many triangles".into()));
         }
@@ -242,10 +236,7 @@ impl Bvh {
                 BuildTri { lo, hi, c: [(lo[0] + hi[0]) * 0.5, (lo[1] + hi[1]) * 0.5, (lo[2] + hi[2]) * 0.5] }
             })
             .collect();
-        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
-        if dbg { eprintln!("prims {:?}", t0.elapsed()); }
-        let nodes = if triangles.is_empty() { Vec::new() } else { build_tree(&prims, &mut order, 0) };
-        if dbg { eprintln!("tree {:?}", t0.elapsed()); }
+        let (nodes, order) = if triangles.is_empty() { (Vec::new(), Vec::new()) } else { build_lbvh(&prims) };
         let tris: Vec<[V3; 3]> = order
             .par_iter()
             .map(|&i| {
@@ -257,14 +248,10 @@ impl Bvh {
         for (s, &i) in order.iter().enumerate() {
             slot[i as usize] = s as u32;
         }
-        if dbg { eprintln!("tris+slot {:?}", t0.elapsed()); }
         let (weld, _) = weld_positions(positions);
-        if dbg { eprintln!("weld {:?}", t0.elapsed()); }
         let welded: Vec<[u32; 3]> = triangles.par_iter().map(|t| t.map(|i| weld[i as usize])).collect();
         let adj = face_adjacency(&welded, &vec![0; triangles.len()]);
-        if dbg { eprintln!("adj {:?}", t0.elapsed()); }
         let adj = order.iter().map(|&i| adj[i as usize].map(|n| if n == NO_FACE { NO_FACE } else { slot[n as usize] })).collect();
-        if dbg { eprintln!("done {:?}", t0.elapsed()); }
         Ok(Bvh { nodes, tris, ids: order, slot, adj })
     }
 
@@ -403,9 +390,14 @@ impl Bvh {
                 for &n in &self.adj[cur as usize] {
                     if n != NO_FACE {
                         let dn = eval(n);
+                        if dn <= bound {
+                            return Some((n, dn, false));
+                        }
                         if dn < d {
+                            // First improvement, not best: half the evaluations, same end.
                             d = dn;
                             next = Some(n);
+                            break;
                         }
                     }
                 }
@@ -419,30 +411,52 @@ impl Bvh {
         self.query(p, start, bound, stack).map(|(s, dd, _)| (s, dd, dd > bound))
     }
 
-    /// One-sided Hausdorff distance from the source mesh to this one, sampled:
-    /// `max over samples s of min over triangles t of |s - t|`. The samples are the source's
-    /// vertices (those of its triangles) and, per triangle, the other points of a barycentric
-    /// grid of k subdivisions ((k+1)(k+2)/2 points with the corners) with
-    /// k = clamp(ceil(longest edge / spacing), min_subdiv, 1024): every point of a source triangle
-    /// is then within 2/3 of a grid cell's longest edge of a sample. When the samples would exceed
-    /// `max_samples`, the spacing is widened to fit (min_subdiv still holds).
-    pub fn directed_hausdorff(&self, positions: &[[f32; 3]], triangles: &[[u32; 3]], spacing: f64, min_subdiv: u32, max_samples: u64) -> Result<Directed, MeshError> {
+    /// Exact squared distance from `p` to the mesh, searching from slot `hint`.
+    fn exact(&self, p: V3, hint: Option<u32>, stack: &mut Vec<u32>) -> (u32, f64) {
+        match self.settle(p, hint, -1.0, stack) {
+            Some((slot, dd, _)) => (slot, dd),
+            None => (0, f64::INFINITY),
+        }
+    }
+
+    /// One-sided Hausdorff distance from the source mesh to this one, estimated by sampling:
+    /// `max over samples s of the source of min over triangles t of this mesh |s - t|`.
+    ///
+    /// 1. Samples: per source triangle, a barycentric grid of k subdivisions ((k+1)(k+2)/2 points,
+    ///    corners included) with k = clamp(ceil(longest edge / spacing), min_subdiv, 1024), so
+    ///    every point of a triangle is within 2/3 of a grid cell's longest edge of a sample; points
+    ///    on shared corners and edges are taken once. When the grid points would exceed
+    ///    `max_samples`, the spacing is widened to fit.
+    /// 2. Only the maximum matters, so a sample is settled as soon as some triangle is known to be
+    ///    within a threshold ("early break", Taha & Hanbury 2015): the hint (the previous sample's
+    ///    triangle), then a walk over neighbouring triangles, then the tree. The threshold is
+    ///    0.7 of the maximum over an eighth of the triangles (a first, cheap pass), so the
+    ///    samples above it (all candidates for the maximum) get exact distances.
+    /// 3. A grid can miss a sharp maximum between samples (where a simplified edge cuts a
+    ///    crease, say), so the best [`HILL_CLIMBS`] samples are refined by a local search in
+    ///    their triangle (pattern search in barycentric coordinates over 8 directions, from half
+    ///    a grid step down to 1/256 of one).
+    ///
+    /// Every step is deterministic: thresholds come from completed passes, and the parallel work
+    /// is split into fixed chunks.
+    pub fn directed_hausdorff(&self, positions: &[[f32; 3]], triangles: &[[u32; 3]], spacing: f64, min_subdiv: u32, max_samples: u64, vertex_hints: Option<&[u32]>) -> Result<Directed, MeshError> {
         check_mesh(positions, triangles)?;
         if self.tris.is_empty() {
             return Err(MeshError("the target mesh has no triangles".into()));
         }
-        let mut used = vec![false; positions.len()];
-        for t in triangles {
-            for &i in t {
-                used[i as usize] = true;
+        if let Some(h) = vertex_hints {
+            if h.len() != positions.len() {
+                return Err(MeshError(format!("{} vertex hints for {} vertices", h.len(), positions.len())));
             }
         }
-        let vertices: Vec<u32> = (0..positions.len() as u32).filter(|&i| used[i as usize]).collect();
+        // A hint (a triangle of this mesh near the vertex) as a slot, if valid.
+        let vertex_hint = |i: usize| vertex_hints.and_then(|h| self.slot.get(h[i] as usize).copied());
         let min_k = min_subdiv.max(1) as u64;
+        let corners = |t: &[u32; 3]| (v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]));
         let longest: Vec<f64> = triangles
             .par_iter()
             .map(|t| {
-                let (a, b, c) = (v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]));
+                let (a, b, c) = corners(t);
                 d2(a, b).max(d2(b, c)).max(d2(c, a)).sqrt()
             })
             .collect();
@@ -450,7 +464,7 @@ impl Bvh {
             let k = if s > 0.0 && s.is_finite() { (l / s).ceil() } else { 1.0 };
             (k.clamp(1.0, 1024.0) as u64).max(min_k)
         };
-        let count = |s: f64| -> u64 { vertices.len() as u64 + longest.par_iter().map(|&l| { let k = subdiv(s, l); (k + 1) * (k + 2) / 2 - 3 }).sum::<u64>() };
+        let count = |s: f64| -> u64 { longest.par_iter().map(|&l| { let k = subdiv(s, l); (k + 1) * (k + 2) / 2 }).sum::<u64>() };
         let mut s = if spacing > 0.0 && spacing.is_finite() { spacing } else { f64::INFINITY };
         let mut total = count(s);
         for _ in 0..8 {
@@ -460,247 +474,367 @@ impl Bvh {
             s *= (total as f64 / max_samples.max(1) as f64).sqrt() * 1.02;
             total = count(s);
         }
-        let best = AtomicU64::new(0f64.to_bits()); // squared distance; non-negative f64 bits order as u64
-        // One sample: settle it against the running maximum, raise the maximum if it is above.
-        let sample = |p: V3, hint: &mut Option<u32>, local: &mut f64, stack: &mut Vec<u32>| {
-            let bound = f64::from_bits(best.load(Ordering::Relaxed)).max(*local);
-            if let Some((slot, dd, exact)) = self.settle(p, *hint, bound, stack) {
-                *hint = Some(slot);
-                if exact {
-                    *local = dd;
-                    best.fetch_max(dd.to_bits(), Ordering::Relaxed);
-                }
-            }
+        let point = |t: &[u32; 3], u: f64, v: f64| -> V3 {
+            let (a, b, c) = corners(t);
+            [0, 1, 2].map(|k| a[k] + u * (b[k] - a[k]) + v * (c[k] - a[k]))
         };
-        vertices.par_chunks(CHUNK).for_each(|chunk| {
-            let (mut stack, mut hint, mut local) = (Vec::with_capacity(64), None, 0.0);
-            for &i in chunk {
-                sample(v3(positions[i as usize]), &mut hint, &mut local, &mut stack);
-            }
-        });
-        triangles.par_chunks(CHUNK / 4).enumerate().for_each(|(c, chunk)| {
-            let (mut stack, mut hint, mut local) = (Vec::with_capacity(64), None, 0.0);
-            for (j, t) in chunk.iter().enumerate() {
-                let k = subdiv(s, longest[c * (CHUNK / 4) + j]);
-                if k == 1 {
-                    continue; // corners only: the vertex pass has them
-                }
-                let (a, b, cc) = (v3(positions[t[0] as usize]), v3(positions[t[1] as usize]), v3(positions[t[2] as usize]));
-                let (ab, ac) = (sub(b, a), sub(cc, a));
-                let inv = 1.0 / k as f64;
-                for i in 0..=k {
-                    // Serpentine order keeps consecutive samples adjacent (good hints).
-                    for step in 0..=k - i {
-                        let jj = if i % 2 == 0 { step } else { k - i - step };
-                        if (i == 0 && (jj == 0 || jj == k)) || i == k {
-                            continue; // a corner
-                        }
-                        let (u, v) = (i as f64 * inv, jj as f64 * inv);
-                        let p = [a[0] + u * ab[0] + v * ac[0], a[1] + u * ab[1] + v * ac[1], a[2] + u * ab[2] + v * ac[2]];
-                        sample(p, &mut hint, &mut local, &mut stack);
+        // Samples shared by neighbouring triangles (corners, points on edges) are taken once, by
+        // the first face (lowest index) around that vertex or edge.
+        let vf = VertexFaces::new(triangles);
+        let owns_vertex = |f: usize, a: u32| vf.faces[vf.start[a as usize] as usize] as usize == f;
+        let owns_edge = |f: usize, a: u32, b: u32| a == b || !vf.across(triangles, f as u32, a, b).any(|g| (g as usize) < f);
+        // Visit the grid of triangle ti: f(u, v, k) for each sample it owns, in serpentine order
+        // (each sample next to the previous one: good hints).
+        let grid = |ti: usize, f: &mut dyn FnMut(f64, f64, u64)| {
+            let k = subdiv(s, longest[ti]);
+            let t = triangles[ti];
+            let own = [owns_vertex(ti, t[0]), owns_vertex(ti, t[1]), owns_vertex(ti, t[2])];
+            let (ab, ac, bc) = (owns_edge(ti, t[0], t[1]), owns_edge(ti, t[0], t[2]), owns_edge(ti, t[1], t[2]));
+            let inv = 1.0 / k as f64;
+            for i in 0..=k {
+                for step in 0..=k - i {
+                    let j = if i % 2 == 0 { step } else { k - i - step };
+                    // (i, j) = (u, v) in grid steps: u along a -> b, v along a -> c.
+                    let keep = match (i, j) {
+                        (0, 0) => own[0],
+                        (i, 0) if i == k => own[1],
+                        (0, j) if j == k => own[2],
+                        (_, 0) => ab,
+                        (0, _) => ac,
+                        (i, j) if i + j == k => bc,
+                        _ => true,
+                    };
+                    if keep {
+                        f(i as f64 * inv, j as f64 * inv, k);
                     }
                 }
             }
+        };
+
+        // Pass 1: a lower bound from every 8th block of triangles (exact max over their samples;
+        // blocks of neighbouring triangles keep the hints good).
+        let best = AtomicU64::new(0f64.to_bits()); // squared; non-negative f64 bits order as u64
+        let block = CHUNK / 4;
+        (0..triangles.len().div_ceil(block)).into_par_iter().step_by(8).for_each(|b| {
+            let (mut stack, mut hint, mut local) = (Vec::with_capacity(64), None, 0.0f64);
+            let first = b * block;
+            for (j, t) in triangles[first..(first + block).min(triangles.len())].iter().enumerate() {
+                grid(first + j, &mut |u, v, _| {
+                    let bound = f64::from_bits(best.load(Ordering::Relaxed)).max(local);
+                    if let Some((slot, dd, exact)) = self.settle(point(t, u, v), hint, bound, &mut stack) {
+                        hint = Some(slot);
+                        if exact {
+                            local = dd;
+                            best.fetch_max(dd.to_bits(), Ordering::Relaxed);
+                        }
+                    }
+                });
+            }
         });
-        Ok(Directed { max: f64::from_bits(best.load(Ordering::Relaxed)).sqrt(), samples: total, spacing: s })
+        let threshold = f64::from_bits(best.load(Ordering::Relaxed)) * (0.7f64 * 0.7); // squared
+
+        // Pass 2: every sample; those above the threshold get exact distances and are candidates.
+        // Corners first, remembering which triangle settled each: a face whose three corners are
+        // all within the threshold of one of those triangles is settled everywhere (the distance
+        // to one triangle is convex, so it is largest at a corner), and its other samples skipped.
+        type Candidate = (f64, u32, f64, f64, u64, u32); // squared distance, triangle, u, v, k, hint slot
+        let keep_best = |top: &mut Vec<Candidate>| {
+            sort_candidates(top);
+            top.truncate(HILL_CLIMBS);
+        };
+        let mut settled_by = vec![NO_FACE; positions.len()];
+        let vertex_lists: Vec<Vec<Candidate>> = settled_by
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, out)| {
+                let (mut stack, mut hint) = (Vec::with_capacity(64), None);
+                let mut top: Vec<Candidate> = Vec::new();
+                for (j, o) in out.iter_mut().enumerate() {
+                    let i = c * CHUNK + j;
+                    let (a, b) = (vf.start[i.min(vf.start.len() - 1)], vf.start[(i + 1).min(vf.start.len() - 1)]);
+                    if a == b {
+                        continue; // not used by any triangle
+                    }
+                    let f = vf.faces[a as usize];
+                    if let Some(h) = vertex_hint(i) {
+                        hint = Some(h);
+                    }
+                    if let Some((slot, dd, exact)) = self.settle(v3(positions[i]), hint, threshold, &mut stack) {
+                        hint = Some(slot);
+                        if exact {
+                            let k = subdiv(s, longest[f as usize]);
+                            let corner = triangles[f as usize].iter().position(|&x| x as usize == i).unwrap();
+                            let (u, v) = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)][corner];
+                            top.push((dd, f, u, v, k, slot));
+                            if top.len() > 4 * HILL_CLIMBS {
+                                keep_best(&mut top);
+                            }
+                        } else {
+                            *o = slot;
+                        }
+                    }
+                }
+                keep_best(&mut top);
+                top
+            })
+            .collect();
+        let lists: Vec<Vec<Candidate>> = triangles
+            .par_chunks(CHUNK / 4)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let (mut stack, mut hint) = (Vec::with_capacity(64), None);
+                let mut top: Vec<Candidate> = Vec::new();
+                for (j, t) in chunk.iter().enumerate() {
+                    let ti = c * (CHUNK / 4) + j;
+                    let by = t.map(|i| settled_by[i as usize]);
+                    let (a, b, cc) = corners(t);
+                    let covers = |slot: u32| {
+                        let tr = &self.tris[slot as usize];
+                        [a, b, cc].iter().all(|&p| closest_on_triangle(p, tr[0], tr[1], tr[2]).0 <= threshold)
+                    };
+                    if by.iter().enumerate().any(|(n, &slot)| slot != NO_FACE && !by[..n].contains(&slot) && covers(slot)) {
+                        continue;
+                    }
+                    if by[0] != NO_FACE {
+                        hint = Some(by[0]); // the grid starts at corner 0
+                    }
+                    grid(ti, &mut |u, v, k| {
+                        if (u == 0.0 && v == 0.0) || u == 1.0 || v == 1.0 {
+                            return; // a corner: done above
+                        }
+                        if let Some((slot, dd, exact)) = self.settle(point(t, u, v), hint, threshold, &mut stack) {
+                            hint = Some(slot);
+                            if exact {
+                                top.push((dd, ti as u32, u, v, k, slot));
+                            }
+                        }
+                    });
+                    if top.len() > 4 * HILL_CLIMBS {
+                        keep_best(&mut top);
+                    }
+                }
+                keep_best(&mut top);
+                top
+            })
+            .chain(vertex_lists)
+            .collect();
+        let mut top: Vec<Candidate> = lists.into_iter().flatten().collect();
+        sort_candidates(&mut top);
+        let sampled = top.first().map_or(f64::from_bits(best.load(Ordering::Relaxed)), |c| c.0);
+        top.truncate(HILL_CLIMBS);
+
+        // Pass 3: refine the best candidates by a local search within their triangle; from a
+        // corner, within every triangle around it.
+        let corner_uv = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)];
+        let starts: Vec<Candidate> = top
+            .iter()
+            .flat_map(|&(dd, ti, u, v, k, slot)| {
+                let at = corner_uv.iter().position(|&c| c == (u, v));
+                let around: Vec<Candidate> = match at {
+                    None => vec![(dd, ti, u, v, k, slot)],
+                    Some(c) => {
+                        let x = triangles[ti as usize][c] as usize;
+                        vf.faces[vf.start[x] as usize..vf.start[x + 1] as usize]
+                            .iter()
+                            .filter_map(|&g| {
+                                let cg = triangles[g as usize].iter().position(|&y| y as usize == x)?;
+                                let (gu, gv) = corner_uv[cg];
+                                Some((dd, g, gu, gv, subdiv(s, longest[g as usize]), slot))
+                            })
+                            .collect()
+                    }
+                };
+                around
+            })
+            .collect();
+        let refined = starts
+            .par_iter()
+            .map(|&(dd, ti, u, v, k, slot)| {
+                let mut stack = Vec::with_capacity(64);
+                let t = &triangles[ti as usize];
+                let (mut u, mut v, mut dd, mut hint) = (u, v, dd, slot);
+                let mut h = 0.5 / k as f64;
+                for _ in 0..48 {
+                    let mut moved = false;
+                    for (du, dv) in [(h, 0.0), (-h, 0.0), (0.0, h), (0.0, -h), (h, -h), (-h, h), (h, h), (-h, -h)] {
+                        let (nu, nv) = (u + du, v + dv);
+                        if nu < 0.0 || nv < 0.0 || nu + nv > 1.0 {
+                            continue;
+                        }
+                        let (slot, nd) = self.exact(point(t, nu, nv), Some(hint), &mut stack);
+                        if nd > dd {
+                            (u, v, dd, hint, moved) = (nu, nv, nd, slot, true);
+                        }
+                    }
+                    if !moved {
+                        h *= 0.5;
+                        if h < 1.0 / (256.0 * k as f64) {
+                            break;
+                        }
+                    }
+                }
+                dd
+            })
+            .reduce(|| 0.0, f64::max);
+        Ok(Directed { max: sampled.max(refined).sqrt(), sampled: sampled.sqrt(), samples: total, spacing: s })
     }
+}
+
+/// Candidates refined by local search in [`Bvh::directed_hausdorff`].
+pub const HILL_CLIMBS: usize = 32;
+
+/// Best first; ties by triangle and position, so the order never depends on the input's order
+/// of equal values.
+fn sort_candidates(c: &mut [(f64, u32, f64, f64, u64, u32)]) {
+    c.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.total_cmp(&b.2)).then(a.3.total_cmp(&b.3)));
 }
 
 /// Result of [`Bvh::directed_hausdorff`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Directed {
-    /// The largest distance of a sample to the target mesh.
+    /// The largest distance found: the grid's, or higher after the local search.
     pub max: f64,
+    /// The largest distance of a grid sample.
+    pub sampled: f64,
     /// Number of samples taken.
     pub samples: u64,
     /// The sample spacing used (wider than asked when the budget was exceeded).
     pub spacing: f64,
 }
 
-/// Ranges at least this large are split and their halves built in parallel.
-const PARALLEL_BUILD: usize = 1 << 14;
-
-/// Binned-SAH BVH over `order` (triangle indices, reordered in place into leaf order; leaf
-/// `start`s are offset by `offset`, the range's position in the whole list). Node 0 is the root;
-/// the children of a node are adjacent. Large ranges are split once here and both halves built in
-/// parallel, then spliced: [root, left root, right root, rest of left, rest of right].
-fn build_tree(prims: &[BuildTri], order: &mut [u32], offset: usize) -> Vec<Node> {
-    if order.len() < PARALLEL_BUILD {
-        return build_serial(prims, order, offset);
-    }
-    let mut root = vec![Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 }];
-    let mid = split_range(prims, order, &mut root[0], 0);
-    let Some(mid) = mid else { return build_serial(prims, order, offset) };
-    let (lo, hi) = order.split_at_mut(mid);
-    let (left, right) = rayon::join(|| build_tree(prims, lo, offset), || build_tree(prims, hi, offset + mid));
-    let (nl, nr) = (left.len(), right.len());
-    // Index maps: left i -> 1 (root) or i + 2; right i -> 2 (root) or nl + 1 + i.
-    let map_l = |i: u32| if i == 0 { 1 } else { i + 2 };
-    let map_r = |i: u32| if i == 0 { 2 } else { nl as u32 + 1 + i };
-    let fix = |n: &Node, map: &dyn Fn(u32) -> u32| if n.count > 0 { *n } else { Node { start: map(n.start), ..*n } };
-    let mut nodes = Vec::with_capacity(1 + nl + nr);
-    nodes.push(Node { start: 1, count: 0, ..root[0] });
-    nodes.push(fix(&left[0], &map_l));
-    nodes.push(fix(&right[0], &map_r));
-    nodes.extend(left[1..].iter().map(|n| fix(n, &map_l)));
-    nodes.extend(right[1..].iter().map(|n| fix(n, &map_r)));
-    nodes
+/// Spread the low 21 bits of x to every third bit (for 3-D Morton codes).
+fn spread3(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | x << 32) & 0x1f_0000_0000_ffff;
+    x = (x | x << 16) & 0x1f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
 }
 
-fn build_serial(prims: &[BuildTri], order: &mut [u32], offset: usize) -> Vec<Node> {
-    let mut nodes = Vec::with_capacity(2 * order.len() / LEAF_SIZE + 1);
-    nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
-    // Explicit stack: (node index, range start, range end) in `order`.
-    let mut work: Vec<(usize, usize, usize)> = vec![(0, 0, order.len())];
+/// A linear BVH (Lauterbach et al. 2009; Karras 2012), built top-down: triangles sorted by the
+/// 63-bit Morton code of their box centres (a parallel sort), the sorted list split recursively
+/// where the highest differing code bit changes (at the middle when all codes are equal), node
+/// bounds filled in bottom-up. Node 0 is the root and the children of a node are adjacent (left,
+/// left + 1). Its boxes overlap a little more than a SAH tree's, but it builds about ten times
+/// faster, and for closest-point queries on surface meshes (small, evenly spread triangles) it
+/// answers about as fast. Returns the nodes and the triangle order (leaf slots -> triangles).
+fn build_lbvh(prims: &[BuildTri]) -> (Vec<Node>, Vec<u32>) {
+    let (clo, chi) = prims
+        .par_iter()
+        .map(|p| (p.c, p.c))
+        .reduce(
+            || ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+            |(a, b), (c, d)| ([0, 1, 2].map(|k| a[k].min(c[k])), [0, 1, 2].map(|k| b[k].max(d[k]))),
+        );
+    let scale = [0, 1, 2].map(|k| {
+        let e = (chi[k] - clo[k]) as f64;
+        if e > 0.0 { ((1u64 << 21) - 1) as f64 / e } else { 0.0 }
+    });
+    let mut keyed: Vec<(u64, u32)> = prims
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let q = [0, 1, 2].map(|k| ((p.c[k] - clo[k]) as f64 * scale[k]) as u64);
+            (spread3(q[0]) << 2 | spread3(q[1]) << 1 | spread3(q[2]), i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    let code: Vec<u64> = keyed.iter().map(|k| k.0).collect();
+    let order: Vec<u32> = keyed.into_iter().map(|k| k.1).collect();
+
+    let empty = Node { lo: [f32::INFINITY; 3], hi: [f32::NEG_INFINITY; 3], start: 0, count: 0 };
+    let mut nodes = Vec::with_capacity(2 * prims.len() / LEAF_SIZE + 1);
+    nodes.push(empty);
+    let mut work = vec![(0usize, 0usize, prims.len())];
     while let Some((ni, s, e)) = work.pop() {
-        match split_range(prims, &mut order[s..e], &mut nodes[ni], offset + s) {
-            None => {}
-            Some(mid) => {
-                let left = nodes.len();
-                nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
-                nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
-                nodes[ni].start = left as u32;
-                nodes[ni].count = 0;
-                work.push((left + 1, s + mid, e));
-                work.push((left, s, s + mid));
-            }
+        if e - s <= LEAF_SIZE {
+            nodes[ni].start = s as u32;
+            nodes[ni].count = (e - s) as u32;
+            continue;
         }
+        let (a, b) = (code[s], code[e - 1]);
+        let mid = if a == b {
+            (s + e) / 2
+        } else {
+            // First index in the range with the highest differing bit set (codes are sorted).
+            let bit = 63 - (a ^ b).leading_zeros();
+            s + code[s..e].partition_point(|&c| c >> bit & 1 == 0)
+        };
+        let left = nodes.len();
+        nodes.push(empty);
+        nodes.push(empty);
+        nodes[ni].start = left as u32;
+        work.push((left + 1, mid, e));
+        work.push((left, s, mid));
     }
-    nodes
-}
-
-/// Set `node`'s bounds over `range`; make it a leaf (start = `first`) when small, else partition
-/// `range` by the best binned-SAH split and return the split point.
-fn split_range(prims: &[BuildTri], range: &mut [u32], node: &mut Node, first: usize) -> Option<usize> {
-    {
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        let mut clo = [f32::INFINITY; 3];
-        let mut chi = [f32::NEG_INFINITY; 3];
-        for &i in range.iter() {
-            let p = &prims[i as usize];
+    // Bounds bottom-up: children come after their parent, so a reverse pass sees them first.
+    for ni in (0..nodes.len()).rev() {
+        let n = nodes[ni];
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        let mut grow = |l: [f32; 3], h: [f32; 3]| {
             for k in 0..3 {
-                lo[k] = lo[k].min(p.lo[k]);
-                hi[k] = hi[k].max(p.hi[k]);
-                clo[k] = clo[k].min(p.c[k]);
-                chi[k] = chi[k].max(p.c[k]);
+                lo[k] = lo[k].min(l[k]);
+                hi[k] = hi[k].max(h[k]);
             }
-        }
-        node.lo = lo;
-        node.hi = hi;
-        let n = range.len();
-        if n <= LEAF_SIZE {
-            node.start = first as u32;
-            node.count = n as u32;
-            return None;
-        }
-        let ext = [chi[0] - clo[0], chi[1] - clo[1], chi[2] - clo[2]];
-        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
-        let mid = if ext[axis] > 0.0 {
-            // Bin centroids along the axis and take the split with the least SAH cost.
-            let scale = BINS as f32 / ext[axis];
-            let bin_of = |i: u32| -> usize { (((prims[i as usize].c[axis] - clo[axis]) * scale) as usize).min(BINS - 1) };
-            let mut cnt = [0usize; BINS];
-            let mut blo = [[f32::INFINITY; 3]; BINS];
-            let mut bhi = [[f32::NEG_INFINITY; 3]; BINS];
-            for &i in range.iter() {
-                let b = bin_of(i);
-                cnt[b] += 1;
-                let p = &prims[i as usize];
-                for k in 0..3 {
-                    blo[b][k] = blo[b][k].min(p.lo[k]);
-                    bhi[b][k] = bhi[b][k].max(p.hi[k]);
-                }
-            }
-            let area = |lo: [f32; 3], hi: [f32; 3]| -> f32 {
-                if lo[0] > hi[0] {
-                    return 0.0;
-                }
-                let d = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
-                d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
-            };
-            // Sweep from the right to get suffix areas.
-            let mut right_area = [0f32; BINS];
-            let mut right_cnt = [0usize; BINS];
-            let (mut rlo, mut rhi, mut rc) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3], 0usize);
-            for b in (1..BINS).rev() {
-                for k in 0..3 {
-                    rlo[k] = rlo[k].min(blo[b][k]);
-                    rhi[k] = rhi[k].max(bhi[b][k]);
-                }
-                rc += cnt[b];
-                right_area[b] = area(rlo, rhi);
-                right_cnt[b] = rc;
-            }
-            let (mut llo, mut lhi, mut lc) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3], 0usize);
-            let mut best = (f32::INFINITY, 0usize);
-            for b in 0..BINS - 1 {
-                for k in 0..3 {
-                    llo[k] = llo[k].min(blo[b][k]);
-                    lhi[k] = lhi[k].max(bhi[b][k]);
-                }
-                lc += cnt[b];
-                if lc == 0 || right_cnt[b + 1] == 0 {
-                    continue;
-                }
-                let cost = area(llo, lhi) * lc as f32 + right_area[b + 1] * right_cnt[b + 1] as f32;
-                if cost < best.0 {
-                    best = (cost, b);
-                }
-            }
-            if best.0.is_finite() {
-                let split = best.1;
-                let mut l = 0;
-                for r in 0..range.len() {
-                    if bin_of(range[r]) <= split {
-                        range.swap(l, r);
-                        l += 1;
-                    }
-                }
-                l
-            } else {
-                n / 2
+        };
+        if n.count > 0 {
+            for &i in &order[n.start as usize..(n.start + n.count) as usize] {
+                grow(prims[i as usize].lo, prims[i as usize].hi);
             }
         } else {
-            // All centroids coincide: split by position in the list.
-            n / 2
-        };
-        Some(if mid == 0 || mid == n { n / 2 } else { mid })
+            let (l, r) = (nodes[n.start as usize], nodes[n.start as usize + 1]);
+            grow(l.lo, l.hi);
+            grow(r.lo, r.hi);
+        }
+        nodes[ni].lo = lo;
+        nodes[ni].hi = hi;
     }
+    (nodes, order)
 }
 
-/// Every proper edge of every face as (sorted vertex pair packed in a u64, face * 3 + corner),
-/// sorted, so the faces around one edge are adjacent in the list.
-fn sorted_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
-    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(3 * triangles.len());
-    for (f, t) in triangles.iter().enumerate() {
-        for j in 0..3 {
-            let (a, b) = (t[j], t[(j + 1) % 3]);
-            if a != b {
-                let (a, b) = (a.min(b) as u64, a.max(b) as u64);
-                edges.push(((a << 32) | b, (3 * f + j) as u32));
+/// The faces around each vertex (compressed rows: the faces of vertex v are
+/// `faces[start[v]..start[v + 1]]`, in face order), by a counting sort.
+struct VertexFaces {
+    start: Vec<u32>,
+    faces: Vec<u32>,
+}
+
+impl VertexFaces {
+    fn new(triangles: &[[u32; 3]]) -> VertexFaces {
+        let n = triangles.iter().flatten().map(|&i| i as usize + 1).max().unwrap_or(0);
+        let mut start = vec![0u32; n + 1];
+        for t in triangles {
+            for &i in t {
+                start[i as usize + 1] += 1;
             }
         }
+        for v in 0..n {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut faces = vec![0u32; start[n] as usize];
+        for (f, t) in triangles.iter().enumerate() {
+            for &i in t {
+                faces[fill[i as usize] as usize] = f as u32;
+                fill[i as usize] += 1;
+            }
+        }
+        VertexFaces { start, faces }
     }
-    edges.par_sort_unstable();
-    edges
-}
 
-/// Runs of equal edges in a [`sorted_edges`] list, as index ranges.
-fn edge_runs(edges: &[(u64, u32)]) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
-    let mut i = 0;
-    std::iter::from_fn(move || {
-        if i >= edges.len() {
-            return None;
-        }
-        let mut j = i + 1;
-        while j < edges.len() && edges[j].0 == edges[i].0 {
-            j += 1;
-        }
-        let r = i..j;
-        i = j;
-        Some(r)
-    })
+    /// Faces other than `f` with an edge (a, b), either orientation (a != b). A face listing a
+    /// vertex twice appears twice around it; it is reported once.
+    fn across<'a>(&'a self, triangles: &'a [[u32; 3]], f: u32, a: u32, b: u32) -> impl Iterator<Item = u32> + 'a {
+        let around = &self.faces[self.start[a as usize] as usize..self.start[a as usize + 1] as usize];
+        let t = triangles;
+        around.iter().enumerate().filter_map(move |(i, &g)| {
+            let tg = t[g as usize];
+            let dup = i > 0 && around[i - 1] == g;
+            (g != f && !dup && (0..3).any(|j| (tg[j] == a && tg[(j + 1) % 3] == b) || (tg[j] == b && tg[(j + 1) % 3] == a))).then_some(g)
+        })
+    }
 }
 
 /// A fast non-cryptographic hasher for integer keys (FxHash's mixing step).
@@ -754,27 +888,43 @@ pub fn weld_positions(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u32>) {
 /// for each (in edge order) [a, b, face, other face] with a < b, the first two faces using it.
 pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
     assert_eq!(welded.len(), split.len());
-    let edges = sorted_edges(welded);
-    let split_key = |e: u32| -> u64 {
-        let (f, j) = ((e / 3) as usize, (e % 3) as usize);
-        let (wa, wb) = (welded[f][j], welded[f][(j + 1) % 3]);
-        let (sa, sb) = (split[f][j], split[f][(j + 1) % 3]);
-        // Orient the split pair like the sorted welded pair.
-        let (sa, sb) = if wa <= wb { (sa, sb) } else { (sb, sa) };
-        ((sa as u64) << 32) | sb as u64
-    };
-    let mut out = Vec::new();
-    for run in edge_runs(&edges) {
-        if run.len() < 2 {
-            continue;
-        }
-        let k0 = split_key(edges[run.start].1);
-        if edges[run.clone()].iter().any(|e| split_key(e.1) != k0) {
-            let key = edges[run.start].0;
-            out.push([(key >> 32) as u32, key as u32, edges[run.start].1 / 3, edges[run.start + 1].1 / 3]);
-        }
-    }
-    out
+    let vf = VertexFaces::new(welded);
+    let per_face: Vec<Vec<[u32; 4]>> = welded
+        .par_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let f = f as u32;
+            let mut out = Vec::new();
+            for j in 0..3 {
+                let (a, b) = (t[j], t[(j + 1) % 3]);
+                if a == b {
+                    continue;
+                }
+                let mine = (split[f as usize][j], split[f as usize][(j + 1) % 3]);
+                let mut first_other = None;
+                let mut seam = false;
+                for g in vf.across(welded, f, a, b) {
+                    if g < f {
+                        first_other = None; // a smaller face reports this edge
+                        seam = false;
+                        break;
+                    }
+                    first_other.get_or_insert(g);
+                    // g's split vertices at a and b.
+                    let (wg, sg) = (welded[g as usize], split[g as usize]);
+                    let at = |v: u32| sg[(0..3).find(|&k| wg[k] == v).unwrap()];
+                    if (at(a), at(b)) != mine {
+                        seam = true;
+                    }
+                }
+                if let (true, Some(g)) = (seam, first_other) {
+                    out.push([a.min(b), a.max(b), f, g]);
+                }
+            }
+            out
+        })
+        .collect();
+    per_face.into_iter().flatten().collect()
 }
 
 /// No neighbour (an open border, a non-manifold edge, or a key change).
@@ -784,19 +934,24 @@ pub const NO_FACE: u32 = u32::MAX;
 /// using the same two vertex indices with the same key, or [`NO_FACE`].
 pub fn face_adjacency(triangles: &[[u32; 3]], keys: &[u32]) -> Vec<[u32; 3]> {
     assert_eq!(triangles.len(), keys.len(), "one key per triangle");
-    let edges = sorted_edges(triangles);
-    let mut adj = vec![[NO_FACE; 3]; triangles.len()];
-    for run in edge_runs(&edges) {
-        if run.len() == 2 {
-            let (a, b) = (edges[run.start].1, edges[run.start + 1].1);
-            let (fa, fb) = (a / 3, b / 3);
-            if fa != fb && keys[fa as usize] == keys[fb as usize] {
-                adj[fa as usize][(a % 3) as usize] = fb;
-                adj[fb as usize][(b % 3) as usize] = fa;
-            }
-        }
-    }
-    adj
+    let vf = VertexFaces::new(triangles);
+    triangles
+        .par_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            [0, 1, 2].map(|j| {
+                let (a, b) = (t[j], t[(j + 1) % 3]);
+                if a == b {
+                    return NO_FACE;
+                }
+                let mut others = vf.across(triangles, f as u32, a, b);
+                match (others.next(), others.next()) {
+                    (Some(g), None) if keys[g as usize] == keys[f] => g,
+                    _ => NO_FACE,
+                }
+            })
+        })
+        .collect()
 }
 
 /// Closest point to `p` found by walking over faces from `start`: move to the neighbour (per
@@ -1045,7 +1200,7 @@ mod tests {
     fn hausdorff_of_a_mesh_to_itself_is_zero() {
         let (pos, tris) = grid_cube(6, [0.0; 3]);
         let bvh = Bvh::build(&pos, &tris).unwrap();
-        let d = bvh.directed_hausdorff(&pos, &tris, 0.02, 1, 1 << 24).unwrap();
+        let d = bvh.directed_hausdorff(&pos, &tris, 0.02, 1, 1 << 24, None).unwrap();
         assert!(d.max < 1e-6, "{d:?}");
         assert!(d.samples > 1000);
     }
@@ -1056,14 +1211,14 @@ mod tests {
         let (pa, ta) = grid_cube(5, [0.0; 3]);
         let (pb, tb) = grid_cube(5, [t, 0.0, 0.0]);
         let (ba, bb) = (Bvh::build(&pa, &ta).unwrap(), Bvh::build(&pb, &tb).unwrap());
-        for d in [bb.directed_hausdorff(&pa, &ta, 0.05, 2, 1 << 24).unwrap(), ba.directed_hausdorff(&pb, &tb, 0.05, 2, 1 << 24).unwrap()] {
+        for d in [bb.directed_hausdorff(&pa, &ta, 0.05, 2, 1 << 24, None).unwrap(), ba.directed_hausdorff(&pb, &tb, 0.05, 2, 1 << 24, None).unwrap()] {
             assert!((d.max - t as f64).abs() < 1e-6, "{d:?}");
         }
         // The same through the coarse cube (12 triangles) with a sample budget that forces a
         // wider spacing: corners are always sampled, and they carry the maximum here.
         let (pc, tc) = cube([t, 0.0, 0.0]);
         let bc = Bvh::build(&pc, &tc).unwrap();
-        let d = bc.directed_hausdorff(&pa, &ta, 0.01, 1, 5000).unwrap();
+        let d = bc.directed_hausdorff(&pa, &ta, 0.01, 1, 5000, None).unwrap();
         assert!(d.samples <= 5000 && d.spacing > 0.01, "{d:?}");
         assert!((d.max - t as f64).abs() < 1e-6, "{d:?}");
     }
@@ -1093,10 +1248,15 @@ mod tests {
         }
         let holed = Bvh::build(&pos, &tris).unwrap();
         let big = vec![[0.05, 0.05, 0.0], [0.95, 0.05, 0.0], [0.05, 0.95, 0.0]];
-        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 0.004, 1, 1 << 20).unwrap();
+        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 0.004, 1, 1 << 20, None).unwrap();
         assert!(d.max <= 0.1 + 1e-7 && d.max > 0.1 - 0.004, "{d:?}");
+        // A coarse grid (k = 3: samples at 0.35, 0.65 along each edge) lands 0.05 from the rim;
+        // the local search walks from there to the centre.
+        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 0.45, 1, 1 << 20, None).unwrap();
+        assert!(d.sampled < 0.06 && d.sampled > 0.04, "{d:?}");
+        assert!(d.max <= 0.1 + 1e-7 && d.max > 0.1 - 1e-3, "{d:?}");
         // Corners only (spacing larger than the triangle) miss it entirely.
-        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 10.0, 1, 1 << 20).unwrap();
+        let d = holed.directed_hausdorff(&big, &[[0, 1, 2]], 10.0, 1, 1 << 20, None).unwrap();
         assert!(d.max < 1e-7 && d.samples == 3, "{d:?}");
     }
 
@@ -1136,11 +1296,10 @@ mod tests {
     }
 
     #[test]
-    fn parallel_build_agrees_with_brute_force() {
-        // Enough triangles for the tree to be built in parallel pieces and spliced.
+    fn large_build_agrees_with_brute_force() {
         let mut rng = Rng(9);
         let mut pos = Vec::new();
-        for _ in 0..3 * PARALLEL_BUILD {
+        for _ in 0..50_000 {
             let a = rng.v(10.0);
             for _ in 0..3 {
                 let d = rng.v(0.1);
