@@ -25,7 +25,7 @@ setup:
 	@bash tools/setup.sh
 
 build: setup
-	$(CARGO) build $(CARGO_FLAGS) -p engine --bins
+	$(CARGO) build $(CARGO_FLAGS) --workspace --exclude asset_pipeline --lib --bins
 
 cooker: setup $(VENV)/.cooker-built
 
