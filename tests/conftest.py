@@ -50,3 +50,21 @@ def cook_ok(source: Path, out: Path) -> None:
     result = subprocess.run([str(COOK), str(source), "-o", str(out)], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, f"cook {source} failed ({result.returncode}):\n{result.stderr}"
     assert out.exists()
+
+
+@pytest.fixture(scope="session")
+def demo_level_uv2():
+    """The demo level's static meshes with lightmap UVs, computed once per test session:
+    (static meshes, their LODs with uv1, LightmapLayout, stats, Uv2Settings)."""
+    from asset_pipeline import uv2
+    from asset_pipeline.csg import build_level
+    from asset_pipeline.level import load_level
+
+    level_path = REPO / "content" / "levels" / "temple.toml"
+    level = load_level(level_path)
+    scene = build_level(level, level_path.parent)
+    static = [m for m in scene.meshes if m.static]
+    settings = uv2.Uv2Settings(texels_per_metre=float(level.texels_per_metre))
+    lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings,
+                                           names=[m.name for m in static])
+    return static, lods, layout, stats, settings

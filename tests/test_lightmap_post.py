@@ -13,7 +13,6 @@ import math
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,8 +20,6 @@ import pytest
 from asset_pipeline import _core, ir, uv2
 from asset_pipeline import lightmap_post as lp
 
-REPO = Path(__file__).resolve().parent.parent
-LEVEL = REPO / "content" / "levels" / "temple.toml"
 NONE = lp.NONE
 
 
@@ -104,19 +101,8 @@ def test_dilation_bad_input_is_an_error():
 
 
 @pytest.fixture(scope="module")
-def demo():
-    pytest.importorskip("asset_pipeline.csg")
-    pytest.importorskip("asset_pipeline.level")
-    if not LEVEL.exists():
-        pytest.skip(f"{LEVEL} not present")
-    from asset_pipeline.csg import build_level
-    from asset_pipeline.level import load_level
-
-    level = load_level(LEVEL)
-    scene = build_level(level, LEVEL.parent)
-    static = [m for m in scene.meshes if m.static]
-    settings = uv2.Uv2Settings(texels_per_metre=float(level.texels_per_metre))
-    lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings)
+def demo(demo_level_uv2):
+    _, lods, layout, _, _ = demo_level_uv2
     return lods, layout
 
 

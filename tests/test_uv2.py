@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,6 @@ import pytest
 from asset_pipeline import _core, ir, uv2
 from asset_pipeline._core import CookError
 
-REPO = Path(__file__).resolve().parent.parent
-LEVEL = REPO / "content" / "levels" / "temple.toml"
 
 
 # ---- generated meshes ---------------------------------------------------------------------------
@@ -385,19 +382,8 @@ def test_png_encoding_is_atomic_and_reports_the_file(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def demo():
-    pytest.importorskip("asset_pipeline.csg")
-    pytest.importorskip("asset_pipeline.level")
-    if not LEVEL.exists():
-        pytest.skip(f"{LEVEL} not present")
-    from asset_pipeline.csg import build_level
-    from asset_pipeline.level import load_level
-
-    scene = build_level(load_level(LEVEL), LEVEL.parent)
-    static = [m for m in scene.meshes if m.static]
-    settings = uv2.Uv2Settings(texels_per_metre=float(load_level(LEVEL).texels_per_metre))
-    lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings, names=[m.name for m in static])
-    return static, lods, layout, stats, settings
+def demo(demo_level_uv2):
+    return demo_level_uv2
 
 
 def test_demo_level_meets_the_acceptance_numbers(demo):
