@@ -27,6 +27,21 @@ uv_scale = 0.5
 """
 
 
+# One box brush "b" made into object "o": the smallest valid geometry, for tests about other parts.
+ONE_BOX = """
+[[brushes]]
+name = "b"
+kind = "box"
+size = [1, 1, 1]
+material = "stone"
+
+[[objects]]
+name = "o"
+op = "union"
+operands = ["b"]
+"""
+
+
 def write(tmp_path: Path, body: str, name: str = "level.toml") -> Path:
     p = tmp_path / name
     p.write_text(textwrap.dedent(body))
@@ -312,17 +327,7 @@ def test_props_are_merged_under_a_placed_node(tmp_path):
                     textures=[ir.Texture("t", 1, 1, "Rgba8Srgb", [np.zeros((1, 1, 4), np.uint8)])],
                     nodes=[ir.Node("root"), ir.Node("child", parent=0, mesh=0)],
                     lights=[ir.Light("lamp", "point", position=(0, 1, 0))])
-    spec = load_level(write(tmp_path, HEADER + textwrap.dedent("""
-        [[brushes]]
-        name = "b"
-        kind = "box"
-        size = [1, 1, 1]
-        material = "stone"
-
-        [[objects]]
-        name = "o"
-        op = "union"
-        operands = ["b"]
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent(ONE_BOX + """
 
         [[props]]
         name = "statue"
@@ -348,17 +353,7 @@ def test_props_are_merged_under_a_placed_node(tmp_path):
 
 
 def test_lights_and_spawns_in_physical_units(tmp_path):
-    scene = build(tmp_path, """
-        [[brushes]]
-        name = "b"
-        kind = "box"
-        size = [1, 1, 1]
-        material = "stone"
-
-        [[objects]]
-        name = "o"
-        op = "union"
-        operands = ["b"]
+    scene = build(tmp_path, ONE_BOX + """
 
         [[lights]]
         name = "spot"
@@ -384,20 +379,6 @@ def test_lights_and_spawns_in_physical_units(tmp_path):
 
 # ---- errors name the file, the line and the key ----------------------------------------------
 
-OK_OBJECT = """
-[[brushes]]
-name = "b"
-kind = "box"
-size = [1, 1, 1]
-material = "stone"
-
-[[objects]]
-name = "o"
-op = "union"
-operands = ["b"]
-"""
-
-
 def error_of(tmp_path: Path, body: str, build_too: bool = False) -> str:
     path = write(tmp_path, HEADER + textwrap.dedent(body))
     with pytest.raises(CookError) as e:
@@ -416,7 +397,7 @@ def line_of(tmp_path: Path, needle: str) -> int:
 
 
 def test_error_unknown_key(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT + """
+    msg = error_of(tmp_path, ONE_BOX + """
         [[brushes]]
         name = "c"
         kind = "box"
@@ -428,17 +409,17 @@ def test_error_unknown_key(tmp_path):
 
 
 def test_error_unknown_key_for_the_kind(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('size = [1, 1, 1]', 'size = [1, 1, 1]\nradius = 2'))
+    msg = error_of(tmp_path, ONE_BOX.replace('size = [1, 1, 1]', 'size = [1, 1, 1]\nradius = 2'))
     assert f":{line_of(tmp_path, 'radius')}: brushes[0].radius: unknown key 'radius' for a box brush" in msg
 
 
 def test_error_bad_operand(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "nope"]'))
+    msg = error_of(tmp_path, ONE_BOX.replace('operands = ["b"]', 'operands = ["b", "nope"]'))
     assert f":{line_of(tmp_path, 'operands')}: objects[0].operands[1]: 'nope' is not a brush or an object" in msg
 
 
 def test_error_operand_defined_later(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["later"]') + """
+    msg = error_of(tmp_path, ONE_BOX.replace('operands = ["b"]', 'operands = ["later"]') + """
         [[objects]]
         name = "later"
         op = "union"
@@ -448,12 +429,12 @@ def test_error_operand_defined_later(tmp_path):
 
 
 def test_error_unknown_op(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('op = "union"', 'op = "xor"'))
+    msg = error_of(tmp_path, ONE_BOX.replace('op = "union"', 'op = "xor"'))
     assert f":{line_of(tmp_path, 'xor')}: objects[0].op: unknown value 'xor'" in msg
 
 
 def test_error_empty_result(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "far"]').replace('"union"', '"intersection"') + """
+    msg = error_of(tmp_path, ONE_BOX.replace('operands = ["b"]', 'operands = ["b", "far"]').replace('"union"', '"intersection"') + """
         [[brushes]]
         name = "far"
         kind = "box"
@@ -465,7 +446,7 @@ def test_error_empty_result(tmp_path):
 
 
 def test_error_touching_brushes(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('operands = ["b"]', 'operands = ["b", "edge"]') + """
+    msg = error_of(tmp_path, ONE_BOX.replace('operands = ["b"]', 'operands = ["b", "edge"]') + """
         [[brushes]]
         name = "edge"
         kind = "box"
@@ -477,28 +458,28 @@ def test_error_touching_brushes(tmp_path):
 
 
 def test_error_toml_syntax(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT + '\n[[brushes]]\nname = "x\n')
+    msg = error_of(tmp_path, ONE_BOX + '\n[[brushes]]\nname = "x\n')
     line = line_of(tmp_path, 'name = "x')
     assert re.search(rf":{line}:\d+: ", msg), msg
 
 
 def test_error_negative_size(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace("size = [1, 1, 1]", "size = [1, -2, 1]"))
+    msg = error_of(tmp_path, ONE_BOX.replace("size = [1, 1, 1]", "size = [1, -2, 1]"))
     assert f":{line_of(tmp_path, 'size')}: brushes[0].size: must be > 0, got -2" in msg
 
 
 def test_error_zero_segments(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('kind = "box"\nsize = [1, 1, 1]', 'kind = "cylinder"\nradius = 1\nheight = 1\nsegments = 0'))
+    msg = error_of(tmp_path, ONE_BOX.replace('kind = "box"\nsize = [1, 1, 1]', 'kind = "cylinder"\nradius = 1\nheight = 1\nsegments = 0'))
     assert "brushes[0].segments: must be >= 3, got 0" in msg
 
 
 def test_error_unknown_material(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('material = "stone"', 'material = "granite"'))
+    msg = error_of(tmp_path, ONE_BOX.replace('material = "stone"', 'material = "granite"'))
     assert f":{line_of(tmp_path, 'granite')}: brushes[0].material: unknown material 'granite'" in msg
 
 
 def test_error_missing_prop_file(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT + """
+    msg = error_of(tmp_path, ONE_BOX + """
         [[props]]
         name = "statue"
         gltf = "props/statue.glb"
@@ -507,21 +488,21 @@ def test_error_missing_prop_file(tmp_path):
 
 
 def test_error_missing_texture_file(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n')
+    msg = error_of(tmp_path, ONE_BOX + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n')
     assert f":{line_of(tmp_path, 'wall.png')}: materials[2].texture: texture file 'wall.png' not found" in msg
 
 
 def test_error_wrong_type_and_unknown_section(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('name = "o"', 'name = "o"\nstatic = "yes"'))
+    msg = error_of(tmp_path, ONE_BOX.replace('name = "o"', 'name = "o"\nstatic = "yes"'))
     assert f":{line_of(tmp_path, 'yes')}: objects[0].static: expected true or false, got a string" in msg
-    msg = error_of(tmp_path, OK_OBJECT + "\n[[brushs]]\nname = 'x'\n")
+    msg = error_of(tmp_path, ONE_BOX + "\n[[brushs]]\nname = 'x'\n")
     assert f":{line_of(tmp_path, '[[brushs]]')}: brushs: unknown key 'brushs'" in msg
 
 
 def test_error_duplicate_name_and_spawn_param(tmp_path):
-    msg = error_of(tmp_path, OK_OBJECT.replace('name = "o"', 'name = "b"'))
+    msg = error_of(tmp_path, ONE_BOX.replace('name = "o"', 'name = "b"'))
     assert "objects[0].name: 'b' is already the name of brushes[0]" in msg
-    msg = error_of(tmp_path, OK_OBJECT + '\n[[spawns]]\nname = "p"\nkind = "boids"\nparams = { count = 3, colour = 1 }\n')
+    msg = error_of(tmp_path, ONE_BOX + '\n[[spawns]]\nname = "p"\nkind = "boids"\nparams = { count = 3, colour = 1 }\n')
     assert f":{line_of(tmp_path, 'colour')}: spawns[0].params.colour: unknown parameter 'colour' for a boids spawn" in msg
 
 
@@ -529,7 +510,7 @@ def test_png_texture(tmp_path):
     from PIL import Image
 
     Image.new("RGBA", (4, 2), (10, 20, 30, 255)).save(tmp_path / "wall.png")
-    spec = load_level(write(tmp_path, HEADER + OK_OBJECT + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n'))
+    spec = load_level(write(tmp_path, HEADER + ONE_BOX + '\n[[materials]]\nname = "tiles"\ntexture = "wall.png"\n'))
     tex = build_level(spec).textures[0]
     assert (tex.width, tex.height, tex.format) == (4, 2, "Rgba8Srgb") and tuple(tex.mips[0][0, 0]) == (10, 20, 30, 255)
 
@@ -552,7 +533,7 @@ def test_real_gltf_prop(tmp_path, gltf_samples):
     box = gltf_samples / "BoxTextured" / "BoxTextured.gltf"
     if not box.is_file():
         pytest.skip(f"{box} missing")
-    scene = build_level(load_level(write(tmp_path, HEADER + OK_OBJECT + f"""
+    scene = build_level(load_level(write(tmp_path, HEADER + ONE_BOX + f"""
 [[props]]
 name = "crate"
 gltf = "{box}"

@@ -19,6 +19,7 @@ import pytest
 
 from asset_pipeline import _core, ir, uv2
 from asset_pipeline import lightmap_post as lp
+import meshes
 
 NONE = lp.NONE
 
@@ -135,15 +136,7 @@ def test_demo_level_dilation_and_bilinear_reads_at_chart_edges(demo):
 
 
 def cylinder_side(radius=1.0, height=2.0, segments=24) -> ir.Lod:
-    pos, nrm, tris = [], [], []
-    for i in range(segments + 1):  # the wrap-around column is duplicated: a UV seam
-        a = 2 * math.pi * i / segments
-        for y in (0.0, height):
-            pos.append([radius * math.cos(a), y, radius * math.sin(a)])
-            nrm.append([math.cos(a), 0, math.sin(a)])
-    for i in range(segments):
-        a, b, c, d = 2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3
-        tris += [[a, b, d], [a, d, c]]
+    pos, nrm, tris = meshes.cylinder(radius, height, segments, caps=False)
     attrs = {"position": np.array(pos, np.float32), "normal": np.array(nrm, np.float32)}
     t = np.array(tris, np.uint32)
     return ir.Lod(attributes=attrs, triangles=t, materials=np.zeros(len(t), np.uint32))

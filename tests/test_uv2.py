@@ -9,13 +9,13 @@ triangles, with the padding rule checked by dilating each chart.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
 
 from asset_pipeline import _core, ir, uv2
 from asset_pipeline._core import CookError
+import meshes
 
 
 
@@ -59,26 +59,7 @@ def box(size, centre=(0, 0, 0)) -> ir.Lod:
 
 
 def cylinder(radius, height, segments=24) -> ir.Lod:
-    pos, nrm, tris = [], [], []
-    for i in range(segments + 1):  # seam duplicated
-        a = 2 * math.pi * i / segments
-        for y in (0.0, height):
-            pos.append([radius * math.cos(a), y, radius * math.sin(a)])
-            nrm.append([math.cos(a), 0, math.sin(a)])
-    for i in range(segments):
-        a, b, c, d = 2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3
-        tris += [[a, b, d], [a, d, c]]
-    for y, ny in ((0.0, -1.0), (height, 1.0)):
-        centre = len(pos)
-        pos.append([0, y, 0])
-        nrm.append([0, ny, 0])
-        for i in range(segments):
-            a = 2 * math.pi * i / segments
-            pos.append([radius * math.cos(a), y, radius * math.sin(a)])
-            nrm.append([0, ny, 0])
-        for i in range(segments):
-            p, q = centre + 1 + i, centre + 1 + (i + 1) % segments
-            tris.append([centre, q, p] if ny > 0 else [centre, p, q])
+    pos, nrm, tris = meshes.cylinder(radius, height, segments)
     return make_lod(pos, tris, nrm)
 
 
