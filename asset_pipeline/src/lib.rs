@@ -72,6 +72,7 @@ mod uv_raster;
 mod measure;
 mod bake;
 mod lightmap_post;
+mod lod_carry;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -84,5 +85,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     measure::register(m)?;
     bake::register(m)?;
     lightmap_post::register(m)?;
+    lod_carry::register(m)?;
     Ok(())
 }

@@ -12,21 +12,26 @@ fn value_error(what: &str, e: MeshError) -> PyErr {
     PyValueError::new_err(format!("{what}: {e}"))
 }
 
-/// An (n, 3) array as rows, borrowed when C-contiguous, copied otherwise.
-pub(crate) fn rows3<'a, T: Element + Copy>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; 3]]>> {
+/// An (n, W) array as rows, borrowed when C-contiguous, copied otherwise.
+pub(crate) fn rows<'a, T: Element + Copy, const W: usize>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; W]]>> {
     let shape = a.shape();
-    if shape[1] != 3 {
-        return Err(PyValueError::new_err(format!("{what}: expected shape (n, 3), got {shape:?}")));
+    if shape[1] != W {
+        return Err(PyValueError::new_err(format!("{what}: expected shape (n, {W}), got {shape:?}")));
     }
     Ok(match a.as_slice() {
-        // SAFETY: [T; 3] has the size of three T and T's alignment, so a contiguous slice of
-        // 3n T is exactly n rows; the borrow keeps the array alive and unaliased for writes.
-        Ok(flat) => Cow::Borrowed(unsafe { std::slice::from_raw_parts(flat.as_ptr() as *const [T; 3], flat.len() / 3) }),
-        Err(_) => Cow::Owned(a.as_array().rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()),
+        // SAFETY: [T; W] has the size of W T and T's alignment, so a contiguous slice of
+        // W n T is exactly n rows; the borrow keeps the array alive and unaliased for writes.
+        Ok(flat) => Cow::Borrowed(unsafe { std::slice::from_raw_parts(flat.as_ptr() as *const [T; W], flat.len() / W) }),
+        Err(_) => Cow::Owned(a.as_array().rows().into_iter().map(|r| std::array::from_fn(|k| r[k])).collect()),
     })
 }
 
-fn vec1<'a, T: Element + Copy>(a: &'a PyReadonlyArray1<'_, T>) -> Cow<'a, [T]> {
+/// An (n, 3) array as rows (see [`rows`]).
+pub(crate) fn rows3<'a, T: Element + Copy>(a: &'a PyReadonlyArray2<'_, T>, what: &str) -> PyResult<Cow<'a, [[T; 3]]>> {
+    rows::<T, 3>(a, what)
+}
+
+pub(crate) fn vec1<'a, T: Element + Copy>(a: &'a PyReadonlyArray1<'_, T>) -> Cow<'a, [T]> {
     match a.as_slice() {
         Ok(s) => Cow::Borrowed(s),
         Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),

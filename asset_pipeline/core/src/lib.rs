@@ -16,7 +16,9 @@ pub mod pack_build;
 mod scene;
 pub mod uv_raster;
 pub mod wire;
-pub mod lightmap_post; pub mod exr_io;
+pub mod exr_io;
+pub mod lightmap_post;
+pub mod lod_carry;
 
 pub use error::CookError;
 pub use pack;

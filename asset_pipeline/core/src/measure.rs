@@ -31,7 +31,7 @@ type V3 = [f64; 3];
 /// Triangles per leaf at most.
 pub const LEAF_SIZE: usize = 4;
 /// Queries per parallel work item; fixed so results never depend on the thread count.
-const CHUNK: usize = 256;
+pub(crate) const CHUNK: usize = 256;
 
 #[inline]
 fn v3(p: [f32; 3]) -> V3 {
@@ -839,7 +839,10 @@ impl VertexFaces {
 
 /// A fast non-cryptographic hasher for integer keys (FxHash's mixing step).
 #[derive(Default)]
-struct FxHasher(u64);
+pub(crate) struct FxHasher(u64);
+
+/// Hash maps keyed by integers, with [`FxHasher`].
+pub(crate) type FxMap<K, V> = std::collections::HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
 
 impl std::hash::Hasher for FxHasher {
     fn write(&mut self, bytes: &[u8]) {
@@ -856,6 +859,9 @@ impl std::hash::Hasher for FxHasher {
     fn write_usize(&mut self, i: usize) {
         self.write_u64(i as u64);
     }
+    fn write_i64(&mut self, i: i64) {
+        self.write_u64(i as u64);
+    }
     fn finish(&self) -> u64 {
         self.0
     }
@@ -864,7 +870,7 @@ impl std::hash::Hasher for FxHasher {
 /// Weld equal positions (bitwise, with -0.0 == 0.0): (an index per vertex, numbered in order of
 /// first use; the first vertex of each index).
 pub fn weld_positions(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u32>) {
-    let mut ids: std::collections::HashMap<[u32; 3], u32, std::hash::BuildHasherDefault<FxHasher>> = Default::default();
+    let mut ids: FxMap<[u32; 3], u32> = Default::default();
     ids.reserve(positions.len());
     let mut first = Vec::new();
     let weld = positions

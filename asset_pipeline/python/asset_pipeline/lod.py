@@ -62,7 +62,7 @@ import fast_simplification
 import numpy as np
 
 from asset_pipeline import ir
-from asset_pipeline._core import MeshBvh, face_adjacency, seam_edges, walk_closest, weld_positions
+from asset_pipeline._core import MeshBvh, carry_attributes, face_adjacency, seam_edges, weld_positions
 
 
 @dataclass(frozen=True)
@@ -287,153 +287,28 @@ def _simplify(level: _Level, target: int, agg: float, seam_angle_deg: float) -> 
 
 def _split_and_carry(ctx: _Lod0, level: _Level) -> tuple[ir.Lod, np.ndarray]:
     """The output LOD: split vertices and their attributes (see the module docstring, step 4);
-    and for each output vertex, the LOD 0 triangle it was found on.
+    and for each output vertex, the LOD 0 triangle it was found on. Sets `level.near` to where
+    each vertex's walk ended.
 
-    A vertex none of whose merged LOD 0 vertices was on a seam lies inside one region of
-    continuous attributes, so all its corners would walk to the same point: it is walked once
-    (from where its survivor's walk ended a level before: a step or two) and becomes one output
-    vertex. Only corners of vertices near seams are walked one by one and merged by where they
-    arrive. Sets `level.near` to where each vertex's walk ended."""
+    One Rust call (``carry_attributes``, without the GIL). A vertex none of whose merged LOD 0
+    vertices was on a seam lies inside one region of continuous attributes, so all its corners
+    would walk to the same point: it is walked once (from where its survivor's walk ended a level
+    before: a step or two) and becomes one output vertex. Only corners of vertices near seams are
+    walked one by one and merged by where they arrive (to 2^-20 in barycentric weights)."""
     lod0 = ctx.lod
-    tri0 = lod0.triangles
+    attributes, triangles, near, level.near = carry_attributes(
+        lod0.attributes["position"], lod0.triangles, ctx.adjacency, lod0.attributes,
+        level.points.astype(np.float32), level.faces.view(np.uint32), level.face_origin.astype(np.uint32),
+        level.seamy, level.near,
+    )
     origin = level.face_origin
-    v = level.faces.astype(np.int64).ravel()  # corner -> level vertex
-    nv, nc = len(level.points), len(v)
-    points = level.points.astype(np.float32)
-    first_corner = np.full(nv, nc, dtype=np.int64)
-    np.minimum.at(first_corner, v, np.arange(nc))
-    plain = np.flatnonzero(~level.seamy)  # one output vertex each, walked from its survivor's spot
-    edge = np.flatnonzero(level.seamy[v])  # corners walked one by one, from their face's origin
-    start = np.concatenate([level.near[plain], origin[edge // 3]]).astype(np.uint32)
-    target = np.concatenate([points[plain], points[v[edge]]])
-    tri, _, bary = walk_closest(lod0.attributes["position"], tri0, ctx.adjacency, start, target)
-
-    # Corners near seams that reached the same point of LOD 0 share an output vertex. The key
-    # (vertex, split vertices with nonzero weight in id order, weights to 2^-20) is canonical:
-    # corners that end on a shared edge or corner name the same split vertices whichever face
-    # they stopped in.
-    n_plain = len(plain)
-    ids = tri0[tri[n_plain:]].astype(np.int64)
-    q = np.rint(bary[n_plain:] * (1 << 20)).astype(np.int64)
-    ids = np.where(q > 0, ids, -1)
-    q = np.maximum(q, 0)
-    order = np.argsort(ids, axis=1, kind="stable")
-    key = np.concatenate([v[edge][:, None], np.take_along_axis(ids, order, 1), np.take_along_axis(q, order, 1)], 1)
-    first, group = _unique_rows(key)
-
-    corner_out = np.zeros(nv, dtype=np.int64)
-    corner_out[plain] = np.arange(n_plain)
-    corner_out = corner_out[v]
-    corner_out[edge] = n_plain + group
-    pick = np.concatenate([np.arange(n_plain), n_plain + first])  # the walk that gives each output vertex
-    near = tri[pick]
-    level.near = level.near.copy()
-    level.near[plain] = tri[:n_plain]  # the next level's walks start here
-    level.near[v[edge]] = tri[n_plain:]  # (any corner's; seamy vertices walk from their faces)
-    corners = tri0[near].astype(np.int64)  # (n, 3) LOD 0 split vertices of each output vertex
-    bary = bary[pick]
-    attributes = {"position": points[np.concatenate([plain, v[edge][first]])]}
-    for name, values in lod0.attributes.items():
-        if name not in ("position", "joints", "weights"):
-            attributes[name] = _interpolate(name, values, corners, bary)
-    if "normal" in attributes and "tangent" in attributes:
-        attributes["tangent"] = _orthonormalise(attributes["tangent"], attributes["normal"], lod0.attributes["tangent"], corners, bary)
-    if "joints" in lod0.attributes and "weights" in lod0.attributes:
-        attributes["joints"], attributes["weights"] = _blend_skin(lod0.attributes["joints"], lod0.attributes["weights"], corners, bary)
-    elif "joints" in lod0.attributes or "weights" in lod0.attributes:
-        name = "joints" if "joints" in lod0.attributes else "weights"
-        attributes[name] = lod0.attributes[name][_dominant(corners, bary)]
-
     lod = ir.Lod(
-        attributes={k: attributes[k] for k in lod0.attributes},  # the input's attribute order
-        triangles=corner_out.reshape(-1, 3).astype(np.uint32),
+        attributes=attributes,
+        triangles=triangles,
         materials=lod0.materials[origin].astype(np.uint32),
         lightmap_pages=None if lod0.lightmap_pages is None else lod0.lightmap_pages[origin].astype(np.uint32),
     )
     return lod, near
-
-
-# Odd 64-bit multipliers for hashing rows of up to 7 int64 columns.
-_HASH = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93, 0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53, 0x94D049BB133111EB], dtype=np.uint64)
-
-
-def _unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique rows of an int64 array, numbered in order of first occurrence: (first row of each
-    unique, each row's unique). Hashes each row to one integer (a fast 1-D unique), checks the
-    hash told rows apart exactly, and falls back to a row sort when it did not."""
-    with np.errstate(over="ignore"):
-        h = (rows.astype(np.uint64) * _HASH[: rows.shape[1]]).sum(axis=1, dtype=np.uint64)
-        h ^= h >> np.uint64(29)
-    _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
-    if not np.array_equal(rows[first][inverse], rows):
-        _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    by_first = np.argsort(first, kind="stable")
-    rank = np.empty_like(by_first)
-    rank[by_first] = np.arange(len(by_first))
-    return first[by_first], rank[inverse]
-
-
-def _dominant(corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """The LOD 0 vertex with the largest barycentric weight, per row."""
-    return corners[np.arange(len(corners)), np.argmax(bary, axis=1)]
-
-
-def _interpolate(name: str, values: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    v = values[corners].astype(np.float64)  # (k, 3, c)
-    out = np.einsum("kj,kjc->kc", bary.astype(np.float64), v)
-    if name == "normal":
-        length = np.linalg.norm(out, axis=1, keepdims=True)
-        fallback = values[_dominant(corners, bary)].astype(np.float64)
-        out = np.where(length > 1e-12, out / np.maximum(length, 1e-300), fallback)
-        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
-    elif name == "color":
-        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
-    return out.astype(ir.ATTRIBUTES[name][0])
-
-
-def _orthonormalise(tangent: np.ndarray, normal: np.ndarray, tangent0: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """Gram-Schmidt the interpolated tangent against the normal; w (handedness) from the nearest corner."""
-    n = normal.astype(np.float64)
-    t = tangent[:, :3].astype(np.float64)
-    t -= n * np.einsum("kc,kc->k", t, n)[:, None]
-    length = np.linalg.norm(t, axis=1)
-    bad = length < 1e-9
-    if bad.any():
-        # Any unit vector perpendicular to the normal: cross with the axis it is least aligned to.
-        axis = np.eye(3)[np.argmin(np.abs(n[bad]), axis=1)]
-        t[bad] = np.cross(n[bad], axis)
-        length[bad] = np.linalg.norm(t[bad], axis=1)
-    t /= length[:, None]
-    w = np.where(tangent0[_dominant(corners, bary), 3] < 0, -1.0, 1.0)
-    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
-
-
-def _blend_skin(joints0: np.ndarray, weights0: np.ndarray, corners: np.ndarray, bary: np.ndarray):
-    """Skin weights at a point inside a triangle: each corner's weights scaled by its barycentric
-    weight and summed per joint; the four largest joints kept and renormalised to sum 1."""
-    k = len(corners)
-    j = joints0[corners].reshape(k, 12).astype(np.int64)
-    w = (weights0[corners].astype(np.float64) * bary.astype(np.float64)[:, :, None]).reshape(k, 12)
-    same = j[:, :, None] == j[:, None, :]  # (k, 12, 12)
-    total = np.einsum("kab,kb->ka", same, w)  # summed weight of each candidate's joint
-    # Keep the first occurrence of each joint; later duplicates drop out of the ranking.
-    earlier = np.tril(np.ones((12, 12), dtype=bool), -1)
-    duplicate = (same & earlier).any(axis=2)
-    total = np.where(duplicate, -1.0, total)
-    top = np.argsort(-total, axis=1, kind="stable")[:, :4]
-    out_j = np.take_along_axis(j, top, axis=1)
-    out_w = np.clip(np.take_along_axis(total, top, axis=1), 0.0, None)
-    s = out_w.sum(axis=1, keepdims=True)
-    empty = s[:, 0] <= 0.0
-    if empty.any():  # the input had no weight here at all: keep the nearest corner's skin as is
-        d = _dominant(corners[empty], bary[empty])
-        out_j[empty] = joints0[d]
-        out_w[empty] = weights0[d]
-        s[empty] = np.maximum(out_w[empty].sum(axis=1, keepdims=True), 1e-30)
-    out_w = out_w / s
-    out_j = np.where(out_w > 0, out_j, 0)  # unused slots: joint 0, weight 0 (glTF's convention)
-    return out_j.astype(np.uint16), out_w.astype(np.float32)
 
 
 # ---- error ------------------------------------------------------------------------------------
