@@ -72,7 +72,7 @@ mod uv_raster;
 mod measure;
 mod bake;
 mod lightmap_post;
-mod lod_carry;
+mod lod;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -85,6 +85,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     measure::register(m)?;
     bake::register(m)?;
     lightmap_post::register(m)?;
-    lod_carry::register(m)?;
+    lod::register(m)?;
     Ok(())
 }

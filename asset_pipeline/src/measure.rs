@@ -1,8 +1,8 @@
 //! Python face of `cook_core::measure`: closest-point queries on a triangle mesh (`MeshBvh`),
-//! sampled one-sided Hausdorff distances, face adjacency and walks over it. Arrays are read in place (numpy,
+//! sampled one-sided Hausdorff distances, the faces on given edges. Arrays are read in place (numpy,
 //! no copies when C-contiguous) and the work runs without the GIL.
 
-use cook_core::measure::{self, Bvh, MeshError, NO_FACE};
+use cook_core::measure::{self, Bvh, MeshError};
 use numpy::{Element, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -141,86 +141,19 @@ impl PyMeshBvh {
     }
 }
 
-/// For each face (uint32 (m, 3)) and corner j, the face across edge (corner j, corner j+1)
-/// sharing both vertex indices and its key (uint32 (m,)), or 0xFFFFFFFF (uint32 (m, 3)).
+/// The two faces on each edge (`edges` uint32 (k, 2), vertex indices of `triangles` uint32
+/// (m, 3)): uint32 (k, 2), 0xFFFFFFFF twice where the edge does not have exactly two faces.
 #[pyfunction]
-fn face_adjacency<'py>(py: Python<'py>, triangles: PyReadonlyArray2<'py, u32>, keys: PyReadonlyArray1<'py, u32>) -> PyResult<Bound<'py, PyArray2<u32>>> {
+fn edge_faces<'py>(py: Python<'py>, triangles: PyReadonlyArray2<'py, u32>, edges: PyReadonlyArray2<'py, u32>) -> PyResult<Bound<'py, PyArray2<u32>>> {
     let tri = rows3(&triangles, "triangles")?;
-    let keys = vec1(&keys);
-    if keys.len() != tri.len() {
-        return Err(PyValueError::new_err(format!("face_adjacency: {} keys for {} triangles", keys.len(), tri.len())));
-    }
-    let adj = py.detach(|| measure::face_adjacency(&tri, &keys));
-    let m = adj.len();
-    Ok(PyArray1::from_vec(py, adj.into_iter().flatten().collect()).reshape([m, 3])?)
-}
-
-/// Closest points found by walking over faces (see `cook_core::measure::walk_closest`): from face
-/// `starts[i]` (uint32 (k,)) toward `points[i]` (float32 (k, 3)) across `adjacency` (from
-/// `face_adjacency`). Returns `(triangle uint32 (k,), distance float64 (k,), bary float64 (k, 3))`.
-#[pyfunction]
-#[allow(clippy::type_complexity)]
-fn walk_closest<'py>(
-    py: Python<'py>,
-    positions: PyReadonlyArray2<'py, f32>,
-    triangles: PyReadonlyArray2<'py, u32>,
-    adjacency: PyReadonlyArray2<'py, u32>,
-    starts: PyReadonlyArray1<'py, u32>,
-    points: PyReadonlyArray2<'py, f32>,
-) -> PyResult<(Bound<'py, PyArray1<u32>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
-    let pos = rows3(&positions, "positions")?;
-    let tri = rows3(&triangles, "triangles")?;
-    let adj = rows3(&adjacency, "adjacency")?;
-    let starts = vec1(&starts);
-    let pts = rows3(&points, "points")?;
-    measure::check_mesh(&pos, &tri).map_err(|e| value_error("walk_closest", e))?;
-    let m = tri.len() as u32;
-    if adj.len() != tri.len() || adj.iter().flatten().any(|&f| f != NO_FACE && f >= m) {
-        return Err(PyValueError::new_err("walk_closest: adjacency does not fit the triangles"));
-    }
-    if starts.len() != pts.len() || starts.iter().any(|&f| f >= m) {
-        return Err(PyValueError::new_err("walk_closest: need one start triangle (a valid index) per point"));
-    }
-    if pts.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
-        return Err(PyValueError::new_err("walk_closest: a point is not finite"));
-    }
-    let hits = py.detach(|| measure::walk_closest_many(&pos, &tri, &adj, &starts, &pts));
-    let k = hits.len();
-    let tri_out: Vec<u32> = hits.iter().map(|h| h.0).collect();
-    let dist: Vec<f64> = hits.iter().map(|h| h.1.sqrt()).collect();
-    let bary: Vec<f64> = hits.iter().flat_map(|h| h.2).collect();
-    Ok((PyArray1::from_vec(py, tri_out), PyArray1::from_vec(py, dist), PyArray1::from_vec(py, bary).reshape([k, 3])?))
-}
-
-/// Weld equal positions (float32 (n, 3), bitwise, -0.0 == 0.0): returns `(ids uint32 (n,), first
-/// uint32 (k,))`, ids numbered in order of first use and `first[id]` the first vertex with it.
-#[pyfunction]
-fn weld_positions<'py>(py: Python<'py>, positions: PyReadonlyArray2<'py, f32>) -> PyResult<(Bound<'py, PyArray1<u32>>, Bound<'py, PyArray1<u32>>)> {
-    let pos = rows3(&positions, "positions")?;
-    let (ids, first) = py.detach(|| measure::weld_positions(&pos));
-    Ok((PyArray1::from_vec(py, ids), PyArray1::from_vec(py, first)))
-}
-
-/// Seam edges of a mesh given twice, corner for corner: by welded vertex (`welded`, uint32
-/// (m, 3)) and by split vertex (`split`, uint32 (m, 3)). An edge is a seam when its faces do not
-/// all use the same two split vertices. Returns uint32 (k, 4): [a, b, face, other face], a < b.
-#[pyfunction]
-fn seam_edges<'py>(py: Python<'py>, welded: PyReadonlyArray2<'py, u32>, split: PyReadonlyArray2<'py, u32>) -> PyResult<Bound<'py, PyArray2<u32>>> {
-    let w = rows3(&welded, "welded")?;
-    let s = rows3(&split, "split")?;
-    if w.len() != s.len() {
-        return Err(PyValueError::new_err(format!("seam_edges: {} welded and {} split triangles", w.len(), s.len())));
-    }
-    let edges = py.detach(|| measure::seam_edges(&w, &s));
-    let k = edges.len();
-    Ok(PyArray1::from_vec(py, edges.into_iter().flatten().collect()).reshape([k, 4])?)
+    let edges = rows::<u32, 2>(&edges, "edges")?;
+    let out = py.detach(|| measure::edge_faces(&tri, &edges));
+    let k = out.len();
+    Ok(PyArray1::from_vec(py, out.into_iter().flatten().collect()).reshape([k, 2])?)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMeshBvh>()?;
-    m.add_function(wrap_pyfunction!(face_adjacency, m)?)?;
-    m.add_function(wrap_pyfunction!(walk_closest, m)?)?;
-    m.add_function(wrap_pyfunction!(weld_positions, m)?)?;
-    m.add_function(wrap_pyfunction!(seam_edges, m)?)?;
+    m.add_function(wrap_pyfunction!(edge_faces, m)?)?;
     Ok(())
 }

@@ -18,7 +18,7 @@ pub mod uv_raster;
 pub mod wire;
 pub mod exr_io;
 pub mod lightmap_post;
-pub mod lod_carry;
+pub mod lod;
 
 pub use error::CookError;
 pub use pack;

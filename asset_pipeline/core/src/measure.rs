@@ -936,6 +936,34 @@ pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
 /// No neighbour (an open border, a non-manifold edge, or a key change).
 pub const NO_FACE: u32 = u32::MAX;
 
+/// The two faces on each edge (a, b) (vertex indices of `triangles`, either orientation), or
+/// [`NO_FACE`] twice where the edge does not have exactly two faces (a border, a non-manifold
+/// edge, no edge at all).
+pub fn edge_faces(triangles: &[[u32; 3]], edges: &[[u32; 2]]) -> Vec<[u32; 2]> {
+    let vf = VertexFaces::new(triangles);
+    edges
+        .par_iter()
+        .map(|&[a, b]| {
+            let (mut out, mut k) = ([NO_FACE; 2], 0);
+            if a == b || a as usize + 1 >= vf.start.len() {
+                return out;
+            }
+            for &f in &vf.faces[vf.start[a as usize] as usize..vf.start[a as usize + 1] as usize] {
+                let t = triangles[f as usize];
+                let on = (0..3).any(|j| (t[j] == a && t[(j + 1) % 3] == b) || (t[j] == b && t[(j + 1) % 3] == a));
+                if on && !out[..k].contains(&f) {
+                    if k == 2 {
+                        return [NO_FACE; 2];
+                    }
+                    out[k] = f;
+                    k += 1;
+                }
+            }
+            if k == 2 { out } else { [NO_FACE; 2] }
+        })
+        .collect()
+}
+
 /// For each face and corner j, the face across edge (corner j, corner j+1): the one other face
 /// using the same two vertex indices with the same key, or [`NO_FACE`].
 pub fn face_adjacency(triangles: &[[u32; 3]], keys: &[u32]) -> Vec<[u32; 3]> {
@@ -1344,6 +1372,12 @@ mod tests {
         let welded: Vec<[u32; 3]> = tris.iter().map(|t| t.map(|i| weld[i as usize])).collect();
         let seams = seam_edges(&welded, &tris);
         assert_eq!(seams.len(), 12 * n as usize);
+        // edge_faces finds the same two faces, in either edge orientation; none for a non-edge.
+        let faces = edge_faces(&welded, &seams.iter().map(|s| [s[1], s[0]]).chain([[0, 0], [seams[0][0], u32::MAX - 1]]).collect::<Vec<_>>());
+        for (s, f) in seams.iter().zip(&faces) {
+            assert_eq!(f, &[s[2].min(s[3]), s[2].max(s[3])]);
+        }
+        assert_eq!(faces[seams.len()..], [[NO_FACE; 2]; 2]);
         for [a, b, f, g] in seams {
             assert!(a < b && f != g);
             let (pa, pb) = (pos[first[a as usize] as usize], pos[first[b as usize] as usize]);
