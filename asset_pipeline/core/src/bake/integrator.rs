@@ -34,19 +34,19 @@ const CHUNK: usize = 64;
 const SHADOW_SHORTEN: f32 = 1e-4;
 
 pub struct BakeScene {
-    bvh: Bvh,
+    pub(super) bvh: Bvh,
     tris: Vec<[V3; 3]>,
     /// Unit geometric normal (b-a)x(c-a) of each triangle: its front side.
-    normals: Vec<V3>,
-    albedo: Vec<V3>,
-    emission: Vec<V3>,
+    pub(super) normals: Vec<V3>,
+    pub(super) albedo: Vec<V3>,
+    pub(super) emission: Vec<V3>,
     /// Emissive triangles and the cumulative distribution that picks them (area x luminance).
     emitters: Vec<u32>,
     emitter_cdf: Vec<f32>,
     /// Per triangle: probability of picking it / its area (the area pdf of emitter sampling).
     emitter_pdf: Vec<f32>,
-    lights: Vec<Light>,
-    sky: Option<V3>,
+    pub(super) lights: Vec<Light>,
+    pub(super) sky: Option<V3>,
 }
 
 fn luminance(c: V3) -> f32 {
@@ -151,18 +151,23 @@ pub struct Baked {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Cancelled;
 
-/// Bake B = H/pi at every (point, unit normal). `progress(points_done, rays_cast)` is called
-/// after each chunk of points (from worker threads); setting `cancel` stops the bake between
-/// chunks. Runs on the current rayon pool; the result does not depend on its thread count.
+/// Bake B = H/pi at every (point, unit normal). Point i's random streams are keyed by
+/// `ids[i]` (default: i), so a point gets the same value whichever batch it is baked in.
+/// `progress(points_done, rays_cast)` is called after each chunk of points (from worker threads);
+/// setting `cancel` stops the bake between chunks. Runs on the current rayon pool; the result
+/// does not depend on its thread count.
+#[allow(clippy::too_many_arguments)]
 pub fn bake_points(
     scene: &BakeScene,
     points: &[V3],
     normals: &[V3],
+    ids: Option<&[u64]>,
     settings: &BakeSettings,
     progress: &(dyn Fn(u64, u64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Baked, Cancelled> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
+    assert!(ids.is_none_or(|ids| ids.len() == points.len()), "one id per point");
     let done = AtomicU64::new(0);
     let rays = AtomicU64::new(0);
     let mut b = vec![[0.0f32; 3]; points.len()];
@@ -173,7 +178,8 @@ pub fn bake_points(
         let mut cast = 0u64;
         for (j, o) in out.iter_mut().enumerate() {
             let i = c * CHUNK + j;
-            *o = bake_point(scene, points[i], normals[i], i as u64, settings, &mut cast);
+            let id = ids.map_or(i as u64, |ids| ids[i]);
+            *o = bake_point(scene, points[i], normals[i], id, settings, &mut cast);
         }
         let d = done.fetch_add(out.len() as u64, Ordering::Relaxed) + out.len() as u64;
         let r = rays.fetch_add(cast, Ordering::Relaxed) + cast;
@@ -203,7 +209,7 @@ fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, ray
 }
 
 /// One estimate of B at x: (direct irradiance)/pi + radiance along one cosine-sampled ray.
-fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &mut Rng, rays: &mut u64) -> V3 {
+pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &mut Rng, rays: &mut u64) -> V3 {
     let mut b = scale(direct(scene, x, n, rng, rays), FRAC_1_PI);
     let mut thr = [1.0f32; 3];
     let (mut p, mut nrm) = (x, n);
@@ -263,7 +269,7 @@ fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &mut Rng, ray
 /// Next-event estimate of the irradiance H at (x, n) from every analytic light and one emissive
 /// triangle, area lights MIS-weighted against cosine sampling. Always draws the same number of
 /// random numbers, so later dimensions of a path stay aligned whatever is hit.
-fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64) -> V3 {
+pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64) -> V3 {
     let o = offset_ray(x, n);
     let mut h = [0.0f32; 3];
     for l in &scene.lights {

@@ -1,10 +1,11 @@
 //! The lightmap baker: ray queries ([`bvh`]), samplers ([`sampling`]), analytic lights in
 //! physical units ([`lights`]) and the path-tracing integrator ([`integrator`]), which computes
-//! B = H/pi per surface point.
+//! B = H/pi per surface point; irradiance probes for dynamic objects ([`probes`]) reuse it.
 
 pub mod bvh;
 pub mod integrator;
 pub mod lights;
+pub mod probes;
 pub mod sampling;
 
 /// Run `f` on a rayon pool of `threads` workers (None or 0: one per core), so callers (the

@@ -4,6 +4,7 @@
 use super::bvh::*;
 use super::integrator::*;
 use super::lights::Light;
+use super::probes::*;
 use super::sampling::*;
 use std::f32::consts::PI;
 use std::sync::atomic::AtomicBool;
@@ -231,7 +232,7 @@ impl Soup {
 }
 
 fn bake(scene: &BakeScene, pts: &[V3], nrm: &[V3], s: &BakeSettings) -> Baked {
-    bake_points(scene, pts, nrm, s, &|_, _| {}, &AtomicBool::new(false)).unwrap()
+    bake_points(scene, pts, nrm, None, s, &|_, _| {}, &AtomicBool::new(false)).unwrap()
 }
 
 fn settings(samples: u32, bounces: u32, seed: u64) -> BakeSettings {
@@ -421,8 +422,77 @@ fn cancel_stops_the_bake() {
     let mut s = Soup::new();
     s.quad([0.0; 3], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0], 0.8, 0.0);
     let scene = s.scene(vec![], Some([1.0; 3]));
-    let r = bake_points(&scene, &[[0.0; 3]; 10], &[[0.0, 1.0, 0.0]; 10], &settings(4, 1, 1), &|_, _| {}, &AtomicBool::new(true));
+    let r = bake_points(&scene, &[[0.0; 3]; 10], &[[0.0, 1.0, 0.0]; 10], None, &settings(4, 1, 1), &|_, _| {}, &AtomicBool::new(true));
     assert_eq!(r, Err(Cancelled));
+}
+
+fn probes(scene: &BakeScene, pts: &[V3], s: &BakeSettings) -> Vec<Probe> {
+    bake_probes(scene, pts, None, s, &|_, _| {}, &AtomicBool::new(false)).unwrap().0
+}
+
+const AXES: [V3; 6] = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+
+#[test]
+fn probe_under_a_uniform_sky_sees_b_equal_l() {
+    // Nothing but sky: the DC term is exact (4 pi Y00^2 = 1); the higher bands are Monte Carlo
+    // noise around 0.
+    let mut s = Soup::new();
+    s.quad([0.0, -1e6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0], 0.5, 0.0); // far away, tiny
+    let scene = s.scene(vec![], Some([0.5, 1.0, 2.0]));
+    let p = &probes(&scene, &[[0.0; 3]], &settings(4096, 2, 1))[0];
+    assert!((p.sh[0][1] * 0.282_094_8 - 1.0).abs() < 1e-4, "{:?}", p.sh[0]);
+    for n in AXES {
+        let b = eval_sh9(&p.sh, n);
+        assert!((b[1] - 1.0).abs() < 0.05 && (b[2] / b[1] - 2.0).abs() < 1e-4, "B({n:?}) = {b:?}");
+    }
+    assert_eq!((p.sun_visibility, p.backface), (1.0, 0.0));
+}
+
+#[test]
+fn probe_point_light_closed_form_and_sun_visibility() {
+    // A point light is one exact sample per ray: its L2 irradiance at the light's direction is
+    // E/pi x sum_l A_l (2l+1)/(4 pi) = 1.0625 E/pi, and 0.0625 E/pi straight away from it.
+    let mut s = Soup::new();
+    s.quad([0.0, 5.0, 0.0], [3.0, 0.0, 0.0], [0.0, 0.0, 3.0], 0.0, 0.0); // a black roof, facing down
+    let json = r#"[{"name":"p","kind":"point","intensity":100,"position":[2,0,0]},
+                   {"name":"sun","kind":"sun","intensity":1000,"direction":[0,-1,0]}]"#;
+    let scene = s.scene(lights(json), None);
+    let e = 100.0 / 4.0 / PI;
+    let under = &probes(&scene, &[[0.0; 3]], &settings(64, 1, 2))[0];
+    let toward = eval_sh9(&under.sh, [1.0, 0.0, 0.0])[0];
+    let away = eval_sh9(&under.sh, [-1.0, 0.0, 0.0])[0];
+    assert!((toward / (1.0625 * e) - 1.0).abs() < 1e-4 && (away / (0.0625 * e) - 1.0).abs() < 1e-3, "{toward} {away} (E/pi = {e})");
+    assert_eq!(under.sun_visibility, 0.0, "under the roof");
+    let beside = &probes(&scene, &[[10.0, 0.0, 0.0]], &settings(64, 1, 2))[0];
+    assert_eq!(beside.sun_visibility, 1.0);
+    assert!(eval_sh9(&beside.sh, [0.0, 1.0, 0.0])[0] < 1.0, "the sun's direct light is not in the SH");
+}
+
+#[test]
+fn probe_inside_a_solid_sees_back_faces_and_bakes_deterministically() {
+    let mut s = Soup::new();
+    s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.8, 0.0);
+    s.cube([0.0, 1.0, 0.0], [0.5, 1.0, 0.5], false, 0.5, 0.0);
+    let json = r#"[{"name":"sun","kind":"sun","intensity":1000,"direction":[-0.6,-0.8,0]}, {"name":"p","kind":"point","intensity":50,"position":[1,2,1]}]"#;
+    let scene = s.scene(lights(json), Some([0.2, 0.3, 0.5]));
+    let st = BakeSettings::preset("draft", 7).unwrap();
+    let pts: Vec<V3> = (0..40).map(|i| [-1.95 + 0.1 * i as f32, 1.0, 0.2]).collect(); // none on a wall
+    let run = |t| rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap().install(|| probes(&scene, &pts, &st));
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a, b);
+    for (p, x) in a.iter().zip(&pts) {
+        let inside = x[0].abs() < 0.5;
+        assert_eq!(p.backface == 1.0, inside, "{x:?}: {}", p.backface);
+        if !inside {
+            // Some light from the floor below. (L2 SH ringing can push B(up) below zero next to
+            // a strong lobe, such as the sunlit box side; the runtime clamps it.)
+            assert!(p.backface < 0.5 && eval_sh9(&p.sh, [0.0, -1.0, 0.0])[0] > 0.0, "{x:?}: {p:?}");
+        }
+    }
+    // Far out on the sunlit floor: its radiance, 0.8 x (800 lux / pi + sky), comes from below.
+    let far = &probes(&scene, &[[6.0, 1.0, 0.2]], &BakeSettings { samples: 2048, ..st })[0];
+    let (up, down) = (eval_sh9(&far.sh, [0.0, 1.0, 0.0])[0], eval_sh9(&far.sh, [0.0, -1.0, 0.0])[0]);
+    assert!(down > 150.0 && down > 10.0 * up.max(0.0), "{far:?}");
 }
 
 /// Benchmark on a raw scene (tools/bench_bvh.py --write-raw): `BVH_RAW=/tmp/temple.bin cargo
@@ -465,3 +535,4 @@ fn bvh_raw_bench() {
         prims as f64 / (3 * n) as f64
     );
 }
+
