@@ -114,7 +114,7 @@ def test_temple_meshes_are_closed_and_outward(temple):
         check_closed(m.base, m.name)
         check_shading(m.base, m.name)
         assert m.static and m.texels_per_metre is None
-    assert temple.lightmap.texels_per_metre == 16 and temple.lightmap.pages == []
+    assert temple.lightmap.texels_per_metre == 5 and temple.lightmap.pages == []
 
 
 def test_temple_contents(temple):

@@ -13,7 +13,13 @@ import pytest
 
 import asset_pipeline
 from asset_pipeline.cook import cook_detailed
+from asset_pipeline.bake import BakeSettings
 from asset_pipeline.pipeline import CookSettings
+
+# These tests are about the pipeline, not light: the smallest bake that still runs every step.
+QUICK_BAKE = BakeSettings(preset="draft", samples=1, probe_samples=4)
+QUICK = CookSettings(bake=QUICK_BAKE)
+QUICK_CLI = ("--quality", "draft", "--samples", "1", "--probe-samples", "4")
 from conftest import COOK, REPO
 
 LEVEL = REPO / "content" / "levels" / "temple.toml"
@@ -41,36 +47,43 @@ def test_recook_with_nothing_changed_does_no_work_and_touches_nothing(level_copy
     out_dir = tmp_path / "build"
     out_dir.mkdir()
     out = out_dir / "temple.pack"
-    first = cook_detailed(level_copy, out, progress=False)
+    first = cook_detailed(level_copy, out, progress=False, settings=QUICK)
     assert not first.up_to_date
     names = [s.name for s in first.stages]
-    assert names == ["level", "uv2", "lod", "write"], names
+    assert names == ["level", "uv2", "lod", "bake", "write"], names
     assert all(s.cached == 0 for s in first.stages)
-    assert out.with_suffix(".report.md").exists()
+    assert out.with_suffix(".report.md").exists() and out.with_name("temple.lightmap0.exr").exists()
     before = snapshot(out_dir)
 
-    again = cook_detailed(level_copy, out, progress=False)
+    again = cook_detailed(level_copy, out, progress=False, settings=QUICK)
     assert again.up_to_date and again.stages == []
     assert again.summary == first.summary
     assert snapshot(out_dir) == before, "an up-to-date re-cook changed files"
 
+    # A lightmap file that went missing is an output out of date: only the write stage runs.
+    out.with_name("temple.lightmap0.exr").unlink()
+    third = cook_detailed(level_copy, out, progress=False, settings=QUICK)
+    assert not third.up_to_date and all(s.cached == s.items for s in third.stages if s.name != "write"), stage_table(third)
+    assert out.with_name("temple.lightmap0.exr").exists()
+
 
 def test_a_comment_in_the_level_reruns_only_the_level_stage(level_copy, tmp_path):
     out = tmp_path / "temple.pack"
-    cook_detailed(level_copy, out, progress=False)
+    cook_detailed(level_copy, out, progress=False, settings=QUICK)
     level_copy.write_text(level_copy.read_text() + "\n# an edit that changes no geometry\n")
-    result = cook_detailed(level_copy, out, progress=False)
+    result = cook_detailed(level_copy, out, progress=False, settings=QUICK)
     table = stage_table(result)
     assert table["level"] == (1, 0), table
     assert table["uv2"][1] == table["uv2"][0] > 0, f"lightmap UVs should come from the cache: {table}"
     assert table["lod"][1] == table["lod"][0] > 0, f"LODs should come from the cache: {table}"
+    assert table["bake"][1] == table["bake"][0] > 0, f"the bake should come from the cache: {table}"
 
 
 def test_force_rebuilds_every_stage_and_gives_the_same_pack(level_copy, tmp_path):
     out = tmp_path / "temple.pack"
-    cook_detailed(level_copy, out, progress=False)
+    cook_detailed(level_copy, out, progress=False, settings=QUICK)
     first = out.read_bytes()
-    forced = cook_detailed(level_copy, out, progress=False, settings=CookSettings(force=True))
+    forced = cook_detailed(level_copy, out, progress=False, settings=CookSettings(force=True, bake=QUICK_BAKE))
     assert not forced.up_to_date and all(s.cached == 0 for s in forced.stages)
     assert out.read_bytes() == first, "cooking is not deterministic"
 
@@ -79,7 +92,7 @@ def test_cli_force_and_up_to_date_messages(level_copy, tmp_path):
     import subprocess
 
     out = tmp_path / "temple.pack"
-    run = lambda *a: subprocess.run([str(COOK), str(level_copy), "-o", str(out), *a], capture_output=True, text=True, timeout=600)
+    run = lambda *a: subprocess.run([str(COOK), str(level_copy), "-o", str(out), *QUICK_CLI, *a], capture_output=True, text=True, timeout=600)
     assert run().returncode == 0
     r = run()
     assert r.returncode == 0 and "is up to date" in r.stdout, r.stdout
@@ -102,9 +115,9 @@ def test_a_damaged_cache_entry_is_a_miss_not_a_failure(tmp_path, gltf_samples):
 
 def test_report_lists_lods_errors_atlas_and_stage_times(level_copy, tmp_path):
     out = tmp_path / "temple.pack"
-    cook_detailed(level_copy, out, progress=False)
+    cook_detailed(level_copy, out, progress=False, settings=QUICK)
     report = out.with_suffix(".report.md").read_text()
-    for heading in ("## Stages", "## Meshes and LODs", "## Lightmap atlas"):
+    for heading in ("## Stages", "## Meshes and LODs", "## Lightmap atlas", "## Bake"):
         assert heading in report
     assert "| lod |" in report and "| uv2 |" in report
     # Every atlas page has a preview image that exists.

@@ -391,7 +391,7 @@ def test_demo_level_independent_overlap_check(demo):
 
 def test_demo_level_over_several_pages(demo):
     static, lods_one, layout_one, stats_one, settings = demo
-    small = dataclasses.replace(settings, max_page_size=1024)
+    small = dataclasses.replace(settings, max_page_size=512)
     lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], small)
     assert len(layout.pages) > 1
     assert stats["overlapping_texels"] == 0 and stats["texels_within_padding"] == 0

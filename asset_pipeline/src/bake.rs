@@ -1,15 +1,18 @@
-//! Python face of `cook_core::bake`: `bake_points` (B = H/pi per surface point, see
-//! `cook_core::bake::integrator`) and `trace_rays` (closest hits, for the BVH benchmark).
+//! Python face of `cook_core::bake`: `Baker` (a scene with its BVH; B = H/pi per surface point,
+//! see `cook_core::bake::integrator`, and irradiance probes, `cook_core::bake::probes`) and
+//! `trace_rays` (closest hits, for the BVH benchmark).
 //! Arrays are read in place and the work runs without the GIL.
 
-use crate::measure::rows3;
+use crate::measure::{rows3, vec1};
 use cook_core::bake::bvh::Bvh;
-use cook_core::bake::integrator::{bake_points as bake, BakeScene, BakeSettings};
+use cook_core::bake::integrator::{bake_points, BakeScene, BakeSettings};
 use cook_core::bake::lights::Light;
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
+use cook_core::bake::probes::bake_probes;
+use cook_core::bake::with_threads;
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use cook_core::bake::with_threads;
+use std::borrow::Cow;
 use std::sync::atomic::AtomicBool;
 
 fn to_array<'py>(py: Python<'py>, rows: &[[f32; 3]]) -> Bound<'py, PyArray2<f32>> {
@@ -17,51 +20,115 @@ fn to_array<'py>(py: Python<'py>, rows: &[[f32; 3]]) -> Bound<'py, PyArray2<f32>
     PyArray1::from_vec(py, flat).reshape([rows.len(), 3]).expect("n*3 elements")
 }
 
-/// Bake B = H/pi (nits, linear RGB; runtime shading is L_e + albedo * B) at `points` with unit
-/// `normals` (float32 (k, 3)) over the scene `positions` float32 (n, 3), `triangles` uint32 (m, 3),
-/// per-triangle `albedo` and front-face `emission` (nits) float32 (m, 3). `lights_json`: a JSON
-/// list of `ir.Light` dicts; `sky`: uniform sky radiance (r, g, b) in nits (colour * intensity)
-/// or None. `preset` draft | medium | high; `samples` / `bounces` override it. Same seed, same
-/// result for any `threads` (None: all cores). Returns float32 (k, 3).
-#[pyfunction]
-#[pyo3(signature = (positions, triangles, albedo, emission, lights_json, sky, points, normals, preset="medium", seed=0, samples=None, bounces=None, threads=None))]
-#[allow(clippy::too_many_arguments)]
-fn bake_points<'py>(
-    py: Python<'py>,
-    positions: PyReadonlyArray2<'py, f32>,
-    triangles: PyReadonlyArray2<'py, u32>,
-    albedo: PyReadonlyArray2<'py, f32>,
-    emission: PyReadonlyArray2<'py, f32>,
-    lights_json: &str,
-    sky: Option<(f32, f32, f32)>,
-    points: PyReadonlyArray2<'py, f32>,
-    normals: PyReadonlyArray2<'py, f32>,
-    preset: &str,
-    seed: u64,
-    samples: Option<u32>,
-    bounces: Option<u32>,
-    threads: Option<usize>,
-) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let mut settings = BakeSettings::preset(preset, seed)
-        .ok_or_else(|| PyValueError::new_err(format!("bake_points: unknown preset '{preset}' (draft, medium, high)")))?;
-    settings.samples = samples.unwrap_or(settings.samples);
-    settings.bounces = bounces.unwrap_or(settings.bounces);
-    let (pos, tri) = (rows3(&positions, "positions")?, rows3(&triangles, "triangles")?);
-    let (alb, emi) = (rows3(&albedo, "albedo")?, rows3(&emission, "emission")?);
-    let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
-    if pts.len() != nrm.len() {
-        return Err(PyValueError::new_err(format!("bake_points: {} points but {} normals", pts.len(), nrm.len())));
+fn settings(preset: &str, seed: u64, samples: Option<u32>, bounces: Option<u32>, probe_samples: Option<u32>) -> PyResult<BakeSettings> {
+    let mut s = BakeSettings::preset(preset, seed).ok_or_else(|| PyValueError::new_err(format!("bake: unknown preset '{preset}' (draft, medium, high)")))?;
+    s.samples = samples.unwrap_or(s.samples);
+    s.bounces = bounces.unwrap_or(s.bounces);
+    s.probe_samples = probe_samples.unwrap_or(s.probe_samples);
+    Ok(s)
+}
+
+fn ids_for<'a>(ids: &'a Option<PyReadonlyArray1<'_, u64>>, n: usize) -> PyResult<Option<Cow<'a, [u64]>>> {
+    let ids = ids.as_ref().map(vec1);
+    if ids.as_ref().is_some_and(|i| i.len() != n) {
+        return Err(PyValueError::new_err(format!("bake: need one id per point ({n})")));
     }
-    let lights = Light::from_ir_json(lights_json).map_err(PyValueError::new_err)?;
-    let cancel = AtomicBool::new(false);
-    let out = py.detach(|| {
-        let scene = BakeScene::new(&pos, &tri, &alb, &emi, lights, sky.map(|(r, g, b)| [r, g, b]))?;
-        // No progress or cancel from Python yet (the core API has both).
-        with_threads(threads, || bake(&scene, &pts, &nrm, &settings, &|_, _| {}, &cancel))
-    });
-    match out.map_err(|e| PyValueError::new_err(format!("bake_points: {e}")))? {
-        Ok(baked) => Ok(to_array(py, &baked.b)),
-        Err(_) => Err(PyRuntimeError::new_err("bake cancelled")),
+    Ok(ids)
+}
+
+/// A static scene ready to bake (its BVH built once).
+///
+/// `Baker(positions float32 (n, 3), triangles uint32 (m, 3), albedo float32 (m, 3), emission
+/// float32 (m, 3), lights_json, sky)`: per-triangle `albedo` and front-face `emission` (nits);
+/// `lights_json` a JSON list of `ir.Light` dicts; `sky` a uniform radiance (r, g, b) in nits
+/// (colour x intensity) or None. Presets draft | medium | high, with `samples`, `bounces`,
+/// `probe_samples` overriding them; the same seed gives the same result for any `threads`
+/// (None: all cores) and any batching (random streams are keyed by the `ids` given per point).
+#[pyclass(frozen, name = "Baker", module = "asset_pipeline._core")]
+pub struct PyBaker {
+    scene: BakeScene,
+}
+
+#[pymethods]
+impl PyBaker {
+    #[new]
+    fn new<'py>(
+        py: Python<'py>,
+        positions: PyReadonlyArray2<'py, f32>,
+        triangles: PyReadonlyArray2<'py, u32>,
+        albedo: PyReadonlyArray2<'py, f32>,
+        emission: PyReadonlyArray2<'py, f32>,
+        lights_json: &str,
+        sky: Option<(f32, f32, f32)>,
+    ) -> PyResult<Self> {
+        let (pos, tri) = (rows3(&positions, "positions")?, rows3(&triangles, "triangles")?);
+        let (alb, emi) = (rows3(&albedo, "albedo")?, rows3(&emission, "emission")?);
+        let lights = Light::from_ir_json(lights_json).map_err(PyValueError::new_err)?;
+        let scene = py.detach(|| BakeScene::new(&pos, &tri, &alb, &emi, lights, sky.map(|(r, g, b)| [r, g, b]))).map_err(|e| PyValueError::new_err(format!("bake: {e}")))?;
+        Ok(PyBaker { scene })
+    }
+
+    /// B = H/pi (nits, linear RGB; runtime shading is L_e + albedo * B) at `points` with unit
+    /// `normals` (float32 (k, 3)); `ids` uint64 (k,) key each point's random streams (default:
+    /// 0..k). Returns `(B float32 (k, 3), rays cast)`.
+    #[pyo3(signature = (points, normals, ids=None, preset="medium", seed=0, samples=None, bounces=None, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn bake_points<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        normals: PyReadonlyArray2<'py, f32>,
+        ids: Option<PyReadonlyArray1<'py, u64>>,
+        preset: &str,
+        seed: u64,
+        samples: Option<u32>,
+        bounces: Option<u32>,
+        threads: Option<usize>,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, u64)> {
+        let s = settings(preset, seed, samples, bounces, None)?;
+        let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        if pts.len() != nrm.len() {
+            return Err(PyValueError::new_err(format!("bake_points: {} points but {} normals", pts.len(), nrm.len())));
+        }
+        let ids = ids_for(&ids, pts.len())?;
+        let cancel = AtomicBool::new(false);
+        let out = py.detach(|| with_threads(threads, || bake_points(&self.scene, &pts, &nrm, ids.as_deref(), &s, &|_, _| {}, &cancel)));
+        match out.map_err(PyRuntimeError::new_err)? {
+            Ok(baked) => Ok((to_array(py, &baked.b), baked.rays)),
+            Err(_) => Err(PyRuntimeError::new_err("bake cancelled")),
+        }
+    }
+
+    /// Irradiance probes at `points` (float32 (k, 3), see `cook_core::bake::probes`): returns
+    /// `(sh float32 (k, 9, 3) (B = E/pi, without the sun's direct light), sun_visibility float32
+    /// (k,), backface float32 (k,), rays cast)`.
+    #[pyo3(signature = (points, ids=None, preset="medium", seed=0, probe_samples=None, bounces=None, threads=None))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn bake_probes<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        ids: Option<PyReadonlyArray1<'py, u64>>,
+        preset: &str,
+        seed: u64,
+        probe_samples: Option<u32>,
+        bounces: Option<u32>,
+        threads: Option<usize>,
+    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>, u64)> {
+        let s = settings(preset, seed, None, bounces, probe_samples)?;
+        let pts = rows3(&points, "points")?;
+        let ids = ids_for(&ids, pts.len())?;
+        let cancel = AtomicBool::new(false);
+        let out = py.detach(|| with_threads(threads, || bake_probes(&self.scene, &pts, ids.as_deref(), &s, &|_, _| {}, &cancel)));
+        let (probes, rays) = out.map_err(PyRuntimeError::new_err)?.map_err(|_| PyRuntimeError::new_err("bake cancelled"))?;
+        let k = probes.len();
+        let sh: Vec<f32> = probes.iter().flat_map(|p| p.sh.iter().flatten().copied()).collect();
+        Ok((
+            PyArray1::from_vec(py, sh).reshape([k, 9, 3])?,
+            PyArray1::from_vec(py, probes.iter().map(|p| p.sun_visibility).collect()),
+            PyArray1::from_vec(py, probes.iter().map(|p| p.backface).collect()),
+            rays,
+        ))
     }
 }
 
@@ -96,7 +163,7 @@ fn trace_rays<'py>(
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(bake_points, m)?)?;
+    m.add_class::<PyBaker>()?;
     m.add_function(wrap_pyfunction!(trace_rays, m)?)?;
     Ok(())
 }

@@ -61,6 +61,9 @@ pub(crate) fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyD
     d.set_item("textures", s.textures)?;
     d.set_item("texture_sizes", s.texture_sizes.clone())?;
     d.set_item("nodes", s.nodes)?;
+    d.set_item("lightmap_pages", s.lightmap_pages)?;
+    d.set_item("lightmaps_baked", s.lightmaps_baked)?;
+    d.set_item("probes", s.probes)?;
     d.set_item("bytes", s.bytes)?;
     Ok(d.unbind())
 }

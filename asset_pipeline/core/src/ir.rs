@@ -53,6 +53,18 @@ pub struct SceneIr {
     pub spawns: Vec<Spawn>,
     pub sky: Option<Sky>,
     pub lightmap: Option<LightmapLayout>,
+    pub probes: Option<ProbesIr>,
+}
+
+/// Baked irradiance probes on a grid (see `pack::ProbeGrid`): per probe 27 SH floats (9 x rgb)
+/// and a sun visibility.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ProbesIr {
+    pub origin: [f32; 3],
+    pub spacing: [f32; 3],
+    pub counts: [u32; 3],
+    pub sh: Vec<[f32; 27]>,
+    pub sun_visibility: Vec<f32>,
 }
 
 impl LodIr {

@@ -157,6 +157,11 @@ pub struct Summary {
     /// (width, height) of each texture, in pack order.
     pub texture_sizes: Vec<[u32; 2]>,
     pub nodes: usize,
+    /// Lightmap atlas pages, and how many of them are baked.
+    pub lightmap_pages: usize,
+    pub lightmaps_baked: usize,
+    /// Irradiance probes.
+    pub probes: u64,
     /// Size of the pack file.
     pub bytes: u64,
 }
@@ -177,6 +182,9 @@ impl Summary {
             textures: m.textures.len(),
             texture_sizes: m.textures.iter().map(|t| [t.width, t.height]).collect(),
             nodes: m.nodes.len(),
+            lightmap_pages: m.lightmap.as_ref().map_or(0, |l| l.pages.len()),
+            lightmaps_baked: m.lightmap.as_ref().map_or(0, |l| l.textures.len()),
+            probes: m.probes.as_ref().map_or(0, |p| p.count()),
             bytes,
         }
     }

@@ -29,6 +29,12 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
     b.manifest.spawns = scene.spawns.clone();
     b.manifest.sky = scene.sky;
     b.manifest.lightmap = scene.lightmap.clone();
+    if let Some(p) = &scene.probes {
+        let sh: Vec<u8> = p.sh.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let vis: Vec<u8> = p.sun_visibility.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let (sh, sun_visibility) = (b.push_bytes(&sh), b.push_bytes(&vis));
+        b.manifest.probes = Some(pack::ProbeGrid { origin: p.origin, spacing: p.spacing, counts: p.counts, sh, sun_visibility });
+    }
     let pack = b.finish();
     // The pack crate's own consistency check, so a cooker bug is caught here and not at load.
     pack.manifest.validate(pack.data.len() as u64).map_err(|e| e.to_string())?;

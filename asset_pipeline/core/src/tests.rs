@@ -464,7 +464,8 @@ fn scene_ir_survives_the_wire_both_ways() {
     lod1.weights = Some(vec![[0.5, 0.5, 0.0, 0.0]; lod1.positions.len()]);
     lod1.lightmap_pages = Some(vec![0]);
     scene.meshes[0].lods.push(lod1);
-    scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2 });
+    scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2, textures: vec![] });
+    scene.probes = Some(crate::ir::ProbesIr { origin: [1.0, 2.0, 3.0], spacing: [2.0; 3], counts: [2, 1, 1], sh: vec![[0.5; 27], [0.25; 27]], sun_visibility: vec![1.0, 0.0] });
     scene.sky = Some(pack::Sky { color: [0.1, 0.2, 0.3], intensity: 2.0 });
     let (json, arrays) = crate::wire::to_wire(&scene);
     let back = crate::wire::from_wire(&json, &arrays).unwrap();
@@ -473,6 +474,9 @@ fn scene_ir_survives_the_wire_both_ways() {
     assert_eq!(pack.manifest.meshes[0].lods.len(), 2);
     assert_eq!(pack.manifest.meshes[0].lods[1].submeshes[0].lightmap_page, Some(0));
     assert_eq!(pack.manifest.meshes[0].lods[1].error, 0.25);
+    let g = pack.manifest.probes.as_ref().unwrap();
+    assert_eq!((g.counts, g.sh.len, g.sun_visibility.len), ([2, 1, 1], 2 * 27 * 4, 8));
+    assert_eq!(&pack.bytes(g.sun_visibility)[4..], &0.0f32.to_le_bytes());
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! in which every array is replaced by an index into a list of raw arrays (numpy dtype string,
 //! shape, little-endian bytes). See `to_wire` / `from_wire` in ir.py for the other side.
 
-use crate::ir::{LodIr, MeshIr, SceneIr, TextureIr};
+use crate::ir::{LodIr, MeshIr, ProbesIr, SceneIr, TextureIr};
 use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -31,6 +31,19 @@ struct WireScene {
     sky: Option<Sky>,
     #[serde(default)]
     lightmap: Option<LightmapLayout>,
+    #[serde(default)]
+    probes: Option<WireProbes>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireProbes {
+    origin: [f32; 3],
+    spacing: [f32; 3],
+    counts: [u32; 3],
+    /// float32 (n, 27): 9 SH coefficients x rgb per probe.
+    sh: usize,
+    /// float32 (n,).
+    sun_visibility: usize,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -175,6 +188,17 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         }
         textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips });
     }
+    let probes = match &w.probes {
+        None => None,
+        Some(p) => {
+            let (sh, sun_visibility) = (r.rows::<f32, 27>(p.sh, "probes sh")?, r.scalars::<f32>(p.sun_visibility, "probes sun_visibility")?);
+            let n: u64 = p.counts.iter().map(|&c| c as u64).product();
+            if sh.len() as u64 != n || sun_visibility.len() as u64 != n {
+                return Err(format!("probes: {} SH rows and {} visibilities for a {:?} grid", sh.len(), sun_visibility.len(), p.counts));
+            }
+            Some(ProbesIr { origin: p.origin, spacing: p.spacing, counts: p.counts, sh, sun_visibility })
+        }
+    };
     Ok(SceneIr {
         name: w.name,
         source: w.source,
@@ -186,6 +210,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         spawns: w.spawns,
         sky: w.sky,
         lightmap: w.lightmap,
+        probes,
     })
 }
 
@@ -276,6 +301,13 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
             WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips }
         })
         .collect();
+    let probes = scene.probes.as_ref().map(|p| WireProbes {
+        origin: p.origin,
+        spacing: p.spacing,
+        counts: p.counts,
+        sh: w.rows(&p.sh),
+        sun_visibility: w.scalars(&p.sun_visibility),
+    });
     let doc = WireScene {
         name: scene.name.clone(),
         source: scene.source.clone(),
@@ -287,6 +319,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         spawns: scene.spawns.clone(),
         sky: scene.sky,
         lightmap: scene.lightmap.clone(),
+        probes,
     };
     (serde_json::to_string(&doc).expect("the IR always serialises"), w.arrays)
 }

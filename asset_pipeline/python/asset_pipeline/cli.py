@@ -11,12 +11,33 @@ import sys
 from pathlib import Path
 
 from asset_pipeline import CookError
+from asset_pipeline.bake import PRESETS, BakeSettings
 from asset_pipeline.cook import cook_detailed
 from asset_pipeline.pipeline import CookSettings
 
 
 def _count(n: int, one: str, many: str) -> str:
     return f"{n} {one if n == 1 else many}"
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{n} is not 1 or more")
+    return n
+
+
+def _non_negative(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"{n} is negative")
+    return n
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -29,8 +50,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
     parser.add_argument("--no-report", action="store_true", help="do not write OUT.report.md")
+    bake = parser.add_argument_group("baking (lightmaps and probes, for levels with lightmap UVs)")
+    bake.add_argument("--no-bake", action="store_true", help="skip the bake stage")
+    bake.add_argument("--quality", choices=PRESETS, default="medium", help="bake preset: samples and bounces (default: medium)")
+    bake.add_argument("--samples", type=_positive, metavar="N", help="paths per lightmap texel (overrides the preset)")
+    bake.add_argument("--bounces", type=_non_negative, metavar="N", help="indirect bounces (overrides the preset)")
+    bake.add_argument("--probe-samples", type=_positive, metavar="N", help="rays per light probe (overrides the preset)")
+    bake.add_argument("--seed", type=_non_negative, default=0, help="random seed: the same seed gives the same bytes")
+    bake.add_argument("--threads", type=_positive, metavar="N", help="bake threads (default: all cores; the result is the same)")
     args = parser.parse_args(argv)
-    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods,
+    bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
+                                 seed=args.seed, threads=args.threads)
+    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)

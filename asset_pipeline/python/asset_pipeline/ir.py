@@ -155,6 +155,20 @@ class LightmapLayout:
     texels_per_metre: float
     pages: list[tuple[int, int]]  # (width, height) in texels of each atlas page
     padding: int = 2  # texels between charts
+    textures: list[int] = field(default_factory=list)  # baked page -> Rgba16Float texture index (empty: not baked)
+
+
+@dataclass
+class ProbeGrid:
+    """Baked irradiance probes (pack::ProbeGrid): probe (i, j, k) at origin + (i, j, k) * spacing,
+    numbered i + nx (j + ny k); `sh` (n, 9, 3) float32, order-2 SH of B = E/pi without the sun's
+    direct light; `sun_visibility` (n,) float32."""
+
+    origin: tuple[float, float, float]
+    spacing: tuple[float, float, float]
+    counts: tuple[int, int, int]
+    sh: np.ndarray
+    sun_visibility: np.ndarray
 
 
 @dataclass
@@ -169,6 +183,7 @@ class Scene:
     spawns: list[Spawn] = field(default_factory=list)
     sky: Sky | None = None
     lightmap: LightmapLayout | None = None
+    probes: ProbeGrid | None = None
 
     def validate(self) -> None:
         for i, m in enumerate(self.meshes):
@@ -249,6 +264,11 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
         "spawns": [dataclasses.asdict(s) for s in scene.spawns],
         "sky": None if scene.sky is None else dataclasses.asdict(scene.sky),
         "lightmap": None if scene.lightmap is None else dataclasses.asdict(scene.lightmap),
+        "probes": None if scene.probes is None else {
+            "origin": list(scene.probes.origin), "spacing": list(scene.probes.spacing), "counts": list(scene.probes.counts),
+            "sh": put(np.asarray(scene.probes.sh, np.float32).reshape(-1, 27)),
+            "sun_visibility": put(np.asarray(scene.probes.sun_visibility, np.float32).reshape(-1)),
+        },
     }
     return json.dumps(doc), arrays
 
@@ -276,6 +296,10 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     )
     if doc.get("lightmap"):
         lm = doc["lightmap"]
-        scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2))
+        scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])))
+    if doc.get("probes"):
+        pr = doc["probes"]
+        scene.probes = ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]),
+                                 arrays[pr["sh"]].reshape(-1, 9, 3), arrays[pr["sun_visibility"]])
     scene.validate()
     return scene

@@ -1,11 +1,12 @@
-"""The cook: source -> scene IR -> lightmap UVs -> LOD chains -> pack + report.
+"""The cook: source -> scene IR -> lightmap UVs -> LOD chains -> bake -> pack + report.
 
 Each stage is a pure function of its inputs and settings, cached by a hash of both and the
 cooker's code (cache.py). The whole cook also has a key: when the output already exists and was
 made from the same key, nothing runs and no file is touched.
 
 Stage order: lightmap UVs come before LODs, so every LOD carries LOD 0's lightmap UVs as an
-attribute and one baked lightmap serves the whole chain.
+attribute and one baked lightmap serves the whole chain. The bake writes its pages into the pack
+(half-float textures) and beside it as OpenEXR files, `<pack>.lightmap<N>.exr`.
 """
 
 from __future__ import annotations
@@ -32,8 +33,10 @@ from asset_pipeline.report import write_report
 class CookSettings:
     lod: "object | None" = None  # asset_pipeline.lod.LodSettings; None = defaults
     uv2: "object | None" = None  # asset_pipeline.uv2.Uv2Settings; None = defaults (density from the level)
+    bake: "object | None" = None  # asset_pipeline.bake.BakeSettings; None = defaults
     lods: bool = True
     lightmap_uvs: bool = True
+    baking: bool = True  # bake lightmaps and probes (when the scene has lightmap UVs)
     force: bool = False  # ignore every cache entry and rebuild
     cache_dir: Path | None = None  # default: .cook-cache beside the output
     report: bool = True
@@ -132,6 +135,8 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     stages: list[StageRecord] = []
 
     settings_doc = {k: _settings_doc(v) for k, v in dataclasses.asdict(settings).items() if k not in ("force", "cache_dir", "report")}
+    if isinstance(settings_doc.get("bake"), dict):
+        settings_doc["bake"].pop("threads", None)  # the result does not depend on it
     source_key = Hasher("source")
     for f in _source_files(source):
         source_key.file(f)
@@ -143,8 +148,7 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     if not settings.force and out.exists() and stamp.exists():
         try:
             recorded = json.loads(stamp.read_text())
-            st = out.stat()
-            if recorded["key"] == cook_key and recorded["size"] == st.st_size and recorded["mtime_ns"] == st.st_mtime_ns:
+            if recorded["key"] == cook_key and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
                 return CookResult(summary=recorded["summary"], up_to_date=True)
         except (OSError, ValueError, KeyError):
             pass
@@ -172,10 +176,16 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     if settings.lods:
         scene, rec = _lod_stage(scene, settings, cache, progress)
         stages.append(rec)
+    bake_stats: dict = {}
+    if settings.baking and scene.lightmap is not None and scene.lightmap.pages:
+        scene, bake_stats, rec = _bake_stage(scene, settings, cache, progress)
+        stages.append(rec)
 
     rec = StageRecord("write", items=1)
     t0 = time.perf_counter()
     with progress.stage("write", 1) as bar:
+        # Lightmap files first, then the pack: each is written whole and renamed into place.
+        exrs = _write_exrs(scene, out)
         summary = write_pack(scene, out)
         bar.advance()
     rec.seconds = time.perf_counter() - t0
@@ -183,13 +193,37 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
 
     report = None
     if settings.report:
-        report = write_report(out, scene, summary, stages, uv2_stats)
-    st = out.stat()
+        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs)
+    files = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
     tmp = stamp.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"key": cook_key, "size": st.st_size, "mtime_ns": st.st_mtime_ns, "summary": summary}))
+    tmp.write_text(json.dumps({"key": cook_key, "files": files, "summary": summary}))
     os.replace(tmp, stamp)
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report)
+
+
+def _unchanged(path: Path, size: int, mtime_ns: int) -> bool:
+    try:
+        st = path.stat()
+    except OSError:
+        return False
+    return st.st_size == size and st.st_mtime_ns == mtime_ns
+
+
+def lightmap_paths(out: Path, pages: int) -> list[Path]:
+    """Where the baked pages of the pack `out` are written as OpenEXR: `<out stem>.lightmap<N>.exr`."""
+    return [out.with_name(f"{out.stem}.lightmap{p}.exr") for p in range(pages)]
+
+
+def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
+    from asset_pipeline.lightmap_post import write_exr
+
+    if scene.lightmap is None or not scene.lightmap.textures:
+        return []
+    paths = lightmap_paths(out, len(scene.lightmap.textures))
+    for path, t in zip(paths, scene.lightmap.textures):
+        write_exr(path, np.asarray(scene.textures[t].mips[0][..., :3], np.float32))
+    return paths
 
 
 # ---- lightmap UVs -------------------------------------------------------------------------------
@@ -265,3 +299,58 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             bar.advance()
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), rec
+
+
+# ---- bake -----------------------------------------------------------------------------------------
+
+
+def _bake_key(scene: ir.Scene, bake_settings) -> str:
+    """Everything the bake reads: static meshes (LOD 0) and where nodes place them, materials and
+    their base colour textures, lights, sky, the atlas layout, the settings."""
+    key = Hasher("bake").settings(bake_settings.key_doc())
+    key.settings([dataclasses.asdict(n) for n in scene.nodes])
+    key.settings([dataclasses.asdict(m) for m in scene.materials])
+    key.settings([dataclasses.asdict(l) for l in scene.lights])
+    key.settings(None if scene.sky is None else dataclasses.asdict(scene.sky))
+    key.settings(dataclasses.asdict(scene.lightmap))
+    for m in scene.meshes:
+        key.text(f"{m.name}:{m.static}")
+        if m.static:
+            base = m.lods[0]
+            for name in sorted(base.attributes):
+                key.text(name).array(base.attributes[name])
+            key.array(base.triangles).array(base.materials).array(base.lightmap_pages)
+    for t in sorted({m.base_color_texture for m in scene.materials if m.base_color_texture is not None}):
+        key.text(f"texture {t}").array(scene.textures[t].mips[0])
+    return key.key()
+
+
+def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    from asset_pipeline.bake import BakeSettings, Baked, attach, bake_level
+
+    bake_settings = settings.bake or BakeSettings()
+    key = _bake_key(scene, bake_settings)
+    pages = len(scene.lightmap.pages)
+    rec = StageRecord("bake", items=pages)
+    t0 = time.perf_counter()
+    hit = cache.load("bake", key)
+    if hit is not None:
+        meta, arrays = hit
+        probes = None
+        if meta["probes"] is not None:
+            pr = meta["probes"]
+            probes = ir.ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]), arrays[pages], arrays[pages + 1])
+        baked = Baked(pages=arrays[:pages], probes=probes, stats=meta["stats"])
+        rec.cached = pages
+        progress.line(f"bake: {pages} page(s) from the cache")
+    else:
+        baked = bake_level(scene, bake_settings, progress)
+        arrays = list(baked.pages)
+        probes = None
+        if baked.probes is not None:
+            p = baked.probes
+            probes = {"origin": list(p.origin), "spacing": list(p.spacing), "counts": list(p.counts)}
+            arrays += [p.sh, p.sun_visibility]
+        cache.store("bake", key, {"probes": probes, "stats": baked.stats}, arrays)
+    rec.seconds = time.perf_counter() - t0
+    return attach(scene, baked), baked.stats, rec

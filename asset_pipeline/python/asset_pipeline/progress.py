@@ -15,6 +15,13 @@ class _Bar:
         self._bar = bar
         self._notify = notify
         self.done = 0
+        self.text = ""
+
+    def note(self, text: str) -> None:
+        """A short status after the counts (a rate, say); the plain log line ends with the last one."""
+        self.text = text
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
 
     def advance(self, n: int = 1) -> None:
         self.done += n
@@ -51,4 +58,4 @@ class Progress:
             return
         b = _Bar(None)
         yield b
-        self.line(f"{name}: {b.done}/{total} in {time.perf_counter() - start:.2f} s")
+        self.line(f"{name}: {b.done}/{total} in {time.perf_counter() - start:.2f} s" + (f", {b.text}" if b.text else ""))

@@ -13,7 +13,7 @@ def _row(*cells) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
 
-def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict) -> Path:
+def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict, bake_stats: dict | None = None, exrs=()) -> Path:
     path = out.with_suffix(".report.md")
     lines = [f"# Cook report: {out.name}", "", f"Source: `{scene.source}`", ""]
     lines += [
@@ -43,6 +43,11 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
             lines += ["", f"Page {i}: {w} x {h}"]
             if i < len(previews):
                 lines.append(f"![UV2 page {i}]({os.path.relpath(previews[i], path.parent)})")
+    if bake_stats:
+        from asset_pipeline.bake import describe
+
+        lines += ["", "## Bake", "", *describe(bake_stats)]
+        lines += [f"- `{os.path.relpath(e, path.parent)}`" for e in exrs]
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)

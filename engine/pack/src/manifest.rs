@@ -77,6 +77,9 @@ pub struct Manifest {
     /// level has no lightmap UVs.
     #[serde(default)]
     pub lightmap: Option<LightmapLayout>,
+    /// Baked irradiance probes; `None` when the level was not baked.
+    #[serde(default)]
+    pub probes: Option<ProbeGrid>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -137,6 +140,33 @@ pub struct LightmapLayout {
     pub pages: Vec<[u32; 2]>,
     /// Texels kept free around every chart.
     pub padding: u32,
+    /// The baked lightmap of each page: a texture (`Rgba16Float`, the page's size, one level)
+    /// holding B = H/pi in nits, linear (runtime: `L_out = L_e + albedo * B`). Empty until baked.
+    #[serde(default)]
+    pub textures: Vec<u32>,
+}
+
+/// Irradiance probes for dynamic objects on a regular grid: probe (i, j, k) sits at
+/// `origin + (i, j, k) * spacing` and is number `i + counts[0] * (j + counts[1] * k)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProbeGrid {
+    pub origin: [f32; 3],
+    pub spacing: [f32; 3],
+    pub counts: [u32; 3],
+    /// f32 [probe][9][rgb]: order-2 SH of B(n) = E(n)/pi in nits, already convolved with the
+    /// cosine, so `B(n) = sum_i sh[i] * Y_i(n)` (basis order Y00, Y1-1 (y), Y10 (z), Y11 (x),
+    /// Y2-2 (xy), Y2-1 (yz), Y20, Y21 (xz), Y22 in world axes; constants in cook_core::bake::probes).
+    /// The sun's direct light is not in it.
+    pub sh: BufferRange,
+    /// f32 [probe]: fraction of the sun's disk visible from the probe (1 with no sun): the
+    /// runtime scales its own sun term by it.
+    pub sun_visibility: BufferRange,
+}
+
+impl ProbeGrid {
+    pub fn count(&self) -> u64 {
+        self.counts.iter().map(|&c| c as u64).product()
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -317,6 +347,26 @@ impl Manifest {
                 let (w, h) = ((t.width >> l).max(1) as u64, (t.height >> l).max(1) as u64);
                 in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, w * h * t.format.bytes_per_texel())?;
             }
+        }
+        if let Some(l) = &self.lightmap {
+            if !l.textures.is_empty() && l.textures.len() != l.pages.len() {
+                return bad(format!("lightmap: {} baked textures for {} pages", l.textures.len(), l.pages.len()));
+            }
+            for (p, (&t, size)) in l.textures.iter().zip(&l.pages).enumerate() {
+                match self.textures.get(t as usize) {
+                    Some(tex) if tex.format == TextureFormat::Rgba16Float && [tex.width, tex.height] == *size => {}
+                    Some(tex) => return bad(format!("lightmap page {p}: texture {t} '{}' is {}x{} {:?}, not {}x{} Rgba16Float", tex.name, tex.width, tex.height, tex.format, size[0], size[1])),
+                    None => return bad(format!("lightmap page {p}: texture {t} does not exist")),
+                }
+            }
+        }
+        if let Some(g) = &self.probes {
+            let n = g.count();
+            if n == 0 || n > 1 << 24 || !g.spacing.iter().chain(&g.origin).all(|x| x.is_finite()) || !g.spacing.iter().all(|&x| x > 0.0) {
+                return bad(format!("probes: bad grid (counts {:?}, spacing {:?}, origin {:?})", g.counts, g.spacing, g.origin));
+            }
+            in_data("probes sh", g.sh, n * 27 * 4)?;
+            in_data("probes sun_visibility", g.sun_visibility, n * 4)?;
         }
         for (i, n) in self.nodes.iter().enumerate() {
             // Parents come before children, which also rules out cycles.

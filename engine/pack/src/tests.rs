@@ -72,7 +72,13 @@ fn sample() -> Pack {
         params: serde_json::json!({"speed": 4.0}),
     });
     b.manifest.sky = Some(Sky { color: [0.5, 0.7, 1.0], intensity: 8000.0 });
-    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[256, 256]], padding: 2 });
+    // A baked 4x4 lightmap page (half floats) and a 2x1x1 probe grid.
+    let lm = b.push_bytes(&[0x3cu8; 4 * 4 * 8]);
+    b.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![lm] });
+    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1] });
+    let sh = b.push_bytes(&[0u8; 2 * 27 * 4]);
+    let sun = b.push_bytes(&[0u8; 2 * 4]);
+    b.manifest.probes = Some(ProbeGrid { origin: [0.0; 3], spacing: [2.0; 3], counts: [2, 1, 1], sh, sun_visibility: sun });
     b.manifest.nodes.push(Node { name: "root".into(), parent: None, local: IDENTITY, mesh: Some(0) });
     b.finish()
 }
@@ -180,6 +186,26 @@ fn dangling_references_are_rejected_before_writing() {
     let mut p = sample();
     p.manifest.nodes.push(Node { name: "loop".into(), parent: Some(1), local: IDENTITY, mesh: None });
     assert!(p.to_bytes().is_err());
+
+    // Lightmap pages must be baked into Rgba16Float textures of the page's size.
+    let mut p = sample();
+    p.manifest.lightmap.as_mut().unwrap().textures = vec![0];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("lightmap page 0: texture 0 't' is 2x2 Rgba8Srgb, not 4x4 Rgba16Float"), "{e}");
+    let mut p = sample();
+    p.manifest.lightmap.as_mut().unwrap().textures = vec![1, 1];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("2 baked textures for 1 pages"), "{e}");
+
+    // Probe data must hold 27 floats and a visibility per probe.
+    let mut p = sample();
+    p.manifest.probes.as_mut().unwrap().counts = [2, 2, 1];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("probes sh") && e.contains("432 expected"), "{e}");
+    let mut p = sample();
+    p.manifest.probes.as_mut().unwrap().spacing[1] = 0.0;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("probes: bad grid"), "{e}");
 }
 
 #[test]

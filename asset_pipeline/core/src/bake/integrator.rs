@@ -123,20 +123,23 @@ pub struct BakeSettings {
     pub samples: u32,
     /// Indirect bounces at most (0: direct light, sky and emitters seen from the point only).
     pub bounces: u32,
+    /// Sphere rays per irradiance probe (see `probes`).
+    pub probe_samples: u32,
     pub seed: u64,
 }
 
 impl BakeSettings {
     /// draft | medium | high. Sample counts follow Godot's low/medium/high rays per texel (32,
-    /// 128, 512; anchors §1.1); bounces 2/3/4 (Godot's default is 3, Unity's 2).
+    /// 128, 512) and per probe (64, 256, 512; anchors §1.1); bounces 2/3/4 (Godot's default is
+    /// 3, Unity's 2).
     pub fn preset(name: &str, seed: u64) -> Option<BakeSettings> {
-        let (samples, bounces) = match name {
-            "draft" => (32, 2),
-            "medium" => (128, 3),
-            "high" => (512, 4),
+        let (samples, probe_samples, bounces) = match name {
+            "draft" => (32, 64, 2),
+            "medium" => (128, 256, 3),
+            "high" => (512, 512, 4),
             _ => return None,
         };
-        Some(BakeSettings { samples, bounces, seed })
+        Some(BakeSettings { samples, bounces, probe_samples, seed })
     }
 }
 

@@ -71,7 +71,7 @@ pub struct Probe {
     pub backface: f32,
 }
 
-/// Bake a probe at every point, with `settings.samples` sphere rays each (and as many light
+/// Bake a probe at every point, with `settings.probe_samples` sphere rays each (and as many light
 /// samples per light). Runs on the current rayon pool; progress and cancel as `bake_points`.
 pub fn bake_probes(
     scene: &BakeScene,
@@ -105,11 +105,11 @@ pub fn bake_probes(
 }
 
 fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u64) -> Probe {
-    let n = s.samples.max(1);
+    let n = s.probe_samples.max(1);
     let mut sh = [[0.0f64; 3]; 9];
     let mut backface = 0u32;
     let (mut sun_seen, mut sun_tried) = (0u32, 0u32);
-    let mut add_delta = |sh: &mut [[f64; 3]; 9], w: V3, l: V3, weight: f32| {
+    let add_delta = |sh: &mut [[f64; 3]; 9], w: V3, l: V3, weight: f32| {
         let y = sh9(w);
         for i in 0..9 {
             for c in 0..3 {

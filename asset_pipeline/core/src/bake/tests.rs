@@ -236,7 +236,7 @@ fn bake(scene: &BakeScene, pts: &[V3], nrm: &[V3], s: &BakeSettings) -> Baked {
 }
 
 fn settings(samples: u32, bounces: u32, seed: u64) -> BakeSettings {
-    BakeSettings { samples, bounces, seed }
+    BakeSettings { samples, bounces, probe_samples: samples, seed }
 }
 
 fn lights(json: &str) -> Vec<Light> {
@@ -490,7 +490,7 @@ fn probe_inside_a_solid_sees_back_faces_and_bakes_deterministically() {
         }
     }
     // Far out on the sunlit floor: its radiance, 0.8 x (800 lux / pi + sky), comes from below.
-    let far = &probes(&scene, &[[6.0, 1.0, 0.2]], &BakeSettings { samples: 2048, ..st })[0];
+    let far = &probes(&scene, &[[6.0, 1.0, 0.2]], &BakeSettings { probe_samples: 2048, ..st })[0];
     let (up, down) = (eval_sh9(&far.sh, [0.0, 1.0, 0.0])[0], eval_sh9(&far.sh, [0.0, -1.0, 0.0])[0]);
     assert!(down > 150.0 && down > 10.0 * up.max(0.0), "{far:?}");
 }

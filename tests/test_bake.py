@@ -1,0 +1,204 @@
+"""The bake stage end to end: a small level cooked with lightmaps and probes, the files it writes,
+determinism across thread counts, Ctrl-C, and bad arguments."""
+
+from __future__ import annotations
+
+import subprocess
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import asset_pipeline
+from asset_pipeline import bake, ir
+from asset_pipeline.lightmap_post import read_exr
+from asset_pipeline.pipeline import CookSettings, cook
+
+COOK = Path(__file__).resolve().parent.parent / ".venv" / "bin" / "cook"
+
+# A closed room (walls, floor, roof) with a doorway and a skylight, on a ground slab, under sun
+# and sky, with a point light inside: light enters and bounces; the room's far corner is in shadow.
+ROOM = """
+[level]
+name = "room"
+texels_per_metre = 4
+sky = { color = [0.5, 0.6, 1.0], intensity = 5000 }
+
+[[materials]]
+name = "stone"
+base_color = [0.7, 0.65, 0.6]
+
+[[brushes]]
+name = "slab"
+kind = "box"
+size = [16, 1, 16]
+translation = [0, -0.5, 0]
+material = "stone"
+
+[[brushes]]
+name = "shell"
+kind = "box"
+size = [6, 4, 6]
+translation = [0, 2, 0]
+material = "stone"
+
+[[brushes]]
+name = "inside"
+kind = "box"
+size = [5.4, 3.4, 5.4]
+translation = [0, 2, 0]
+material = "stone"
+
+[[brushes]]
+name = "door"
+kind = "box"
+size = [1.2, 2.2, 1]
+translation = [0, 1.4, 2.9]
+material = "stone"
+
+[[brushes]]
+name = "skylight"
+kind = "box"
+size = [1, 1, 1]
+translation = [1.5, 3.8, -1.5]
+material = "stone"
+
+[[objects]]
+name = "ground"
+op = "union"
+operands = ["slab"]
+
+[[objects]]
+name = "room"
+op = "difference"
+operands = ["shell", "inside", "door", "skylight"]
+
+[[lights]]
+name = "sun"
+kind = "sun"
+direction = [-0.3, -0.8, -0.5]
+intensity = 80000
+
+[[lights]]
+name = "lamp"
+kind = "point"
+position = [-1.5, 2.5, -1.5]
+intensity = 100
+range = 8
+"""
+
+QUICK = bake.BakeSettings(preset="draft", samples=8, probe_samples=16)
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("room")
+    p = d / "room.toml"
+    p.write_text(textwrap.dedent(ROOM))
+    return p
+
+
+@pytest.fixture(scope="module")
+def cooked(room, tmp_path_factory):
+    out = tmp_path_factory.mktemp("out") / "room.pack"
+    result = cook(room, out, CookSettings(bake=QUICK, lods=False))
+    return out, result
+
+
+def test_bake_writes_exr_pages_and_puts_lightmaps_and_probes_in_the_pack(cooked):
+    out, result = cooked
+    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "write"]
+    exr = out.with_name("room.lightmap0.exr")
+    img = read_exr(exr)
+    # Readable by the OpenEXR package as well, as half floats.
+    import OpenEXR
+
+    with OpenEXR.File(str(exr)) as f:
+        parts = f.parts[0]
+        rgb = parts.channels["RGB"].pixels if "RGB" in parts.channels else np.stack([parts.channels[c].pixels for c in "RGB"], -1)
+    assert rgb.dtype == np.float16 and rgb.shape == img.shape
+    np.testing.assert_array_equal(rgb.astype(np.float32), img)
+
+    summary = asset_pipeline.read_pack_summary(out)
+    assert summary["lightmap_pages"] == 1 and summary["lightmaps_baked"] == 1, summary
+    assert summary["probes"] > 0, summary
+
+    # HDR kept (sunlit ground is thousands of nits, no clamp at 1), nothing negative or NaN.
+    assert np.isfinite(img).all() and img.min() >= 0.0
+    assert img.max() > 1000.0, img.max()
+    report = out.with_suffix(".report.md").read_text()
+    assert "## Bake" in report and "room.lightmap0.exr" in report and "Probes:" in report
+
+
+def test_probes_see_the_room_dark_and_the_yard_bright(room, tmp_path):
+    scene = _scene(room)
+    baked = bake.bake_level(scene, QUICK)
+    g = baked.probes
+    nx, ny, nz = g.counts
+    pos = np.array(g.origin) + np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), -1).transpose(2, 1, 0, 3).reshape(-1, 3) * np.array(g.spacing)
+    inside = (np.abs(pos[:, 0]) < 2.4) & (np.abs(pos[:, 2]) < 2.4) & (pos[:, 1] > 0.5) & (pos[:, 1] < 3.5)
+    outside = (np.abs(pos[:, 0]) > 4.0) & (pos[:, 1] > 0.5) & (pos[:, 1] < 3.5)
+    assert inside.any() and outside.any()
+    # DC term: the mean of B over directions.
+    dc = g.sh[:, 0, 1] * 0.2820948
+    assert np.median(dc[outside]) > 3 * np.median(dc[inside]), (np.median(dc[outside]), np.median(dc[inside]))
+    assert g.sun_visibility[outside].mean() > 0.9 and g.sun_visibility[inside].mean() < 0.5
+
+
+def _scene(room: Path) -> ir.Scene:
+    import dataclasses
+
+    from asset_pipeline.csg import build_level
+    from asset_pipeline.level import load_level
+    from asset_pipeline.uv2 import Uv2Settings, lightmap_uvs
+
+    scene = build_level(load_level(room))
+    static = [i for i, m in enumerate(scene.meshes) if m.static]
+    lods, layout, _ = lightmap_uvs([(scene.meshes[i].base, 1.0) for i in static], Uv2Settings(texels_per_metre=4.0))
+    meshes = list(scene.meshes)
+    for i, lod in zip(static, lods):
+        meshes[i] = dataclasses.replace(meshes[i], lods=[lod])
+    return dataclasses.replace(scene, meshes=meshes, lightmap=layout)
+
+
+def test_same_seed_one_and_two_threads_give_identical_exr_bytes(room, tmp_path):
+    outs = []
+    for threads in (1, 2):
+        out = tmp_path / f"t{threads}" / "room.pack"
+        out.parent.mkdir()
+        cook(room, out, CookSettings(bake=bake.BakeSettings(preset="draft", samples=4, probe_samples=8, seed=3, threads=threads), lods=False, report=False))
+        outs.append(out)
+    a, b = (o.with_name("room.lightmap0.exr").read_bytes() for o in outs)
+    assert a == b
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+
+
+def test_interrupting_the_bake_leaves_the_previous_outputs(room, tmp_path):
+    out = tmp_path / "room.pack"
+    cook(room, out, CookSettings(bake=QUICK, lods=False, report=False))
+    exr = out.with_name("room.lightmap0.exr")
+    before = (out.read_bytes(), exr.read_bytes())
+
+    def interrupt(stage, done, total):
+        if stage.startswith("bake") and done > 0:
+            raise KeyboardInterrupt
+
+    from asset_pipeline.progress import Progress
+
+    with pytest.raises(KeyboardInterrupt):
+        cook(room, out, CookSettings(bake=bake.BakeSettings(preset="draft", samples=2, probe_samples=4, seed=9), lods=False, report=False),
+             progress=Progress(callback=interrupt))
+    assert (out.read_bytes(), exr.read_bytes()) == before
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["room.lightmap0.exr", "room.pack"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--samples", "0"), "argument --samples: 0 is not 1 or more"),
+    (("--quality", "ultra"), "argument --quality: invalid choice: 'ultra'"),
+    (("--bounces", "x"), "argument --bounces: 'x' is not a whole number"),
+])
+def test_bad_bake_arguments_are_one_line_errors(room, tmp_path, args, message):
+    r = subprocess.run([str(COOK), str(room), "-o", str(tmp_path / "x.pack"), *args], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "x.pack").exists()
