@@ -1,8 +1,10 @@
 //! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
 
 pub mod camera;
+pub mod cull;
 pub mod gpu;
 pub mod headless;
+pub mod lod_select;
 pub mod renderer;
 pub mod scene;
 pub mod shaders;
