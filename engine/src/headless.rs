@@ -99,7 +99,6 @@ impl Offscreen {
             depth_view: self.depth.view,
             extent: self.extent,
         };
-        let aspect = self.extent.width as f32 / self.extent.height as f32;
         unsafe {
             d.reset_command_buffer(self.cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(self.cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
@@ -108,7 +107,7 @@ impl Offscreen {
                 d.cmd_write_timestamp2(self.cb, vk::PipelineStageFlags2::TOP_OF_PIPE, q, 0);
             }
         }
-        renderer.record(gpu, self.cb, 0, scene, camera.view_proj(aspect), camera.position, lighting, &target);
+        renderer.record(gpu, self.cb, 0, scene, camera, lighting, &target);
         unsafe {
             if capture {
                 barrier(gpu, self.cb, self.color.image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_TRANSFER_SRC);

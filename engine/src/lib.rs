@@ -9,6 +9,7 @@ pub mod renderer;
 pub mod scene;
 pub mod shaders;
 pub mod stats;
+pub mod visibility;
 pub mod window;
 
 pub use pack;

@@ -1,9 +1,11 @@
 //! The forward renderer: one graphics pipeline (dynamic rendering, reversed-Z depth) that draws a
 //! `GpuScene` into any colour + depth attachment pair. Used by the headless target and the window.
 
+use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
 use crate::scene::GpuScene;
 use crate::shaders;
+use crate::visibility::Visibility;
 use anyhow::Result;
 use ash::vk;
 use glam::{Mat3, Mat4, Vec3, Vec4};
@@ -83,6 +85,8 @@ pub struct Renderer {
     /// One uniform buffer and descriptor set per frame in flight.
     frame_ubos: Vec<Buffer>,
     frame_sets: Vec<vk::DescriptorSet>,
+    /// Culling and LOD state and settings; `visibility.counts` are the last frame's counters.
+    pub visibility: Visibility,
 }
 
 /// Normal matrix: inverse-transpose of the 3x3 part (not the cofactor, which flips normals of
@@ -147,27 +151,33 @@ impl Renderer {
             frame_ubos.push(ubo);
             frame_sets.push(set);
         }
-        Ok(Renderer { color_format, depth_format, material_layout, frame_layout, pipeline_layout, pipeline, pool, frame_ubos, frame_sets })
+        Ok(Renderer {
+            color_format,
+            depth_format,
+            material_layout,
+            frame_layout,
+            pipeline_layout,
+            pipeline,
+            pool,
+            frame_ubos,
+            frame_sets,
+            visibility: Visibility::default(),
+        })
     }
 
-    /// Record one frame: attachments from UNDEFINED to attachment layouts, clear, draw every
-    /// instance. The colour image is left in COLOR_ATTACHMENT_OPTIMAL for the caller to present
-    /// or copy. `slot` selects the per-frame uniform buffer, which must not be in use by the GPU.
-    pub fn record(
-        &mut self,
-        gpu: &Gpu,
-        cb: vk::CommandBuffer,
-        slot: usize,
-        scene: &GpuScene,
-        view_proj: Mat4,
-        camera_pos: Vec3,
-        lighting: &Lighting,
-        target: &FrameTarget,
-    ) {
+    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`), attachments from
+    /// UNDEFINED to attachment layouts, clear, draw what is visible. The colour image is left in
+    /// COLOR_ATTACHMENT_OPTIMAL for the caller to present or copy. `slot` selects the per-frame
+    /// uniform buffer, which must not be in use by the GPU.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, target: &FrameTarget) {
         let d = &gpu.device;
+        let aspect = target.extent.width as f32 / target.extent.height as f32;
+        let view_proj = camera.view_proj(aspect);
+        self.visibility.update(scene, view_proj, camera.position, camera.fov_y, target.extent.height as f32);
         let uniforms = FrameUniforms {
             view_proj,
-            camera_pos: camera_pos.extend(1.0),
+            camera_pos: camera.position.extend(1.0),
             sun_dir: lighting.sun_dir.normalize().extend(0.0),
             sun_color: lighting.sun_color.extend(0.0),
             ambient: lighting.ambient.extend(0.0),
@@ -218,13 +228,15 @@ impl Renderer {
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[self.frame_sets[slot]], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
-            for inst in &scene.instances {
+            for draw in &self.visibility.draws {
+                let inst = &scene.instances[draw.instance as usize];
                 let mesh = &scene.meshes[inst.mesh as usize];
+                let lod = &mesh.lods[draw.lod as usize];
                 let n = normal_matrix(inst.world);
                 // A mirrored instance (negative determinant) reverses its winding.
                 let front = if inst.world.determinant() < 0.0 { vk::FrontFace::CLOCKWISE } else { vk::FrontFace::COUNTER_CLOCKWISE };
                 d.cmd_set_front_face(cb, front);
-                for sm in &mesh.submeshes {
+                for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
                     let push = DrawPush {
                         model: inst.world,
@@ -241,7 +253,7 @@ impl Renderer {
                     );
                     d.cmd_set_cull_mode(cb, if mat.double_sided { vk::CullModeFlags::NONE } else { vk::CullModeFlags::BACK });
                     d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
-                    d.cmd_draw_indexed(cb, sm.index_count, 1, mesh.first_index + sm.first_index, mesh.base_vertex, 0);
+                    d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, lod.base_vertex, 0);
                 }
             }
             d.cmd_end_rendering(cb);

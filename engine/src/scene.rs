@@ -1,21 +1,35 @@
 //! A cooked pack on the GPU: one vertex and one index buffer for all meshes, textures, material
 //! descriptor sets, and instances (mesh + world transform) from the node hierarchy.
 
+use crate::cull::{world_sphere, Spheres};
 use crate::gpu::{Buffer, Gpu, Image};
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::{Mat4, Vec3};
 use pack::{Pack, TextureFormat};
 
-/// Where one mesh lives inside the shared buffers.
+/// Where one level of detail of a mesh lives inside the shared buffers.
 #[derive(Debug, Clone)]
-pub struct GpuMesh {
-    pub name: String,
+pub struct GpuLod {
     pub base_vertex: i32,
     pub first_index: u32,
     pub submeshes: Vec<pack::Submesh>,
+    /// Geometric error to LOD 0, metres in object space (0 for LOD 0).
+    pub error: f32,
+    pub triangles: u32,
+}
+
+#[derive(Debug, Clone)]
+pub struct GpuMesh {
+    pub name: String,
+    /// Full detail first.
+    pub lods: Vec<GpuLod>,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
+    /// Static level geometry: lit by its lightmap rather than the probes and the sun.
+    pub is_static: bool,
+    /// `lods[i].error` for every LOD (what LOD selection reads, without gathering it per draw).
+    pub errors: Vec<f32>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -32,12 +46,16 @@ pub struct GpuMaterial {
 pub struct Instance {
     pub mesh: u32,
     pub world: Mat4,
+    /// Largest axis scale of `world` (object-space errors and radii to world metres).
+    pub scale: f32,
 }
 
 pub struct GpuScene {
     pub meshes: Vec<GpuMesh>,
     pub materials: Vec<GpuMaterial>,
     pub instances: Vec<Instance>,
+    /// World bounding sphere of every instance, for culling (same order as `instances`).
+    pub spheres: Spheres,
     pub vertex_buffer: Buffer,
     pub index_buffer: Buffer,
     textures: Vec<Image>,
@@ -52,6 +70,12 @@ fn vk_format(f: TextureFormat) -> vk::Format {
         TextureFormat::Rgba8Unorm => vk::Format::R8G8B8A8_UNORM,
         TextureFormat::Rgba16Float => vk::Format::R16G16B16A16_SFLOAT,
     }
+}
+
+/// Largest axis scale of a transform's 3x3 part.
+pub fn max_scale(m: Mat4) -> f32 {
+    let m3 = glam::Mat3::from_mat4(m);
+    m3.x_axis.length().max(m3.y_axis.length()).max(m3.z_axis.length())
 }
 
 /// World transforms of every node (parents precede children, as the pack guarantees).
@@ -109,18 +133,26 @@ impl GpuScene {
         let mut index_bytes = Vec::new();
         let mut meshes = Vec::with_capacity(m.meshes.len());
         for mesh in &m.meshes {
-            // LOD 0 only until LOD selection by projected error lands in the renderer.
-            let lod = &mesh.lods[0];
+            let mut lods = Vec::with_capacity(mesh.lods.len());
+            for lod in &mesh.lods {
+                lods.push(GpuLod {
+                    base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
+                    first_index: (index_bytes.len() / 4) as u32,
+                    submeshes: lod.submeshes.clone(),
+                    error: lod.error,
+                    triangles: lod.index_count / 3,
+                });
+                vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
+                index_bytes.extend_from_slice(pack.bytes(lod.indices));
+            }
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),
-                base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
-                first_index: (index_bytes.len() / 4) as u32,
-                submeshes: lod.submeshes.clone(),
+                lods,
                 bounds_min: Vec3::from(mesh.bounds_min),
                 bounds_max: Vec3::from(mesh.bounds_max),
+                is_static: mesh.is_static,
+                errors: mesh.lods.iter().map(|l| l.error).collect(),
             });
-            vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
-            index_bytes.extend_from_slice(pack.bytes(lod.indices));
         }
         let vertex_buffer = Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
         let index_buffer = Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?;
@@ -177,14 +209,20 @@ impl GpuScene {
         }
 
         let world = world_transforms(&m.nodes);
-        let instances = m
+        let instances: Vec<Instance> = m
             .nodes
             .iter()
             .zip(&world)
-            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w }))
+            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w, scale: max_scale(*w) }))
             .collect();
+        let mut spheres = Spheres::default();
+        for i in &instances {
+            let mesh = &meshes[i.mesh as usize];
+            let (c, r) = world_sphere(i.world, (mesh.bounds_min + mesh.bounds_max) * 0.5, (mesh.bounds_max - mesh.bounds_min).length() * 0.5);
+            spheres.push(c, r);
+        }
 
-        Ok(GpuScene { meshes, materials, instances, vertex_buffer, index_buffer, textures, white, samplers: [sampler, sampler_aniso], pool })
+        Ok(GpuScene { meshes, materials, instances, spheres, vertex_buffer, index_buffer, textures, white, samplers: [sampler, sampler_aniso], pool })
     }
 
     /// World-space bounds of every instance together (for framing the camera).
@@ -204,11 +242,9 @@ impl GpuScene {
         }
     }
 
+    /// Triangles of every instance at full detail.
     pub fn triangle_count(&self) -> u64 {
-        self.instances
-            .iter()
-            .map(|i| self.meshes[i.mesh as usize].submeshes.iter().map(|s| s.index_count as u64 / 3).sum::<u64>())
-            .sum()
+        self.instances.iter().map(|i| self.meshes[i.mesh as usize].lods[0].triangles as u64).sum()
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {

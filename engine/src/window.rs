@@ -271,13 +271,12 @@ impl State {
             depth_view: self.swapchain.depth.view,
             extent: self.swapchain.extent,
         };
-        let aspect = target.extent.width as f32 / target.extent.height as f32;
         unsafe {
             d.reset_fences(&[fence])?;
             d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
-        self.renderer.record(&self.gpu, cb, slot, &self.scene, self.camera.view_proj(aspect), self.camera.position, &self.lighting, &target);
+        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target);
         barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
         let rendered = self.swapchain.rendered[i];
         unsafe {

@@ -251,3 +251,73 @@ fn rendering_is_deterministic() {
     assert!(a == b, "two renders of the same scene differ");
     assert_clean(&gpu);
 }
+
+#[test]
+fn renderer_culls_the_notes_known_scene_exactly() {
+    // pipeline.md T3.1 through the renderer: 441 cubes whose bounding spheres have radius 0.5
+    // (scale 1/sqrt 3) on the integer grid x, z in -10..10, a 90 degree camera at the origin
+    // looking down -z: 121 drawn, 320 culled. Culling off draws all 441 to the same image there.
+    let gpu = gpu();
+    let s = 1.0 / 3f32.sqrt();
+    let placements: Vec<Mat4> = (-10..=10)
+        .flat_map(|x| (-10..=10).map(move |z| Mat4::from_translation(Vec3::new(x as f32, 0.0, z as f32)) * Mat4::from_scale(Vec3::splat(s))))
+        .collect();
+    let pack = cube_pack(&placements, WHITE4, Material::default());
+    let cam = Camera { position: Vec3::ZERO, yaw: 0.0, pitch: 0.0, fov_y: 90f32.to_radians(), near: 0.1 };
+    let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
+    let culled = target.pixels().to_vec();
+    let c = renderer.visibility.counts;
+    assert_eq!((c.cull.tested, c.cull.visible, c.cull.culled, c.cull.inside), (441, 121, 320, 100));
+    assert_eq!(c.triangles, 121 * 12);
+    renderer.visibility.culling = false;
+    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(renderer.visibility.counts.cull.visible, 441);
+    assert!(target.pixels() == culled.as_slice(), "culling changed the image");
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    target.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
+fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
+    // One cube mesh with three LODs (6, 4 and 2 faces of it, errors 0, 5 cm and 30 cm): moving the
+    // camera back, the drawn LOD never goes back to a finer one and ends at the coarsest; the
+    // triangle counter follows the LOD drawn.
+    let gpu = gpu();
+    let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
+    let lod0 = pack.manifest.meshes[0].lods[0].clone();
+    for (faces, error) in [(4u32, 0.05f32), (2, 0.3)] {
+        let mut l = lod0.clone();
+        l.index_count = faces * 6;
+        l.submeshes[0].index_count = faces * 6;
+        l.error = error;
+        pack.manifest.meshes[0].lods.push(l);
+    }
+    let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    let mut last = 0u8;
+    let mut seen = vec![];
+    for step in 0..40 {
+        let distance = 1.5 * 1.25f32.powi(step);
+        target.render(&gpu, &mut renderer, &scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
+        let v = &renderer.visibility;
+        assert_eq!(v.draws.len(), 1);
+        let lod = v.draws[0].lod;
+        assert!(lod >= last, "LOD went from {last} to {lod} moving away at {distance} m");
+        assert_eq!(v.counts.triangles, [12, 8, 4][lod as usize]);
+        if seen.last() != Some(&lod) {
+            seen.push(lod);
+        }
+        last = lod;
+    }
+    assert_eq!(seen, vec![0, 1, 2]);
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    target.destroy(&gpu);
+    assert_clean(&gpu);
+}

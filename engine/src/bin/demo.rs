@@ -190,12 +190,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     }
     target.save_png(&args.screenshot)?;
     println!("wrote {}", args.screenshot.display());
+    let c = renderer.visibility.counts;
     println!(
-        "frames: {frames} at {}x{}, {} instances, {} triangles per frame",
+        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
         args.width,
         args.height,
         scene.instances.len(),
-        scene.triangle_count()
+        c.cull.culled,
+        c.cull.visible,
+        c.triangles,
+        scene.triangle_count(),
+        c.lod_histogram
     );
     println!(
         "frame_ms: median {:.3} p95 {:.3}",
