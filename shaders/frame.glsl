@@ -6,3 +6,9 @@ layout(set = 0, binding = 0) uniform Frame {
     vec4 sun_color;    // rgb linear irradiance scale
     vec4 ambient;      // rgb linear ambient (stand-in until probes and lightmaps land)
 } frame;
+
+// Counted fragments (the renderer's fragment counter; written only by pipelines made with the
+// COUNT_FRAGMENTS specialisation constant set). Mirrors `Renderer::fragment_count`.
+layout(set = 0, binding = 1) buffer Counters {
+    uint fragments;
+} counters;

@@ -15,6 +15,9 @@ layout(push_constant) uniform Draw {
 } draw;
 
 layout(location = 0) out vec3 out_normal;
+// The depth pre-pass and the shading pass run this same shader; invariance makes their depths
+// bit-identical, so the shading pass's EQUAL test passes exactly the pre-pass's winners.
+invariant gl_Position;
 layout(location = 1) out vec2 out_uv0;
 layout(location = 2) out vec4 out_color;
 

@@ -3,7 +3,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
-use crate::scene::GpuScene;
+use crate::scene::{GpuMaterial, GpuScene};
 use crate::shaders;
 use crate::visibility::Visibility;
 use anyhow::Result;
@@ -80,13 +80,50 @@ pub struct Renderer {
     pub material_layout: vk::DescriptorSetLayout,
     frame_layout: vk::DescriptorSetLayout,
     pipeline_layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    pipelines: Pipelines,
     pool: vk::DescriptorPool,
+    /// Pipeline statistics (vertex and fragment shader invocations) of the pre-pass and the
+    /// shading pass, two queries per frame slot; None when the device cannot count.
+    stats_pool: Option<vk::QueryPool>,
+    /// Whether the frame recorded in each slot ran the pre-pass (its query was begun).
+    slot_prepass: Vec<bool>,
+    /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
+    pub prepass: bool,
+    /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
+    pub count_fragments: bool,
+    counters: Vec<Buffer>,
     /// One uniform buffer and descriptor set per frame in flight.
     frame_ubos: Vec<Buffer>,
     frame_sets: Vec<vk::DescriptorSet>,
     /// Culling and LOD state and settings; `visibility.counts` are the last frame's counters.
     pub visibility: Visibility,
+}
+
+/// The graphics pipelines of the mesh passes (all share one layout and the vertex shader).
+struct Pipelines {
+    /// Shading without a pre-pass: depth test and write, alpha test in the shader.
+    shade: vk::Pipeline,
+    /// Shading after the pre-pass: depth EQUAL, no writes, early fragment tests.
+    shade_equal: vk::Pipeline,
+    /// Both again, counting fragments (when the device lets fragment shaders write buffers).
+    shade_counting: Option<(vk::Pipeline, vk::Pipeline)>,
+    /// Pre-pass: depth only, no fragment shader; and with the alpha-test discard.
+    depth: vk::Pipeline,
+    depth_masked: vk::Pipeline,
+}
+
+/// Shader invocations counted by the pipeline statistics queries.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ShaderInvocations {
+    pub vertex: u64,
+    pub fragment: u64,
+}
+
+/// The last frame's counts per pass (`prepass` is None when it did not run).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PassStats {
+    pub prepass: Option<ShaderInvocations>,
+    pub shading: ShaderInvocations,
 }
 
 /// Normal matrix: inverse-transpose of the 3x3 part (not the cofactor, which flips normals of
@@ -99,11 +136,18 @@ impl Renderer {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Renderer> {
         let d = &gpu.device;
         let depth_format = gpu.caps.depth_format;
-        let frame_binding = [vk::DescriptorSetLayoutBinding::default()
-            .binding(0)
-            .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-            .descriptor_count(1)
-            .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)];
+        let frame_binding = [
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(0)
+                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(1)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+        ];
         let material_binding = [vk::DescriptorSetLayoutBinding::default()
             .binding(0)
             .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
@@ -122,14 +166,36 @@ impl Renderer {
         let pipeline_layout = unsafe {
             d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?
         };
-        let pipeline = create_mesh_pipeline(gpu, pipeline_layout, color_format, depth_format)?;
+        let reversed_z_nearer = vk::CompareOp::GREATER_OR_EQUAL;
+        let shade = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(color_format), depth_format, Some(shaders::MESH_FRAG), true, reversed_z_nearer, count);
+        let shade_equal = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(color_format), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, count);
+        let pipelines = Pipelines {
+            shade: shade(false)?,
+            shade_equal: shade_equal(false)?,
+            shade_counting: if gpu.caps.fragment_atomics { Some((shade(true)?, shade_equal(true)?)) } else { None },
+            depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, false)?,
+            depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, false)?,
+        };
+        let stats_pool = if gpu.caps.pipeline_statistics {
+            let info = vk::QueryPoolCreateInfo::default()
+                .query_type(vk::QueryType::PIPELINE_STATISTICS)
+                .query_count(2 * frames_in_flight as u32)
+                .pipeline_statistics(vk::QueryPipelineStatisticFlags::VERTEX_SHADER_INVOCATIONS | vk::QueryPipelineStatisticFlags::FRAGMENT_SHADER_INVOCATIONS);
+            Some(unsafe { d.create_query_pool(&info, None)? })
+        } else {
+            None
+        };
 
         let n = frames_in_flight as u32;
-        let pool_sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n }];
+        let pool_sizes = [
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: n },
+        ];
         let pool = unsafe {
             d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&pool_sizes), None)?
         };
         let mut frame_ubos = Vec::new();
+        let mut counters = Vec::new();
         let mut frame_sets = Vec::new();
         for _ in 0..frames_in_flight {
             let ubo = Buffer::new(
@@ -139,16 +205,18 @@ impl Renderer {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 MemoryLocation::CpuToGpu,
             )?;
+            let counter = Buffer::new(gpu, "fragment counter", 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu)?;
             let layouts = [frame_layout];
             let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
-            let info = [vk::DescriptorBufferInfo { buffer: ubo.buffer, offset: 0, range: vk::WHOLE_SIZE }];
-            let write = vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-                .buffer_info(&info);
-            unsafe { d.update_descriptor_sets(&[write], &[]) };
+            let ubo_info = [vk::DescriptorBufferInfo { buffer: ubo.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+            let counter_info = [vk::DescriptorBufferInfo { buffer: counter.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+            let writes = [
+                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(0).descriptor_type(vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&ubo_info),
+                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&counter_info),
+            ];
+            unsafe { d.update_descriptor_sets(&writes, &[]) };
             frame_ubos.push(ubo);
+            counters.push(counter);
             frame_sets.push(set);
         }
         Ok(Renderer {
@@ -157,8 +225,13 @@ impl Renderer {
             material_layout,
             frame_layout,
             pipeline_layout,
-            pipeline,
+            pipelines,
             pool,
+            stats_pool,
+            slot_prepass: vec![false; frames_in_flight],
+            prepass: true,
+            count_fragments: false,
+            counters,
             frame_ubos,
             frame_sets,
             visibility: Visibility::default(),
@@ -190,44 +263,68 @@ impl Renderer {
 
         barrier(gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_DISCARD);
         barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_ATTACHMENT_DISCARD);
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
+        let (query_a, query_b) = (2 * slot as u32, 2 * slot as u32 + 1);
+        if let Some(pool) = self.stats_pool {
+            unsafe { d.cmd_reset_query_pool(cb, pool, query_a, 2) };
+        }
+        // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
+        // depth-only rendering that has no draws).
+        let prepass = self.prepass && !self.visibility.draws.is_empty();
+        self.slot_prepass[slot] = prepass;
+        // Reversed-Z: the far plane is depth 0.
+        let depth_clear = vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } };
+        if prepass {
+            let depth_attachment = vk::RenderingAttachmentInfo::default()
+                .image_view(target.depth_view)
+                .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .clear_value(depth_clear);
+            let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
+            self.pass(gpu, cb, scene, slot, &rendering, query_a, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
+            // The shading pass tests against what the pre-pass wrote.
+            barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
+        }
         let color_attachment = [vk::RenderingAttachmentInfo::default()
             .image_view(target.color_view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::STORE)
             .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: CLEAR_COLOR } })];
-        // Reversed-Z: the far plane is depth 0.
         let depth_attachment = vk::RenderingAttachmentInfo::default()
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .load_op(if prepass { vk::AttachmentLoadOp::LOAD } else { vk::AttachmentLoadOp::CLEAR })
             .store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } });
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
-        let rendering = vk::RenderingInfo::default()
-            .render_area(area)
-            .layer_count(1)
-            .color_attachments(&color_attachment)
-            .depth_attachment(&depth_attachment);
+            .clear_value(depth_clear);
+        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
+        let p = &self.pipelines;
+        let shade = match (self.count_fragments, p.shade_counting) {
+            (true, Some((plain, equal))) => if prepass { equal } else { plain },
+            _ => if prepass { p.shade_equal } else { p.shade },
+        };
+        self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
+        self.pass(gpu, cb, scene, slot, &rendering, query_b, |_| shade);
+    }
+
+    /// One rendering instance drawing every visible instance, each submesh with the pipeline
+    /// `pipeline_for(material)` gives, counted by pipeline-statistics query `query`.
+    #[allow(clippy::too_many_arguments)]
+    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, slot: usize, rendering: &vk::RenderingInfo, query: u32, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) {
+        let d = &gpu.device;
+        let extent = rendering.render_area.extent;
         unsafe {
-            d.cmd_begin_rendering(cb, &rendering);
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
-            d.cmd_set_viewport(
-                cb,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: target.extent.width as f32,
-                    height: target.extent.height as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cb, 0, &[area]);
+            if let Some(pool) = self.stats_pool {
+                d.cmd_begin_query(cb, pool, query, vk::QueryControlFlags::empty());
+            }
+            d.cmd_begin_rendering(cb, rendering);
+            d.cmd_set_viewport(cb, 0, &[vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 }]);
+            d.cmd_set_scissor(cb, 0, &[rendering.render_area]);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[self.frame_sets[slot]], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
+            let mut bound = vk::Pipeline::null();
             for draw in &self.visibility.draws {
                 let inst = &scene.instances[draw.instance as usize];
                 let mesh = &scene.meshes[inst.mesh as usize];
@@ -238,36 +335,63 @@ impl Renderer {
                 d.cmd_set_front_face(cb, front);
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
+                    let pipeline = pipeline_for(mat);
+                    if pipeline != bound {
+                        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+                        bound = pipeline;
+                    }
                     let push = DrawPush {
                         model: inst.world,
                         normal_cols: [n.x_axis.extend(mat.alpha_cutoff), n.y_axis.extend(0.0), n.z_axis.extend(0.0)],
                         base_color: Vec4::from(mat.base_color),
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
-                    d.cmd_push_constants(
-                        cb,
-                        self.pipeline_layout,
-                        vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT,
-                        0,
-                        push_bytes,
-                    );
+                    d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
                     d.cmd_set_cull_mode(cb, if mat.double_sided { vk::CullModeFlags::NONE } else { vk::CullModeFlags::BACK });
                     d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
                     d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, lod.base_vertex, 0);
                 }
             }
             d.cmd_end_rendering(cb);
+            if let Some(pool) = self.stats_pool {
+                d.cmd_end_query(cb, pool, query);
+            }
         }
+    }
+
+    /// Fragments the shading pass of the frame last recorded in `slot` shaded, once the GPU has
+    /// finished it; None unless `count_fragments` was on and the device can count.
+    pub fn fragment_count(&self, slot: usize) -> Option<u32> {
+        (self.count_fragments && self.pipelines.shade_counting.is_some()).then(|| u32::from_le_bytes(self.counters[slot].mapped_ref()[..4].try_into().unwrap()))
+    }
+
+    /// Shader invocations of the frame last recorded in `slot`, once the GPU has finished it
+    /// (the caller waits for its fence first). None when the device cannot count.
+    pub fn pass_stats(&self, gpu: &Gpu, slot: usize) -> Option<PassStats> {
+        let pool = self.stats_pool?;
+        let read = |q: u32| -> Option<ShaderInvocations> {
+            let mut v = [[0u64; 2]; 1];
+            unsafe { gpu.device.get_query_pool_results(pool, q, &mut v, vk::QueryResultFlags::TYPE_64) }.ok()?;
+            Some(ShaderInvocations { vertex: v[0][0], fragment: v[0][1] })
+        };
+        let prepass = if self.slot_prepass[slot] { Some(read(2 * slot as u32)?) } else { None };
+        Some(PassStats { prepass, shading: read(2 * slot as u32 + 1)? })
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
         let d = &gpu.device;
-        for b in &mut self.frame_ubos {
+        for b in self.frame_ubos.iter_mut().chain(self.counters.iter_mut()) {
             b.destroy(gpu);
         }
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);
-            d.destroy_pipeline(self.pipeline, None);
+            let p = &self.pipelines;
+            for pipeline in [p.shade, p.shade_equal, p.depth, p.depth_masked].into_iter().chain(p.shade_counting.into_iter().flat_map(|(a, b)| [a, b])) {
+                d.destroy_pipeline(pipeline, None);
+            }
+            if let Some(pool) = self.stats_pool {
+                d.destroy_query_pool(pool, None);
+            }
             d.destroy_pipeline_layout(self.pipeline_layout, None);
             d.destroy_descriptor_set_layout(self.frame_layout, None);
             d.destroy_descriptor_set_layout(self.material_layout, None);
@@ -284,14 +408,30 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     }
 }
 
-fn create_mesh_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, color_format: vk::Format, depth_format: vk::Format) -> Result<vk::Pipeline> {
+/// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
+/// (None: no colour attachment) and `depth_format` with the given depth write and compare.
+#[allow(clippy::too_many_arguments)]
+fn create_mesh_pipeline(
+    gpu: &Gpu,
+    layout: vk::PipelineLayout,
+    color_format: Option<vk::Format>,
+    depth_format: vk::Format,
+    frag: Option<&[u8]>,
+    depth_write: bool,
+    compare: vk::CompareOp,
+    count_fragments: bool,
+) -> Result<vk::Pipeline> {
     let d = &gpu.device;
     let vert = shaders::module(d, shaders::MESH_VERT)?;
-    let frag = shaders::module(d, shaders::MESH_FRAG)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(c"main"),
-    ];
+    let frag = frag.map(|f| shaders::module(d, f)).transpose()?;
+    let mut stages = vec![vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main")];
+    // Specialisation constant 0: COUNT_FRAGMENTS (mesh_shading.glsl).
+    let count_bytes = vk::Bool32::from(count_fragments).to_le_bytes();
+    let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }];
+    let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&count_bytes);
+    if let Some(f) = frag {
+        stages.push(vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(f).name(c"main").specialization_info(&spec));
+    }
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared (tangent and lightmap UV arrive with normal
     // mapping and lightmaps).
@@ -315,15 +455,12 @@ fn create_mesh_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, color_format: vk:
         .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
         .line_width(1.0);
     let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(true)
-        .depth_compare_op(vk::CompareOp::GREATER_OR_EQUAL);
+    let depth = vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(depth_write).depth_compare_op(compare);
     let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
+    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(if color_format.is_some() { &blend_attachment[..] } else { &[] });
     let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR, vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE];
     let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats = [color_format];
+    let color_formats: Vec<vk::Format> = color_format.into_iter().collect();
     let mut rendering = vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&color_formats).depth_attachment_format(depth_format);
     let info = vk::GraphicsPipelineCreateInfo::default()
         .stages(&stages)
@@ -340,7 +477,9 @@ fn create_mesh_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, color_format: vk:
     let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
     unsafe {
         d.destroy_shader_module(vert, None);
-        d.destroy_shader_module(frag, None);
+        if let Some(f) = frag {
+            d.destroy_shader_module(f, None);
+        }
     }
     let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the mesh pipeline: {e}"))?;
     Ok(pipelines[0])

@@ -321,3 +321,67 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
     target.destroy(&gpu);
     assert_clean(&gpu);
 }
+
+/// A pack of one triangle per entry of `depths`, at z = -depth facing +Z, big enough to cover the
+/// whole view of a 60 degree camera at the origin with its edges off screen (so no pixel is
+/// shaded twice along an interior edge, and no helper invocation lands on screen), in that order.
+fn screen_triangles_pack(depths: &[f32]) -> Pack {
+    let mut b = PackBuilder::new("generated", "test");
+    let verts: Vec<Vertex> = [(-1.0f32, -1.0f32), (3.0, -1.0), (-1.0, 3.0)]
+        .iter()
+        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], color: [255; 4], ..Default::default() })
+        .collect();
+    let idx: Vec<u8> = [0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect();
+    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let indices = b.push_bytes(&idx);
+    b.manifest.materials.push(Material::default());
+    b.manifest.meshes.push(Mesh {
+        name: "triangle".into(),
+        lods: vec![MeshLod { vertices, vertex_count: 3, indices, index_count: 3, submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_page: None }], error: 0.0 }],
+        bounds_min: [-1.0, -1.0, 0.0],
+        bounds_max: [3.0, 3.0, 0.0],
+        is_static: false,
+    });
+    for (i, d) in depths.iter().enumerate() {
+        // Centred on the view axis: the triangle's inscribed centre is at (1/3, 1/3).
+        let m = Mat4::from_translation(Vec3::new(0.0, 0.0, -d)) * Mat4::from_scale(Vec3::splat(4.0 * d)) * Mat4::from_translation(Vec3::new(-1.0 / 3.0, -1.0 / 3.0, 0.0));
+        b.manifest.nodes.push(Node { name: format!("t{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
+    }
+    b.finish()
+}
+
+#[test]
+fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
+    // pipeline.md T4.1/T4.3: 8 full-screen layers drawn back to front. Without the pre-pass
+    // every layer shades every pixel (8 W H fragments); with it exactly W H, and the same image.
+    // Fragments are counted by an atomic in the shading shader (lavapipe's fragment-invocation
+    // statistic counts rasterised fragments before the depth test, so it cannot show this);
+    // layers are single triangles with their edges off screen.
+    let gpu = gpu();
+    let (w, h) = (64u32, 48u32);
+    let pack = screen_triangles_pack(&[8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0]);
+    let mut target = Offscreen::new(&gpu, w, h).unwrap();
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    let cam = looking_down_neg_z(0.0);
+    renderer.count_fragments = true;
+    let mut run = |prepass: bool| {
+        renderer.prepass = prepass;
+        target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
+        (target.pixels().to_vec(), renderer.fragment_count(0).expect("lavapipe can count"), renderer.pass_stats(&gpu, 0))
+    };
+    let (without, f0, s0) = run(false);
+    let (with, f1, s1) = run(true);
+    let pixels = w * h;
+    assert_eq!((f0, f1), (8 * pixels, pixels));
+    assert!(with == without, "the pre-pass changed the image");
+    // The pre-pass costs a second transform of every vertex (T4.5): 8 layers x 3 vertices.
+    if let (Some(s0), Some(s1)) = (s0, s1) {
+        assert_eq!((s0.prepass, s0.shading.vertex), (None, 24));
+        assert_eq!((s1.prepass.map(|p| p.vertex), s1.shading.vertex), (Some(24), 24));
+    }
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    target.destroy(&gpu);
+    assert_clean(&gpu);
+}

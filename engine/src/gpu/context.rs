@@ -64,6 +64,8 @@ pub struct Capabilities {
     pub timestamp_period_ns: f32,
     pub timestamps: bool,
     pub pipeline_statistics: bool,
+    /// Fragment shaders may write storage buffers (the renderer's fragment counter needs it).
+    pub fragment_atomics: bool,
     pub sampler_anisotropy: Option<f32>,
     pub depth_format: vk::Format,
 }
@@ -165,6 +167,7 @@ impl Gpu {
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps: queue_props[queue_family as usize].timestamp_valid_bits > 0,
             pipeline_statistics: features.pipeline_statistics_query == vk::TRUE,
+            fragment_atomics: features.fragment_stores_and_atomics == vk::TRUE,
             sampler_anisotropy: (features.sampler_anisotropy == vk::TRUE).then_some(props.limits.max_sampler_anisotropy),
             depth_format: pick_depth_format(&instance, physical_device)?,
         };
@@ -173,6 +176,7 @@ impl Gpu {
         let queue_info = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let enabled = vk::PhysicalDeviceFeatures::default()
             .pipeline_statistics_query(caps.pipeline_statistics)
+            .fragment_stores_and_atomics(caps.fragment_atomics)
             .sampler_anisotropy(caps.sampler_anisotropy.is_some());
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true).synchronization2(true);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default().host_query_reset(true);

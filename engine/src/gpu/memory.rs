@@ -236,6 +236,19 @@ impl Transition {
             vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
         ),
     };
+    /// After the depth pre-pass: its writes become visible to the shading pass's depth tests.
+    pub const DEPTH_WRITE_TO_TEST: Transition = Transition {
+        old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::from_raw(
+            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
+        ),
+        src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::from_raw(
+            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
+        ),
+        dst_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ,
+    };
     pub const COLOR_ATTACHMENT_TO_TRANSFER_SRC: Transition = Transition {
         old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
         new: vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
