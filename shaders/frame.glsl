@@ -4,7 +4,8 @@ layout(set = 0, binding = 0) uniform Frame {
     vec4 camera_pos;   // xyz world position
     vec4 sun_dir;      // xyz unit vector towards the sun
     vec4 sun_color;    // rgb linear irradiance scale
-    vec4 ambient;      // rgb linear ambient (stand-in until probes and lightmaps land)
+    vec4 ambient;      // rgb linear ambient (stand-in lighting only)
+    vec4 exposure;     // x: exposure; y: 1 = physical lighting (lightmaps, probes, sun in lux), tone-mapped
 } frame;
 
 // Counted fragments (the renderer's fragment counter; written only by pipelines made with the

@@ -4,8 +4,9 @@
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 3) in vec2 in_uv0;
+layout(location = 4) in vec2 in_uv1;
 layout(location = 5) in vec4 in_color;
-// Locations 2 (tangent) and 4 (lightmap UV) exist in the vertex format but are not read yet.
+// Location 2 (tangent) exists in the vertex format but is not read yet.
 
 // 128 bytes: the minimum every device guarantees. Mirrors `DrawPush` in renderer.rs.
 layout(push_constant) uniform Draw {
@@ -20,6 +21,8 @@ layout(location = 0) out vec3 out_normal;
 invariant gl_Position;
 layout(location = 1) out vec2 out_uv0;
 layout(location = 2) out vec4 out_color;
+layout(location = 3) out vec3 out_world;
+layout(location = 4) out vec2 out_uv1;
 
 void main() {
     vec4 world = draw.model * vec4(in_position, 1.0);
@@ -27,5 +30,7 @@ void main() {
     out_normal = normal_matrix * in_normal;
     out_uv0 = in_uv0;
     out_color = in_color;
+    out_world = world.xyz;
+    out_uv1 = in_uv1;
     gl_Position = frame.view_proj * world;
 }

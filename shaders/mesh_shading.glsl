@@ -6,13 +6,28 @@ layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: 
 
 layout(push_constant) uniform Draw {
     mat4 model;
-    vec4 normal_cols[3]; // column 0's w: alpha-test cutoff, or -1 for none
+    vec4 normal_cols[3]; // w: alpha-test cutoff (or -1), lightmapped (1/0), material index
     vec4 base_color;
 } draw;
+
+// Set 2: the scene's baked light (engine/src/scene.rs). The draw's lightmap page (a black
+// texel for geometry without one), the probe grid, and every material's emission.
+layout(set = 2, binding = 0) uniform sampler2D lightmap; // B = H/pi in nits, half float
+layout(std430, set = 2, binding = 1) readonly buffer Probes {
+    vec4 origin;   // probe (i, j, k) at origin + (i, j, k) * spacing
+    vec4 spacing;
+    uvec4 counts;  // 0 when the pack has no probes
+    float data[];  // per probe: 27 SH floats (9 x rgb, B = E/pi without the sun), sun visibility
+} probes;
+layout(std430, set = 2, binding = 2) readonly buffer Emission {
+    vec4 emission[]; // rgb emitted radiance per material
+} materials;
 
 layout(location = 0) in vec3 in_normal;
 layout(location = 1) in vec2 in_uv0;
 layout(location = 2) in vec4 in_color;
+layout(location = 3) in vec3 in_world;
+layout(location = 4) in vec2 in_uv1;
 
 // Set by the renderer's counting pipelines: each shaded fragment adds one to counters.fragments
 // (helper invocations' atomics have no effect, so only real fragments count).
@@ -33,11 +48,76 @@ bool alpha_tested_away(vec4 a) {
     return cutoff >= 0.0 && a.a < cutoff;
 }
 
+const float PI = 3.14159265;
+
+// One probe's 28 floats start here.
+uint probe_base(ivec3 c) {
+    ivec3 n = ivec3(probes.counts.xyz);
+    c = clamp(c, ivec3(0), n - 1);
+    return uint(c.x + n.x * (c.y + n.y * c.z)) * 28u;
+}
+
+// Order-2 SH basis at unit n (cook_core::bake::probes: Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22).
+float sh_basis(int i, vec3 n) {
+    if (i == 0) return 0.2820948;
+    if (i == 1) return 0.4886025 * n.y;
+    if (i == 2) return 0.4886025 * n.z;
+    if (i == 3) return 0.4886025 * n.x;
+    if (i == 4) return 1.0925484 * n.x * n.y;
+    if (i == 5) return 1.0925484 * n.y * n.z;
+    if (i == 6) return 0.3153916 * (3.0 * n.z * n.z - 1.0);
+    if (i == 7) return 1.0925484 * n.x * n.z;
+    return 0.5462742 * (n.x * n.x - n.y * n.y);
+}
+
+// B(n) at p from the probe grid, trilinear over the 8 probes around p; and (w) the interpolated
+// sun visibility. (0, 0, 0, 1) without probes.
+vec4 probe_light(vec3 p, vec3 n) {
+    if (probes.counts.x == 0u) {
+        return vec4(0.0, 0.0, 0.0, 1.0);
+    }
+    vec3 g = (p - probes.origin.xyz) / probes.spacing.xyz;
+    ivec3 c0 = ivec3(floor(g));
+    vec3 f = clamp(g - vec3(c0), 0.0, 1.0);
+    float y[9];
+    for (int i = 0; i < 9; i++) {
+        y[i] = sh_basis(i, n);
+    }
+    vec4 acc = vec4(0.0);
+    for (int k = 0; k < 8; k++) {
+        ivec3 o = ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        vec3 w3 = mix(1.0 - f, f, vec3(o));
+        float w = w3.x * w3.y * w3.z;
+        uint b = probe_base(c0 + o);
+        vec3 e = vec3(0.0);
+        for (int i = 0; i < 9; i++) {
+            e += y[i] * vec3(probes.data[b + 3u * uint(i)], probes.data[b + 3u * uint(i) + 1u], probes.data[b + 3u * uint(i) + 2u]);
+        }
+        acc += w * vec4(e, probes.data[b + 27u]);
+    }
+    // L2 SH rings below zero next to strong lobes: clamp.
+    return vec4(max(acc.rgb, 0.0), acc.w);
+}
+
 vec4 shade(vec4 a) {
     // Double-sided faces seen from behind shade with the flipped normal.
     vec3 n = normalize(gl_FrontFacing ? in_normal : -in_normal);
     float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
-    vec3 lit = a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl);
-    // Linear out; the _SRGB attachment encodes.
-    return vec4(lit, a.a);
+    if (frame.exposure.y < 0.5) {
+        // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
+        return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), a.a);
+    }
+    // Physical: B = H/pi from the lightmap (static geometry: it holds the sun too) or from the
+    // probes plus the sun scaled by the probes' view of it (dynamic objects).
+    vec3 b;
+    if (draw.normal_cols[1].w > 0.5) {
+        b = texture(lightmap, in_uv1).rgb;
+    } else {
+        vec4 pl = probe_light(in_world, n);
+        b = pl.rgb + frame.sun_color.rgb * ndotl * pl.w / PI;
+    }
+    vec3 l = a.rgb * b + materials.emission[int(draw.normal_cols[2].w)].rgb;
+    // Exposure, then Reinhard's global operator per channel (textures.md §5.4).
+    vec3 ls = l * frame.exposure.x;
+    return vec4(ls / (1.0 + ls), a.a);
 }

@@ -3,7 +3,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
-use crate::scene::{GpuMaterial, GpuScene};
+use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
 use crate::visibility::Visibility;
 use anyhow::Result;
@@ -20,6 +20,9 @@ pub struct FrameUniforms {
     pub sun_dir: Vec4,
     pub sun_color: Vec4,
     pub ambient: Vec4,
+    /// x: exposure; y: 1 when lighting is physical (baked lightmaps, probes, sun in lux) and
+    /// tone-mapped, 0 for the stand-in lighting (already display-referred).
+    pub exposure: Vec4,
 }
 
 /// Mirrors the push-constant block of shaders/mesh.vert (128 bytes).
@@ -78,6 +81,7 @@ pub struct Renderer {
     pub color_format: vk::Format,
     pub depth_format: vk::Format,
     pub material_layout: vk::DescriptorSetLayout,
+    pub scene_layout: vk::DescriptorSetLayout,
     frame_layout: vk::DescriptorSetLayout,
     pipeline_layout: vk::PipelineLayout,
     pipelines: Pipelines,
@@ -159,7 +163,13 @@ impl Renderer {
         let material_layout = unsafe {
             d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&material_binding), None)?
         };
-        let set_layouts = [frame_layout, material_layout];
+        let scene_bindings = [
+            vk::DescriptorSetLayoutBinding::default().binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default().binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default().binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
+        ];
+        let scene_layout = unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&scene_bindings), None)? };
+        let set_layouts = [frame_layout, material_layout, scene_layout];
         let push = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(std::mem::size_of::<DrawPush>() as u32)];
@@ -223,6 +233,7 @@ impl Renderer {
             color_format,
             depth_format,
             material_layout,
+            scene_layout,
             frame_layout,
             pipeline_layout,
             pipelines,
@@ -238,6 +249,11 @@ impl Renderer {
         })
     }
 
+    /// The layouts `GpuScene::upload` makes its descriptor sets for.
+    pub fn layouts(&self) -> SceneLayouts {
+        SceneLayouts { material: self.material_layout, scene: self.scene_layout }
+    }
+
     /// Record one frame: cull and pick LODs for `camera` (`self.visibility`), attachments from
     /// UNDEFINED to attachment layouts, clear, draw what is visible. The colour image is left in
     /// COLOR_ATTACHMENT_OPTIMAL for the caller to present or copy. `slot` selects the per-frame
@@ -248,12 +264,25 @@ impl Renderer {
         let aspect = target.extent.width as f32 / target.extent.height as f32;
         let view_proj = camera.view_proj(aspect);
         self.visibility.update(scene, view_proj, camera.position, camera.fov_y, target.extent.height as f32);
-        let uniforms = FrameUniforms {
-            view_proj,
-            camera_pos: camera.position.extend(1.0),
-            sun_dir: lighting.sun_dir.normalize().extend(0.0),
-            sun_color: lighting.sun_color.extend(0.0),
-            ambient: lighting.ambient.extend(0.0),
+        // A baked scene is lit by its lightmaps, probes and sun in physical units, exposed and
+        // tone-mapped; otherwise the stand-in `lighting`.
+        let uniforms = match scene.baked {
+            Some(b) => FrameUniforms {
+                view_proj,
+                camera_pos: camera.position.extend(1.0),
+                sun_dir: b.sun_dir.extend(0.0),
+                sun_color: b.sun_lux.extend(0.0),
+                ambient: Vec4::ZERO,
+                exposure: Vec4::new(b.exposure, 1.0, 0.0, 0.0),
+            },
+            None => FrameUniforms {
+                view_proj,
+                camera_pos: camera.position.extend(1.0),
+                sun_dir: lighting.sun_dir.normalize().extend(0.0),
+                sun_color: lighting.sun_color.extend(0.0),
+                ambient: lighting.ambient.extend(0.0),
+                exposure: Vec4::new(1.0, 0.0, 0.0, 0.0),
+            },
         };
         // SAFETY: FrameUniforms is repr(C) plain floats.
         let bytes = unsafe {
@@ -336,19 +365,21 @@ impl Renderer {
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
                     let pipeline = pipeline_for(mat);
+                    // Static geometry reads its lightmap page; the rest the probes and the sun.
+                    let page = sm.lightmap_page.filter(|_| mesh.is_static).and_then(|p| scene.lightmap_sets.get(p as usize));
                     if pipeline != bound {
                         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
                         bound = pipeline;
                     }
                     let push = DrawPush {
                         model: inst.world,
-                        normal_cols: [n.x_axis.extend(mat.alpha_cutoff), n.y_axis.extend(0.0), n.z_axis.extend(0.0)],
+                        normal_cols: [n.x_axis.extend(mat.alpha_cutoff), n.y_axis.extend(page.is_some() as u32 as f32), n.z_axis.extend(sm.material as f32)],
                         base_color: Vec4::from(mat.base_color),
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
                     d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
                     d.cmd_set_cull_mode(cb, if mat.double_sided { vk::CullModeFlags::NONE } else { vk::CullModeFlags::BACK });
-                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
+                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set, *page.unwrap_or(&scene.unlit_set)], &[]);
                     d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, lod.base_vertex, 0);
                 }
             }
@@ -395,6 +426,7 @@ impl Renderer {
             d.destroy_pipeline_layout(self.pipeline_layout, None);
             d.destroy_descriptor_set_layout(self.frame_layout, None);
             d.destroy_descriptor_set_layout(self.material_layout, None);
+            d.destroy_descriptor_set_layout(self.scene_layout, None);
         }
     }
 }
@@ -433,9 +465,8 @@ fn create_mesh_pipeline(
         stages.push(vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(f).name(c"main").specialization_info(&spec));
     }
     // The vertex layout comes from the pack crate: one definition of the format. Only the
-    // attributes this shader reads are declared (tangent and lightmap UV arrive with normal
-    // mapping and lightmaps).
-    const MESH_SHADER_INPUTS: [u32; 4] = [0, 1, 3, 5];
+    // attributes this shader reads are declared (tangent arrives with normal mapping).
+    const MESH_SHADER_INPUTS: [u32; 5] = [0, 1, 3, 4, 5];
     let bindings = [vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX }];
     let attributes: Vec<_> = pack::VERTEX_ATTRIBUTES
         .iter()

@@ -35,6 +35,8 @@ pub struct GpuMesh {
 #[derive(Debug, Clone, Copy)]
 pub struct GpuMaterial {
     pub base_color: [f32; 4],
+    /// Emitted radiance (nits in a baked level).
+    pub emissive: [f32; 3],
     /// Alpha-test threshold, or a negative value for "no alpha test".
     pub alpha_cutoff: f32,
     pub double_sided: bool,
@@ -50,6 +52,17 @@ pub struct Instance {
     pub scale: f32,
 }
 
+/// Baked light the renderer reads (pack lightmaps and probes), in physical units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BakedLighting {
+    /// Unit vector towards the sun, and its illuminance (lux, linear RGB); zero without a sun.
+    pub sun_dir: Vec3,
+    pub sun_lux: Vec3,
+    /// Exposure that maps the lightmaps' log-average luminance (times a typical albedo of 0.5)
+    /// to the key 0.18 (textures.md §5.4), before the Reinhard operator.
+    pub exposure: f32,
+}
+
 pub struct GpuScene {
     pub meshes: Vec<GpuMesh>,
     pub materials: Vec<GpuMaterial>,
@@ -60,8 +73,26 @@ pub struct GpuScene {
     pub index_buffer: Buffer,
     textures: Vec<Image>,
     white: Image,
-    samplers: [vk::Sampler; 2],
+    black: Image,
+    samplers: [vk::Sampler; 3],
     pool: vk::DescriptorPool,
+    /// Set 2 per lightmap page, and one for meshes without a lightmap (a black page); each also
+    /// holds the probe grid and the materials' emission.
+    pub lightmap_sets: Vec<vk::DescriptorSet>,
+    pub unlit_set: vk::DescriptorSet,
+    probes: Buffer,
+    emission: Buffer,
+    /// Present when the pack has baked lightmaps: the renderer then shades in physical units.
+    pub baked: Option<BakedLighting>,
+}
+
+/// The descriptor set layouts a scene's sets are made for (the renderer's).
+#[derive(Debug, Clone, Copy)]
+pub struct SceneLayouts {
+    /// Set 1: the base colour texture.
+    pub material: vk::DescriptorSetLayout,
+    /// Set 2: lightmap page, probe grid, material emission.
+    pub scene: vk::DescriptorSetLayout,
 }
 
 fn vk_format(f: TextureFormat) -> vk::Format {
@@ -109,15 +140,17 @@ pub fn transform_bounds(m: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
-/// Trilinear, repeating; anisotropic (up to 16x) when asked and the device offers it.
-fn create_sampler(gpu: &Gpu, anisotropic: bool) -> Result<vk::Sampler> {
+/// Trilinear, repeating (clamped for lightmap pages); anisotropic (up to 16x) when asked and the
+/// device offers it.
+fn create_sampler(gpu: &Gpu, anisotropic: bool, clamp: bool) -> Result<vk::Sampler> {
+    let mode = if clamp { vk::SamplerAddressMode::CLAMP_TO_EDGE } else { vk::SamplerAddressMode::REPEAT };
     let mut info = vk::SamplerCreateInfo::default()
         .mag_filter(vk::Filter::LINEAR)
         .min_filter(vk::Filter::LINEAR)
         .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-        .address_mode_u(vk::SamplerAddressMode::REPEAT)
-        .address_mode_v(vk::SamplerAddressMode::REPEAT)
-        .address_mode_w(vk::SamplerAddressMode::REPEAT)
+        .address_mode_u(mode)
+        .address_mode_v(mode)
+        .address_mode_w(mode)
         .max_lod(vk::LOD_CLAMP_NONE);
     if let (true, Some(max)) = (anisotropic, gpu.caps.sampler_anisotropy) {
         info = info.anisotropy_enable(true).max_anisotropy(max.min(16.0));
@@ -126,7 +159,8 @@ fn create_sampler(gpu: &Gpu, anisotropic: bool) -> Result<vk::Sampler> {
 }
 
 impl GpuScene {
-    pub fn upload(gpu: &Gpu, pack: &Pack, material_layout: vk::DescriptorSetLayout) -> Result<GpuScene> {
+    pub fn upload(gpu: &Gpu, pack: &Pack, layouts: SceneLayouts) -> Result<GpuScene> {
+        let material_layout = layouts.material;
         let m = &pack.manifest;
         // Concatenate every mesh's vertices and indices: one bind for the whole scene.
         let mut vertex_bytes = Vec::new();
@@ -169,11 +203,17 @@ impl GpuScene {
         // Materials without a base colour texture sample this instead: no shader variants.
         let white = Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?;
 
-        let sampler = create_sampler(gpu, false)?;
-        let sampler_aniso = create_sampler(gpu, true)?;
+        let black = Image::sampled_with_mips(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?;
+        let sampler = create_sampler(gpu, false, false)?;
+        let sampler_aniso = create_sampler(gpu, true, false)?;
+        let sampler_clamp = create_sampler(gpu, false, true)?;
 
-        let set_count = m.materials.len().max(1) as u32;
-        let pool_sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: set_count }];
+        let pages = m.lightmap.as_ref().map_or(&[][..], |l| &l.textures[..]);
+        let set_count = (m.materials.len() + pages.len() + 1) as u32;
+        let pool_sizes = [
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: set_count },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 * set_count },
+        ];
         let pool = unsafe {
             gpu.device.create_descriptor_pool(
                 &vk::DescriptorPoolCreateInfo::default().max_sets(set_count).pool_sizes(&pool_sizes),
@@ -202,6 +242,7 @@ impl GpuScene {
             unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
             materials.push(GpuMaterial {
                 base_color: mat.base_color,
+                emissive: mat.emissive,
                 alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
                 double_sided: mat.double_sided,
                 descriptor_set: set,
@@ -222,7 +263,47 @@ impl GpuScene {
             spheres.push(c, r);
         }
 
-        Ok(GpuScene { meshes, materials, instances, spheres, vertex_buffer, index_buffer, textures, white, samplers: [sampler, sampler_aniso], pool })
+        // Set 2: probes and emission are shared by every page's set.
+        let probe_bytes = probe_buffer_bytes(pack);
+        let probes = Buffer::with_data(gpu, "probes", &probe_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
+        let emission_bytes: Vec<u8> = materials.iter().flat_map(|mt| [mt.emissive[0], mt.emissive[1], mt.emissive[2], 0.0]).chain([0.0; 4]).flat_map(f32::to_le_bytes).collect();
+        let emission = Buffer::with_data(gpu, "material emission", &emission_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
+        let scene_set = |image: &Image| -> Result<vk::DescriptorSet> {
+            let layouts = [layouts.scene];
+            let set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
+            let image_info = [vk::DescriptorImageInfo { sampler: sampler_clamp, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+            let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+            let emission_info = [vk::DescriptorBufferInfo { buffer: emission.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+            let writes = [
+                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&image_info),
+                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&probe_info),
+                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&emission_info),
+            ];
+            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+            Ok(set)
+        };
+        let lightmap_sets = pages.iter().map(|&t| scene_set(&textures[t as usize])).collect::<Result<Vec<_>>>()?;
+        let unlit_set = scene_set(&black)?;
+        let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
+
+        Ok(GpuScene {
+            meshes,
+            materials,
+            instances,
+            spheres,
+            vertex_buffer,
+            index_buffer,
+            textures,
+            white,
+            black,
+            samplers: [sampler, sampler_aniso, sampler_clamp],
+            pool,
+            lightmap_sets,
+            unlit_set,
+            probes,
+            emission,
+            baked,
+        })
     }
 
     /// World-space bounds of every instance together (for framing the camera).
@@ -258,7 +339,71 @@ impl GpuScene {
             t.destroy(gpu);
         }
         self.white.destroy(gpu);
+        self.black.destroy(gpu);
+        self.probes.destroy(gpu);
+        self.emission.destroy(gpu);
         self.vertex_buffer.destroy(gpu);
         self.index_buffer.destroy(gpu);
     }
+}
+
+/// The probe grid as the shaders read it (std430): origin, spacing (vec4s), counts (uvec4),
+/// then per probe 27 SH floats (9 x rgb) and the sun visibility. An empty grid (counts 0) when
+/// the pack has no probes: dynamic objects then get the sun only.
+fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
+    let mut out = Vec::new();
+    let Some(g) = &pack.manifest.probes else {
+        out.extend(std::iter::repeat_n(0u8, 48 + 28 * 4));
+        return out;
+    };
+    for v in [g.origin, g.spacing] {
+        out.extend([v[0], v[1], v[2], 0.0].iter().flat_map(|x| x.to_le_bytes()));
+    }
+    out.extend([g.counts[0], g.counts[1], g.counts[2], 0].iter().flat_map(|x| x.to_le_bytes()));
+    let (sh, vis) = (pack.bytes(g.sh), pack.bytes(g.sun_visibility));
+    for i in 0..g.count() as usize {
+        out.extend_from_slice(&sh[i * 108..(i + 1) * 108]);
+        out.extend_from_slice(&vis[i * 4..(i + 1) * 4]);
+    }
+    out
+}
+
+/// An IEEE half float's value.
+pub fn f16_to_f32(h: u16) -> f32 {
+    let (sign, exp, frac) = ((h >> 15) as u32, ((h >> 10) & 0x1f) as u32, (h & 0x3ff) as u32);
+    let bits = match (exp, frac) {
+        (0, 0) => sign << 31,
+        (0, f) => {
+            // Subnormal: renormalise.
+            let shift = f.leading_zeros() - 21;
+            (sign << 31) | ((113 - shift) << 23) | (((f << shift) & 0x3ff) << 13)
+        }
+        (31, f) => (sign << 31) | (0xff << 23) | (f << 13),
+        (e, f) => (sign << 31) | ((e + 112) << 23) | (f << 13),
+    };
+    f32::from_bits(bits)
+}
+
+/// Sun and exposure for a baked pack: exposure k / L with k = 0.18 and L the log-average
+/// luminance (textures.md eq. 21.1) of the lightmaps' covered texels times an albedo of 0.5.
+fn baked_lighting(pack: &Pack) -> BakedLighting {
+    let m = &pack.manifest;
+    let (mut sum, mut count) = (0.0f64, 0u64);
+    for &t in m.lightmap.as_ref().map_or(&[][..], |l| &l.textures[..]) {
+        let tex = &m.textures[t as usize];
+        for px in pack.bytes(tex.mips[0]).chunks_exact(8) {
+            let c: [f32; 3] = std::array::from_fn(|k| f16_to_f32(u16::from_le_bytes([px[2 * k], px[2 * k + 1]])));
+            let lum = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+            if lum > 0.0 {
+                sum += (1e-4 + 0.5 * lum as f64).ln();
+                count += 1;
+            }
+        }
+    }
+    let log_average = if count > 0 { (sum / count as f64).exp() as f32 } else { 1.0 };
+    let (sun_dir, sun_lux) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
+        Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity),
+        None => (Vec3::Y, Vec3::ZERO),
+    };
+    BakedLighting { sun_dir, sun_lux, exposure: 0.18 / log_average }
 }

@@ -198,7 +198,7 @@ impl State {
         };
         let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
-        let scene = match GpuScene::upload(&gpu, pack, renderer.material_layout) {
+        let scene = match GpuScene::upload(&gpu, pack, renderer.layouts()) {
             Ok(s) => s,
             Err(e) => {
                 renderer.destroy(&gpu);

@@ -88,7 +88,7 @@ const WHITE4: [[u8; 4]; 4] = [[255; 4]; 4];
 fn render(gpu: &Gpu, pack: &Pack, camera: &Camera, w: u32, h: u32) -> Vec<u8> {
     let mut target = Offscreen::new(gpu, w, h).unwrap();
     let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(gpu, pack, renderer.material_layout).unwrap();
+    let mut scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
     target.render(gpu, &mut renderer, &scene, camera, &Lighting::default(), true).unwrap();
     let px = target.pixels().to_vec();
     scene.destroy(gpu);
@@ -266,7 +266,7 @@ fn renderer_culls_the_notes_known_scene_exactly() {
     let cam = Camera { position: Vec3::ZERO, yaw: 0.0, pitch: 0.0, fov_y: 90f32.to_radians(), near: 0.1 };
     let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
     let culled = target.pixels().to_vec();
     let c = renderer.visibility.counts;
@@ -299,7 +299,7 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
     }
     let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut last = 0u8;
     let mut seen = vec![];
     for step in 0..40 {
@@ -362,7 +362,7 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
     let pack = screen_triangles_pack(&[8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0]);
     let mut target = Offscreen::new(&gpu, w, h).unwrap();
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.material_layout).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let cam = looking_down_neg_z(0.0);
     renderer.count_fragments = true;
     let mut run = |prepass: bool| {

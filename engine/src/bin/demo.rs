@@ -170,7 +170,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
-    let mut scene = GpuScene::upload(&gpu, pack, renderer.material_layout)?;
+    let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
     let lighting = Lighting::for_pack(&pack.manifest);
