@@ -54,6 +54,11 @@ fn cube_vertices() -> (Vec<Vertex>, Vec<u32>) {
 /// A pack with one cube mesh placed at each of `placements`, textured with a 2x2 checker of
 /// `colors` (sRGB bytes).
 fn cube_pack(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> Pack {
+    cube_builder(placements, colors, material).finish()
+}
+
+/// `cube_pack`, still open for more.
+fn cube_builder(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> PackBuilder {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = cube_vertices();
     let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
@@ -80,7 +85,7 @@ fn cube_pack(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> P
     for (i, m) in placements.iter().enumerate() {
         b.manifest.nodes.push(Node { name: format!("cube{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
     }
-    b.finish()
+    b
 }
 
 const WHITE4: [[u8; 4]; 4] = [[255; 4]; 4];
@@ -384,4 +389,86 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
     renderer.destroy(&gpu);
     target.destroy(&gpu);
     assert_clean(&gpu);
+}
+
+#[test]
+fn baked_light_lightmaps_for_static_geometry_probes_for_dynamic() {
+    // A static quad with a uniform lightmap page B = 200 nits and a dynamic cube inside a probe
+    // grid whose probes all hold B(n) = 200 nits (DC term only) and see no sun. Both are white,
+    // so both show L = 200 exposed (auto exposure: 0.18 / (0.5 x 200)) and tone-mapped:
+    // Reinhard(0.36) = 0.2647, sRGB byte 141.
+    let gpu = gpu();
+    let b_nits = 200.0f32;
+    let mut pack = quads_like_lightmapped(b_nits);
+    let (w, h) = (64u32, 64u32);
+    let mut target = Offscreen::new(&gpu, w, h).unwrap();
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    assert!(scene.baked.is_some());
+    let cam = looking_down_neg_z(3.0);
+    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
+    let px = target.pixels().to_vec();
+    let want = srgb_encode(0.36 / 1.36);
+    let quad = pixel(&px, w, 8, 32); // the static quad fills the left half
+    let cube = pixel(&px, w, 48, 32); // the dynamic cube's front face on the right
+    for (what, p) in [("lightmapped quad", quad), ("probe-lit cube", cube)] {
+        for c in 0..3 {
+            assert!((p[c] as i32 - want as i32).abs() <= 2, "{what}: {p:?}, want {want}");
+        }
+    }
+    scene.destroy(&gpu);
+    pack.manifest.probes = None;
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(pixel(target.pixels(), w, 48, 32)[..3], [0, 0, 0], "without probes or sun a dynamic object is unlit");
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    target.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+/// The cube pack plus a static quad on the left (lightmap page 0, uniform B) and a 2x2x2 probe
+/// grid around the cube whose probes all hold B = `b` (DC only), sun visibility 0.
+fn quads_like_lightmapped(b: f32) -> Pack {
+    let cube_at = Mat4::from_translation(Vec3::new(0.8, 0.0, 0.0)) * Mat4::from_scale(Vec3::splat(0.6));
+    let mut bld = cube_builder(&[cube_at], WHITE4, Material::default());
+    let verts: Vec<Vertex> = [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+        .iter()
+        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [(x + 1.0) * 0.5, (1.0 - y) * 0.5], color: [255; 4], ..Default::default() })
+        .collect();
+    let idx: Vec<u8> = [0u32, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
+    let vertices = bld.push_bytes(Vertex::slice_as_bytes(&verts));
+    let indices = bld.push_bytes(&idx);
+    bld.manifest.meshes.push(Mesh {
+        name: "floor".into(),
+        lods: vec![MeshLod { vertices, vertex_count: 4, indices, index_count: 6, submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: Some(0) }], error: 0.0 }],
+        bounds_min: [-1.0, -1.0, 0.0],
+        bounds_max: [1.0, 1.0, 0.0],
+        is_static: true,
+    });
+    let quad_at = Mat4::from_translation(Vec3::new(-1.3, 0.0, 0.0)) * Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
+    bld.manifest.nodes.push(Node { name: "floor".into(), parent: None, local: quad_at.to_cols_array(), mesh: Some(1) });
+    let half = half_bits(b);
+    let texel: Vec<u8> = [half, half, half, half_bits(1.0)].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let page = bld.push_bytes(&texel.repeat(16));
+    let t = bld.manifest.textures.len() as u32;
+    bld.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![page] });
+    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![t] });
+    let mut sh = Vec::new();
+    for _ in 0..8 {
+        let mut probe = [0.0f32; 27];
+        probe[..3].copy_from_slice(&[b / 0.282_094_8; 3]);
+        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    let sh = bld.push_bytes(&sh);
+    let vis = bld.push_bytes(&[0u8; 32]);
+    bld.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
+    bld.finish()
+}
+
+/// f32 -> IEEE half (round to nearest; normal range only, which these tests stay in).
+fn half_bits(v: f32) -> u16 {
+    let b = v.to_bits();
+    let (sign, exp, man) = ((b >> 16) & 0x8000, ((b >> 23) & 0xff) as i32 - 127 + 15, b & 0x7f_ffff);
+    (sign | ((exp as u32) << 10) | ((man + 0x1000) >> 13)) as u16
 }
