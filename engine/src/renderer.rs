@@ -91,6 +91,8 @@ pub struct Renderer {
     stats_pool: Option<vk::QueryPool>,
     /// Whether the frame recorded in each slot ran the pre-pass (its query was begun).
     slot_prepass: Vec<bool>,
+    /// GPU timestamps per frame slot: before the pre-pass, between the passes, after shading.
+    timestamps: Option<vk::QueryPool>,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -186,6 +188,12 @@ impl Renderer {
             depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, false)?,
             depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, false)?,
         };
+        let timestamps = if gpu.caps.timestamps {
+            let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(3 * frames_in_flight as u32);
+            Some(unsafe { d.create_query_pool(&info, None)? })
+        } else {
+            None
+        };
         let stats_pool = if gpu.caps.pipeline_statistics {
             let info = vk::QueryPoolCreateInfo::default()
                 .query_type(vk::QueryType::PIPELINE_STATISTICS)
@@ -240,6 +248,7 @@ impl Renderer {
             pool,
             stats_pool,
             slot_prepass: vec![false; frames_in_flight],
+            timestamps,
             prepass: true,
             count_fragments: false,
             counters,
@@ -297,6 +306,15 @@ impl Renderer {
         if let Some(pool) = self.stats_pool {
             unsafe { d.cmd_reset_query_pool(cb, pool, query_a, 2) };
         }
+        let stamp = |i: u32| {
+            if let Some(pool) = self.timestamps {
+                unsafe { d.cmd_write_timestamp2(cb, vk::PipelineStageFlags2::ALL_COMMANDS, pool, 3 * slot as u32 + i) };
+            }
+        };
+        if let Some(pool) = self.timestamps {
+            unsafe { d.cmd_reset_query_pool(cb, pool, 3 * slot as u32, 3) };
+        }
+        stamp(0);
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
         let prepass = self.prepass && !self.visibility.draws.is_empty();
@@ -315,6 +333,7 @@ impl Renderer {
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
         }
+        stamp(1);
         let color_attachment = [vk::RenderingAttachmentInfo::default()
             .image_view(target.color_view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
@@ -335,6 +354,17 @@ impl Renderer {
         };
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
         self.pass(gpu, cb, scene, slot, &rendering, query_b, |_| shade);
+        stamp(2);
+    }
+
+    /// GPU milliseconds of the pre-pass (0 when it did not run) and the shading pass of the frame
+    /// last recorded in `slot`, once the GPU has finished it; None without timestamps.
+    pub fn pass_times_ms(&self, gpu: &Gpu, slot: usize) -> Option<(f64, f64)> {
+        let pool = self.timestamps?;
+        let mut t = [0u64; 3];
+        unsafe { gpu.device.get_query_pool_results(pool, 3 * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
+        let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * gpu.caps.timestamp_period_ns as f64 * 1e-6;
+        Some((ms(t[0], t[1]), ms(t[1], t[2])))
     }
 
     /// One rendering instance drawing every visible instance, each submesh with the pipeline
@@ -420,7 +450,7 @@ impl Renderer {
             for pipeline in [p.shade, p.shade_equal, p.depth, p.depth_masked].into_iter().chain(p.shade_counting.into_iter().flat_map(|(a, b)| [a, b])) {
                 d.destroy_pipeline(pipeline, None);
             }
-            if let Some(pool) = self.stats_pool {
+            for pool in self.stats_pool.into_iter().chain(self.timestamps) {
                 d.destroy_query_pool(pool, None);
             }
             d.destroy_pipeline_layout(self.pipeline_layout, None);

@@ -177,12 +177,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
+    let (mut prepass_ms, mut shading_ms) = (Vec::new(), Vec::new());
     for f in 0..frames {
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
         let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, last || every)?;
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
+        if let Some((a, b)) = renderer.pass_times_ms(&gpu, 0) {
+            prepass_ms.push(a);
+            shading_ms.push(b);
+        }
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));
             target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
@@ -209,6 +214,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     );
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
+    }
+    if let (Some(a), Some(b)) = (median(&prepass_ms), median(&shading_ms)) {
+        println!("pass gpu_ms (median): depth pre-pass {a:.3}, shading {b:.3}");
     }
     scene.destroy(&gpu);
     renderer.destroy(&gpu);
