@@ -185,6 +185,10 @@ pub fn full_range(aspect: vk::ImageAspectFlags, mip_levels: u32) -> vk::ImageSub
     vk::ImageSubresourceRange { aspect_mask: aspect, base_mip_level: 0, level_count: mip_levels, base_array_layer: 0, layer_count: 1 }
 }
 
+/// The stages that test and write depth.
+const DEPTH_TESTS: vk::PipelineStageFlags2 =
+    vk::PipelineStageFlags2::from_raw(vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw());
+
 /// An image layout transition with the stages and accesses on both sides.
 #[derive(Clone, Copy)]
 pub struct Transition {
@@ -225,13 +229,9 @@ impl Transition {
     pub const DEPTH_ATTACHMENT_DISCARD: Transition = Transition {
         old: vk::ImageLayout::UNDEFINED,
         new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-        src_stage: vk::PipelineStageFlags2::from_raw(
-            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
-        ),
+        src_stage: DEPTH_TESTS,
         src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
-        dst_stage: vk::PipelineStageFlags2::from_raw(
-            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
-        ),
+        dst_stage: DEPTH_TESTS,
         dst_access: vk::AccessFlags2::from_raw(
             vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
         ),
@@ -240,13 +240,9 @@ impl Transition {
     pub const DEPTH_WRITE_TO_TEST: Transition = Transition {
         old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
         new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-        src_stage: vk::PipelineStageFlags2::from_raw(
-            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
-        ),
+        src_stage: DEPTH_TESTS,
         src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
-        dst_stage: vk::PipelineStageFlags2::from_raw(
-            vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw(),
-        ),
+        dst_stage: DEPTH_TESTS,
         dst_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ,
     };
     pub const COLOR_ATTACHMENT_TO_TRANSFER_SRC: Transition = Transition {

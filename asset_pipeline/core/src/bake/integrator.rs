@@ -170,28 +170,41 @@ pub fn bake_points(
     cancel: &AtomicBool,
 ) -> Result<Baked, Cancelled> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
-    assert!(ids.is_none_or(|ids| ids.len() == points.len()), "one id per point");
-    let done = AtomicU64::new(0);
-    let rays = AtomicU64::new(0);
-    let mut b = vec![[0.0f32; 3]; points.len()];
-    b.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+    let (b, rays) = par_bake(points.len(), CHUNK, ids, progress, cancel, |i, id, cast| bake_point(scene, points[i], normals[i], id, settings, cast))?;
+    Ok(Baked { b, rays })
+}
+
+/// `n` items baked in parallel, `chunk` at a time: `f(i, id, rays)` makes item i, whose random
+/// streams are keyed by `ids[i]` (default i), adding the rays it casts. `progress(items done,
+/// rays cast)` after each chunk; `cancel` stops between chunks. Returns the items and the rays.
+pub(super) fn par_bake<T: Clone + Default + Send>(
+    n: usize,
+    chunk: usize,
+    ids: Option<&[u64]>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+    f: impl Fn(usize, u64, &mut u64) -> T + Sync,
+) -> Result<(Vec<T>, u64), Cancelled> {
+    assert!(ids.is_none_or(|ids| ids.len() == n), "one id per point");
+    let (done, rays) = (AtomicU64::new(0), AtomicU64::new(0));
+    let mut out = vec![T::default(); n];
+    out.par_chunks_mut(chunk).enumerate().for_each(|(c, dst)| {
         if cancel.load(Ordering::Relaxed) {
             return;
         }
         let mut cast = 0u64;
-        for (j, o) in out.iter_mut().enumerate() {
-            let i = c * CHUNK + j;
-            let id = ids.map_or(i as u64, |ids| ids[i]);
-            *o = bake_point(scene, points[i], normals[i], id, settings, &mut cast);
+        for (j, o) in dst.iter_mut().enumerate() {
+            let i = c * chunk + j;
+            *o = f(i, ids.map_or(i as u64, |ids| ids[i]), &mut cast);
         }
-        let d = done.fetch_add(out.len() as u64, Ordering::Relaxed) + out.len() as u64;
+        let d = done.fetch_add(dst.len() as u64, Ordering::Relaxed) + dst.len() as u64;
         let r = rays.fetch_add(cast, Ordering::Relaxed) + cast;
         progress(d, r);
     });
     if cancel.load(Ordering::Relaxed) {
         return Err(Cancelled);
     }
-    Ok(Baked { b, rays: rays.into_inner() })
+    Ok((out, rays.into_inner()))
 }
 
 fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, rays: &mut u64) -> V3 {

@@ -19,13 +19,12 @@
 //!
 //! Deterministic like the lightmaps: probe i's random streams are keyed by (seed, `ids[i]`, sample).
 
-use super::integrator::{direct, sample_path, BakeScene, BakeSettings, Cancelled};
+use super::integrator::{direct, par_bake, sample_path, BakeScene, BakeSettings, Cancelled};
 use super::bvh::Ray;
 use super::lights::Light;
 use super::sampling::*;
-use rayon::prelude::*;
 use std::f32::consts::{FRAC_1_PI, PI};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::AtomicBool;
 
 /// Shadow rays stop this fraction short of a light point (as the integrator's).
 const SHADOW_SHORTEN: f32 = 1e-4;
@@ -61,7 +60,7 @@ pub fn eval_sh9(c: &[V3; 9], n: V3) -> V3 {
     out
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Probe {
     /// SH coefficients of B(n) = E(n)/pi, RGB, without the sun's direct light.
     pub sh: [V3; 9],
@@ -81,27 +80,8 @@ pub fn bake_probes(
     progress: &(dyn Fn(u64, u64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<(Vec<Probe>, u64), Cancelled> {
-    assert!(ids.is_none_or(|ids| ids.len() == points.len()), "one id per point");
-    let (done, rays) = (AtomicU64::new(0), AtomicU64::new(0));
-    let mut out = vec![Probe { sh: [[0.0; 3]; 9], sun_visibility: 1.0, backface: 0.0 }; points.len()];
-    out.par_chunks_mut(4).enumerate().for_each(|(c, dst)| {
-        if cancel.load(Ordering::Relaxed) {
-            return;
-        }
-        let mut cast = 0u64;
-        for (j, o) in dst.iter_mut().enumerate() {
-            let i = c * 4 + j;
-            let id = ids.map_or(i as u64, |ids| ids[i]);
-            *o = bake_probe(scene, points[i], PROBE_STREAM ^ id, settings, &mut cast);
-        }
-        let d = done.fetch_add(dst.len() as u64, Ordering::Relaxed) + dst.len() as u64;
-        let r = rays.fetch_add(cast, Ordering::Relaxed) + cast;
-        progress(d, r);
-    });
-    if cancel.load(Ordering::Relaxed) {
-        return Err(Cancelled);
-    }
-    Ok((out, rays.into_inner()))
+    // Probes are slow (hundreds of rays each): small chunks keep progress and cancel prompt.
+    par_bake(points.len(), 4, ids, progress, cancel, |i, id, cast| bake_probe(scene, points[i], PROBE_STREAM ^ id, settings, cast))
 }
 
 fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u64) -> Probe {
