@@ -97,6 +97,8 @@ pub struct Renderer {
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
     pub count_fragments: bool,
+    /// Depth testing in the shading pass without a pre-pass (off only to count raw fragments).
+    pub depth_test: bool,
     counters: Vec<Buffer>,
     /// One uniform buffer and descriptor set per frame in flight.
     frame_ubos: Vec<Buffer>,
@@ -251,6 +253,7 @@ impl Renderer {
             timestamps,
             prepass: true,
             count_fragments: false,
+            depth_test: true,
             counters,
             frame_ubos,
             frame_sets,
@@ -329,7 +332,7 @@ impl Renderer {
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .clear_value(depth_clear);
             let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
-            self.pass(gpu, cb, scene, slot, &rendering, query_a, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
+            self.pass(gpu, cb, scene, slot, &rendering, query_a, true, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
         }
@@ -353,7 +356,7 @@ impl Renderer {
             _ => if prepass { p.shade_equal } else { p.shade },
         };
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
-        self.pass(gpu, cb, scene, slot, &rendering, query_b, |_| shade);
+        self.pass(gpu, cb, scene, slot, &rendering, query_b, prepass || self.depth_test, |_| shade);
         stamp(2);
     }
 
@@ -370,7 +373,17 @@ impl Renderer {
     /// One rendering instance drawing every visible instance, each submesh with the pipeline
     /// `pipeline_for(material)` gives, counted by pipeline-statistics query `query`.
     #[allow(clippy::too_many_arguments)]
-    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, slot: usize, rendering: &vk::RenderingInfo, query: u32, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) {
+    fn pass(
+        &self,
+        gpu: &Gpu,
+        cb: vk::CommandBuffer,
+        scene: &GpuScene,
+        slot: usize,
+        rendering: &vk::RenderingInfo,
+        query: u32,
+        depth_test: bool,
+        pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline,
+    ) {
         let d = &gpu.device;
         let extent = rendering.render_area.extent;
         unsafe {
@@ -380,6 +393,7 @@ impl Renderer {
             d.cmd_begin_rendering(cb, rendering);
             d.cmd_set_viewport(cb, 0, &[vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 }]);
             d.cmd_set_scissor(cb, 0, &[rendering.render_area]);
+            d.cmd_set_depth_test_enable(cb, depth_test);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[self.frame_sets[slot]], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
@@ -519,7 +533,7 @@ fn create_mesh_pipeline(
     let depth = vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(depth_write).depth_compare_op(compare);
     let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
     let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(if color_format.is_some() { &blend_attachment[..] } else { &[] });
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR, vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE];
+    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR, vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE, vk::DynamicState::DEPTH_TEST_ENABLE];
     let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
     let color_formats: Vec<vk::Format> = color_format.into_iter().collect();
     let mut rendering = vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&color_formats).depth_attachment_format(depth_format);

@@ -472,3 +472,33 @@ fn half_bits(v: f32) -> u16 {
     let (sign, exp, man) = ((b >> 16) & 0x8000, ((b >> 23) & 0xff) as i32 - 127 + 15, b & 0x7f_ffff);
     (sign | ((exp as u32) << 10) | ((man + 0x1000) >> 13)) as u16
 }
+
+#[test]
+fn backface_culling_shades_a_closed_mesh_once_per_pixel_and_twice_without() {
+    // pipeline.md T3.6 with the fragment counter: a cube in a generic pose (irrational angles,
+    // so no pixel centre lies on a silhouette edge), depth test off. Culling back faces: one
+    // fragment per covered pixel; double-sided (culling off): exactly two.
+    let gpu = gpu();
+    let pose = Mat4::from_rotation_y(0.7137) * Mat4::from_rotation_x(0.4321);
+    let count = |double_sided: bool| {
+        let pack = cube_pack(&[pose], WHITE4, Material { double_sided, ..Material::default() });
+        let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
+        let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+        let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+        (renderer.count_fragments, renderer.prepass, renderer.depth_test) = (true, false, false);
+        target.render(&gpu, &mut renderer, &scene, &looking_down_neg_z(2.5), &Lighting::default(), true).unwrap();
+        let clear = pixel(target.pixels(), 64, 0, 0);
+        let covered = target.pixels().chunks_exact(4).filter(|p| *p != clear).count() as u32;
+        let n = renderer.fragment_count(0).unwrap();
+        scene.destroy(&gpu);
+        renderer.destroy(&gpu);
+        target.destroy(&gpu);
+        (n, covered)
+    };
+    let (once, covered) = count(false);
+    assert!(covered > 500, "the cube covers {covered} pixels");
+    assert_eq!(once, covered);
+    let (twice, covered2) = count(true);
+    assert_eq!((twice, covered2), (2 * covered, covered));
+    assert_clean(&gpu);
+}
