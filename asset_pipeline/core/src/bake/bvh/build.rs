@@ -1,0 +1,255 @@
+//! Binned-SAH build of the binary tree, with early split clipping of long triangles.
+
+use super::Node;
+
+/// Triangles per leaf at most (unless all their centroids coincide: then count splits apply).
+const MAX_LEAF: usize = 8;
+const BINS: usize = 16;
+/// Cost of a box-pair test relative to one triangle test, in the SAH.
+const TRAVERSAL_COST: f32 = 1.0;
+/// Pre-splitting: references' boxes are halved while longer than this fraction of the scene's
+/// largest extent, to at most `PRESPLIT_BUDGET` references per triangle on average.
+const PRESPLIT_EXTENT: f32 = 1.0 / 32.0;
+const PRESPLIT_BUDGET: usize = 2;
+const PRESPLIT_DEPTH: u32 = 12;
+/// Below this depth the SAH decides; deeper nodes split by count, so the tree depth (and the
+/// traversal stack) stays bounded even for adversarial soups: at most 48 + 32 < STACK.
+const SAH_DEPTH: usize = 48;
+
+#[derive(Clone, Copy)]
+struct Aabb {
+    min: [f32; 3],
+    max: [f32; 3],
+}
+
+impl Aabb {
+    const EMPTY: Aabb = Aabb { min: [f32::INFINITY; 3], max: [f32::NEG_INFINITY; 3] };
+    fn grow(&mut self, p: [f32; 3]) {
+        for k in 0..3 {
+            self.min[k] = self.min[k].min(p[k]);
+            self.max[k] = self.max[k].max(p[k]);
+        }
+    }
+    fn join(&mut self, b: &Aabb) {
+        self.grow(b.min);
+        self.grow(b.max);
+    }
+    fn area(&self) -> f32 {
+        let d = [0, 1, 2].map(|k| self.max[k] - self.min[k]);
+        if d[0] < 0.0 {
+            return 0.0;
+        }
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+}
+
+pub(super) struct Prim {
+    bounds: Aabb,
+    centroid: [f32; 3],
+    pub(super) id: u32,
+}
+
+/// The references to build over: one per usable triangle (index in range, finite corners),
+/// more for long triangles (see [`presplit`]).
+pub(super) fn prims(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<Prim> {
+    let mut prims: Vec<Prim> = triangles
+        .iter()
+        .enumerate()
+        .filter_map(|(i, t)| {
+            let c = [positions.get(t[0] as usize)?, positions.get(t[1] as usize)?, positions.get(t[2] as usize)?];
+            if c.iter().flat_map(|p| p.iter()).any(|x| !x.is_finite()) {
+                return None;
+            }
+            let mut b = Aabb::EMPTY;
+            c.iter().for_each(|p| b.grow(**p));
+            let centroid = [0, 1, 2].map(|k| 0.5 * (b.min[k] + b.max[k]));
+            Some(Prim { bounds: b, centroid, id: i as u32 })
+        })
+        .collect();
+    presplit(&mut prims, positions, triangles);
+    prims
+}
+
+pub(super) fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<Node>) -> usize {
+    let me = nodes.len();
+    let mut bounds = Aabb::EMPTY;
+    let mut cb = Aabb::EMPTY;
+    for p in prims.iter() {
+        bounds.join(&p.bounds);
+        cb.grow(p.centroid);
+    }
+    let n = prims.len();
+    let leaf = |nodes: &mut Vec<Node>| {
+        nodes.push(Node { min: bounds.min, offset: first as u32, max: bounds.max, count: n as u16, axis: 0 });
+        me
+    };
+    if n <= 2 {
+        return leaf(nodes);
+    }
+    // Best binned SAH split over the three axes.
+    let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, bins on the left)
+    for axis in 0..if depth < SAH_DEPTH { 3 } else { 0 } {
+        let (lo, hi) = (cb.min[axis], cb.max[axis]);
+        if !(hi > lo) {
+            continue;
+        }
+        let scale = BINS as f32 / (hi - lo);
+        let bin_of = |c: f32| (((c - lo) * scale) as usize).min(BINS - 1);
+        let mut counts = [0usize; BINS];
+        let mut boxes = [Aabb::EMPTY; BINS];
+        for p in prims.iter() {
+            let b = bin_of(p.centroid[axis]);
+            counts[b] += 1;
+            boxes[b].join(&p.bounds);
+        }
+        // Sweep from the right for the right-side areas, then from the left.
+        let mut right_area = [0f32; BINS];
+        let mut acc = Aabb::EMPTY;
+        for i in (1..BINS).rev() {
+            acc.join(&boxes[i]);
+            right_area[i] = acc.area();
+        }
+        let mut left = Aabb::EMPTY;
+        let mut nl = 0;
+        for i in 0..BINS - 1 {
+            left.join(&boxes[i]);
+            nl += counts[i];
+            let nr = n - nl;
+            if nl == 0 || nr == 0 {
+                continue;
+            }
+            let cost = nl as f32 * left.area() + nr as f32 * right_area[i + 1];
+            if best.is_none_or(|b| cost < b.0) {
+                best = Some((cost, axis, i + 1));
+            }
+        }
+    }
+    let area = bounds.area();
+    let (mid, axis) = match best {
+        Some((cost, axis, split)) => {
+            let leaf_cost = n as f32 * area;
+            if n <= MAX_LEAF && leaf_cost <= TRAVERSAL_COST * area + cost {
+                return leaf(nodes);
+            }
+            let (lo, hi) = (cb.min[axis], cb.max[axis]);
+            let scale = BINS as f32 / (hi - lo);
+            let mid = partition(prims, |p| (((p.centroid[axis] - lo) * scale) as usize).min(BINS - 1) < split);
+            (mid, axis)
+        }
+        None if n <= MAX_LEAF => return leaf(nodes),
+        // Every centroid in one point: split by count (keeps depth logarithmic).
+        None => (n / 2, 0),
+    };
+    nodes.push(Node { min: bounds.min, offset: 0, max: bounds.max, count: 0, axis: axis as u16 });
+    let (l, r) = prims.split_at_mut(mid);
+    build_node(l, first, depth + 1, nodes);
+    let right = build_node(r, first + mid, depth + 1, nodes);
+    nodes[me].offset = right as u32;
+    me
+}
+
+/// Early split clipping (Ernst & Greiner 2007): a triangle whose box is large next to the scene
+/// is split into several references, each with the box of the part of the triangle inside a
+/// half of its box, so long thin triangles (walls, ground) do not make every box overlap. A
+/// triangle may then sit in several leaves; hits are unchanged (the same test, the same t).
+fn presplit(prims: &mut Vec<Prim>, positions: &[[f32; 3]], triangles: &[[u32; 3]]) {
+    let mut scene = Aabb::EMPTY;
+    prims.iter().for_each(|p| scene.join(&p.bounds));
+    let ext = [0, 1, 2].map(|k| scene.max[k] - scene.min[k]);
+    let limit = ext[0].max(ext[1]).max(ext[2]) * PRESPLIT_EXTENT;
+    if !(limit > 0.0) || !limit.is_finite() {
+        return;
+    }
+    let budget = prims.len() * PRESPLIT_BUDGET;
+    let n = prims.len();
+    for i in 0..n {
+        if prims.len() >= budget {
+            break;
+        }
+        let b = prims[i].bounds;
+        if (0..3).all(|k| b.max[k] - b.min[k] <= limit) {
+            continue;
+        }
+        let id = prims[i].id;
+        let tri = triangles[id as usize].map(|v| positions[v as usize]);
+        let mut out = Vec::new();
+        split_ref(&tri, b, limit, 0, &mut out);
+        if out.is_empty() {
+            continue;
+        }
+        let mk = |bounds: Aabb| Prim { bounds, centroid: [0, 1, 2].map(|k| 0.5 * (bounds.min[k] + bounds.max[k])), id };
+        prims[i] = mk(out[0]);
+        prims.extend(out[1..].iter().map(|b| mk(*b)));
+    }
+}
+
+/// Boxes of the parts of `tri` inside `clip` (halving its longest side until under `limit`).
+fn split_ref(tri: &[[f32; 3]; 3], clip: Aabb, limit: f32, depth: u32, out: &mut Vec<Aabb>) {
+    let ext = [0, 1, 2].map(|k| clip.max[k] - clip.min[k]);
+    let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
+    if ext[axis] <= limit || depth >= PRESPLIT_DEPTH {
+        out.push(clip);
+        return;
+    }
+    let mid = 0.5 * (clip.min[axis] + clip.max[axis]);
+    for side in 0..2 {
+        let mut half = clip;
+        if side == 0 {
+            half.max[axis] = mid;
+        } else {
+            half.min[axis] = mid;
+        }
+        if let Some(b) = clipped_bounds(tri, &half) {
+            split_ref(tri, b, limit, depth + 1, out);
+        }
+    }
+}
+
+/// Bounds of the triangle clipped to the box `b` (Sutherland-Hodgman in f64), widened by a few
+/// ulps and cut to `b` (so a hit inside `b` is always inside); None if nothing is left.
+fn clipped_bounds(tri: &[[f32; 3]; 3], b: &Aabb) -> Option<Aabb> {
+    let mut poly: Vec<[f64; 3]> = tri.iter().map(|p| p.map(|x| x as f64)).collect();
+    for k in 0..3 {
+        for (side, plane) in [(0, b.min[k] as f64), (1, b.max[k] as f64)] {
+            let inside = |p: &[f64; 3]| if side == 0 { p[k] >= plane } else { p[k] <= plane };
+            let mut next = Vec::with_capacity(poly.len() + 2);
+            for i in 0..poly.len() {
+                let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+                if inside(&p) {
+                    next.push(p);
+                }
+                if inside(&p) != inside(&q) {
+                    let t = (plane - p[k]) / (q[k] - p[k]);
+                    let mut x = [0, 1, 2].map(|j| p[j] + t * (q[j] - p[j]));
+                    x[k] = plane;
+                    next.push(x);
+                }
+            }
+            poly = next;
+            if poly.is_empty() {
+                return None;
+            }
+        }
+    }
+    let mut out = Aabb::EMPTY;
+    for p in &poly {
+        for k in 0..3 {
+            let pad = p[k].abs() * 1e-6 + 1e-30;
+            out.min[k] = out.min[k].min(((p[k] - pad) as f32).max(b.min[k]));
+            out.max[k] = out.max[k].max(((p[k] + pad) as f32).min(b.max[k]));
+        }
+    }
+    Some(out)
+}
+
+fn partition<T>(v: &mut [T], pred: impl Fn(&T) -> bool) -> usize {
+    let mut i = 0;
+    for j in 0..v.len() {
+        if pred(&v[j]) {
+            v.swap(i, j);
+            i += 1;
+        }
+    }
+    i
+}
+
