@@ -1,6 +1,27 @@
 //! Binned-SAH build of the binary tree, with early split clipping of long triangles.
 
-use super::Node;
+/// A node of the binary tree, depth-first: an interior node's left child is the next node.
+pub(super) struct Node {
+    pub(super) min: [f32; 3],
+    pub(super) max: [f32; 3],
+    /// Interior: index of the right child. Leaf: first reference in [`Binary::ids`].
+    pub(super) offset: u32,
+    /// References in a leaf; 0 for interior nodes.
+    pub(super) count: u32,
+}
+
+impl Node {
+    /// Half the surface area (what the SAH weighs children by).
+    pub(super) fn area(&self) -> f32 {
+        Aabb { min: self.min, max: self.max }.area()
+    }
+}
+
+/// The binary tree and the triangle index of each reference, in leaf order.
+pub(super) struct Binary {
+    pub(super) nodes: Vec<Node>,
+    pub(super) ids: Vec<u32>,
+}
 
 /// Triangles per leaf at most (unless all their centroids coincide: then count splits apply).
 const MAX_LEAF: usize = 8;
@@ -13,7 +34,7 @@ const PRESPLIT_EXTENT: f32 = 1.0 / 32.0;
 const PRESPLIT_BUDGET: usize = 2;
 const PRESPLIT_DEPTH: u32 = 12;
 /// Below this depth the SAH decides; deeper nodes split by count, so the tree depth (and the
-/// traversal stack) stays bounded even for adversarial soups: at most 48 + 32 < STACK.
+/// traversal stack) stays bounded even for adversarial soups: at most 48 + 32 levels.
 const SAH_DEPTH: usize = 48;
 
 #[derive(Clone, Copy)]
@@ -43,15 +64,14 @@ impl Aabb {
     }
 }
 
-pub(super) struct Prim {
+struct Prim {
     bounds: Aabb,
     centroid: [f32; 3],
-    pub(super) id: u32,
+    id: u32,
 }
 
-/// The references to build over: one per usable triangle (index in range, finite corners),
-/// more for long triangles (see [`presplit`]).
-pub(super) fn prims(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<Prim> {
+/// Build over the usable triangles (index in range, finite corners); None if there is none.
+pub(super) fn binary(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Option<Binary> {
     let mut prims: Vec<Prim> = triangles
         .iter()
         .enumerate()
@@ -66,11 +86,16 @@ pub(super) fn prims(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<Prim>
             Some(Prim { bounds: b, centroid, id: i as u32 })
         })
         .collect();
+    if prims.is_empty() {
+        return None;
+    }
     presplit(&mut prims, positions, triangles);
-    prims
+    let mut nodes = Vec::with_capacity(2 * prims.len());
+    build_node(&mut prims, 0, 0, &mut nodes);
+    Some(Binary { nodes, ids: prims.iter().map(|p| p.id).collect() })
 }
 
-pub(super) fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<Node>) -> usize {
+fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<Node>) -> usize {
     let me = nodes.len();
     let mut bounds = Aabb::EMPTY;
     let mut cb = Aabb::EMPTY;
@@ -80,7 +105,7 @@ pub(super) fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: 
     }
     let n = prims.len();
     let leaf = |nodes: &mut Vec<Node>| {
-        nodes.push(Node { min: bounds.min, offset: first as u32, max: bounds.max, count: n as u16, axis: 0 });
+        nodes.push(Node { min: bounds.min, max: bounds.max, offset: first as u32, count: n as u32 });
         me
     };
     if n <= 2 {
@@ -125,7 +150,7 @@ pub(super) fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: 
         }
     }
     let area = bounds.area();
-    let (mid, axis) = match best {
+    let mid = match best {
         Some((cost, axis, split)) => {
             let leaf_cost = n as f32 * area;
             if n <= MAX_LEAF && leaf_cost <= TRAVERSAL_COST * area + cost {
@@ -133,14 +158,13 @@ pub(super) fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: 
             }
             let (lo, hi) = (cb.min[axis], cb.max[axis]);
             let scale = BINS as f32 / (hi - lo);
-            let mid = partition(prims, |p| (((p.centroid[axis] - lo) * scale) as usize).min(BINS - 1) < split);
-            (mid, axis)
+            partition(prims, |p| (((p.centroid[axis] - lo) * scale) as usize).min(BINS - 1) < split)
         }
         None if n <= MAX_LEAF => return leaf(nodes),
         // Every centroid in one point: split by count (keeps depth logarithmic).
-        None => (n / 2, 0),
+        None => n / 2,
     };
-    nodes.push(Node { min: bounds.min, offset: 0, max: bounds.max, count: 0, axis: axis as u16 });
+    nodes.push(Node { min: bounds.min, max: bounds.max, offset: 0, count: 0 });
     let (l, r) = prims.split_at_mut(mid);
     build_node(l, first, depth + 1, nodes);
     let right = build_node(r, first + mid, depth + 1, nodes);

@@ -1,26 +1,23 @@
 //! Per-ray constants and the watertight ray-triangle test.
 
-use super::{Hit, Node, Ray};
+use super::{Hit, Ray};
 
-/// Per-ray constants for the box and triangle tests.
+/// Per-ray constants of the triangle test.
 pub(super) struct Prepared {
-    org: [f32; 3],
-    inv: [f32; 3],
-    /// Direction sign bits (near plane is the box's max on negative axes).
-    neg: [bool; 3],
+    pub(super) org: [f32; 3],
     pub(super) tmin: f32,
-    // Woop et al.: axis permutation and shear that make the ray +z from the origin.
-    k: [usize; 3],
-    shear: [f32; 3],
+    /// Woop et al.: axis permutation and shear that make the ray +z from the origin.
+    pub(super) k: [usize; 3],
+    pub(super) shear: [f32; 3],
 }
 
-/// 1 + 2*gamma(3), gamma(n) = n*eps/(1-n*eps) with eps = 2^-24 (pbrt 3 §3.9.2).
-const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// 1 + 2*gamma(3), gamma(n) = n*eps/(1-n*eps) with eps = 2^-24 (pbrt 3 §3.9.2): widens far
+/// bounds so rounding never culls a real hit.
+pub(super) const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl Prepared {
     pub(super) fn new(ray: &Ray) -> Prepared {
         let d = ray.dir;
-        let inv = d.map(|x| 1.0 / x);
         let a = d.map(f32::abs);
         let kz = if a[0] > a[1] { if a[0] > a[2] { 0 } else { 2 } } else if a[1] > a[2] { 1 } else { 2 };
         let mut kx = (kz + 1) % 3;
@@ -29,35 +26,9 @@ impl Prepared {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        Prepared {
-            org: ray.origin,
-            inv,
-            neg: d.map(|x| x.is_sign_negative()),
-            tmin: ray.tmin,
-            k: [kx, ky, kz],
-            shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
-        }
-    }
-
-    /// Entry distance of the box if the ray overlaps it within (tmin, tmax).
-    #[inline(always)]
-    pub(super) fn enter(&self, n: &Node, tmax: f32) -> Option<f32> {
-        let mut lo = self.tmin;
-        let mut hi = tmax;
-        for k in 0..3 {
-            // Near and far planes by the direction's sign (sign bit, so -0 counts as negative).
-            let (pn, pf) = if self.neg[k] { (n.max[k], n.min[k]) } else { (n.min[k], n.max[k]) };
-            let t0 = (pn - self.org[k]) * self.inv[k];
-            let t1 = (pf - self.org[k]) * self.inv[k] * ROBUST;
-            // NaN (origin on the slab plane, direction 0 on this axis) fails the comparison and
-            // leaves the bound as it was: conservative.
-            lo = if t0 > lo { t0 } else { lo };
-            hi = if t1 < hi { t1 } else { hi };
-        }
-        (lo <= hi).then_some(lo)
+        Prepared { org: ray.origin, tmin: ray.tmin, k: [kx, ky, kz], shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
     }
 }
-
 
 /// Watertight ray-triangle test; the hit distance if `tmin < t < tmax`.
 #[inline(always)]

@@ -1,0 +1,307 @@
+//! Walking the wide tree: 8 child boxes per visit, 4 triangles per test. One generic source,
+//! instantiated as the portable kernel (plain arrays) and, on x86_64 CPUs that have it, the AVX
+//! kernel; both compute the same bits (see [`super::lanes`]), so results do not depend on it.
+
+use super::lanes::{Lanes, Scalar};
+use super::triangle::{intersect, Prepared, ROBUST};
+use super::wide::{child, Tri4, Wide, BLOCK, WIDTH};
+use super::{stats, Bvh, Hit, Ray};
+use std::mem::MaybeUninit;
+
+/// Traversal stack entries. A visit pushes at most WIDTH - 1 and the build bounds the binary
+/// depth (so the wide one) to 48 + 32 levels; the build checks its tree's actual need.
+pub(super) const STACK: usize = (WIDTH - 1) * 80 + WIDTH;
+
+/// Boxes are culled against the closest hit so far times this. A triangle's computed t can be
+/// a few ulps under the true distance (a ray through a shared vertex on a box's corner gets
+/// t = 0.9999999 from one triangle, 0.99999994 from its neighbour, box entry 1.0): without the
+/// slack, the first found would hide the other and the closest hit would depend on the order
+/// of the walk. Visiting the odd box entered just behind the closest hit costs nothing.
+const CULL_SLACK: f32 = 1.0 + 1.0 / 4096.0;
+
+/// The implementations the queries can run with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Kernel {
+    Portable,
+    #[cfg(target_arch = "x86_64")]
+    Avx,
+}
+
+impl Kernel {
+    /// Every kernel this CPU can run, the fastest last.
+    pub(super) fn available() -> Vec<Kernel> {
+        let mut k = vec![Kernel::Portable];
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            k.push(Kernel::Avx);
+        }
+        k
+    }
+}
+
+pub(super) fn closest(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
+    match bvh.kernel {
+        Kernel::Portable => walk::<Scalar<WIDTH>, Scalar<BLOCK>, true>(bvh, ray),
+        // SAFETY: `Bvh` only holds a kernel that `Kernel::available` listed.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx => unsafe { avx::walk::<true>(bvh, ray) },
+    }
+}
+
+pub(super) fn any(bvh: &Bvh, ray: &Ray) -> bool {
+    match bvh.kernel {
+        Kernel::Portable => walk::<Scalar<WIDTH>, Scalar<BLOCK>, false>(bvh, ray),
+        // SAFETY: as in `closest`.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx => unsafe { avx::walk::<false>(bvh, ray) },
+    }
+    .is_some()
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::super::lanes::{Avx, Sse};
+    use super::{Bvh, Hit, Ray};
+
+    /// # Safety
+    /// The CPU must have AVX.
+    #[target_feature(enable = "avx")]
+    pub(super) unsafe fn walk<const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
+        super::walk::<Avx, Sse, CLOSEST>(bvh, ray)
+    }
+}
+
+/// Per-ray constants of the box test, broadcast to the lanes.
+struct BoxRay<B> {
+    org: [B; 3],
+    inv: [B; 3],
+    /// Plane indices (see `Wide::planes`) of the near and far side per axis: the box's max is
+    /// the near side where the direction is negative (sign bit, so -0 counts as negative).
+    near: [usize; 3],
+    far: [usize; 3],
+    tmin: B,
+    robust: B,
+}
+
+impl<B: Lanes> BoxRay<B> {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Self {
+        let neg = ray.dir.map(|x| x.is_sign_negative() as usize);
+        BoxRay {
+            org: ray.origin.map(B::splat),
+            // IEEE infinities handle zero components.
+            inv: ray.dir.map(|x| B::splat(1.0 / x)),
+            near: [0, 1, 2].map(|k| 2 * k + neg[k]),
+            far: [0, 1, 2].map(|k| 2 * k + 1 - neg[k]),
+            tmin: B::splat(ray.tmin),
+            robust: B::splat(ROBUST),
+        }
+    }
+
+    /// Slab test of the 8 child boxes: (mask of those the ray overlaps within (tmin, tcull),
+    /// their entry distances). The far distance is widened by ROBUST (pbrt's bound), so
+    /// rounding never culls a real hit; a NaN (origin on a slab plane, direction 0 on that
+    /// axis) leaves the bound as it was, which keeps the box: conservative.
+    #[inline(always)]
+    fn enter(&self, n: &Wide, tcull: f32) -> (u32, B) {
+        const { assert!(B::N == WIDTH) };
+        let mut lo = self.tmin;
+        let mut hi = B::splat(tcull);
+        for k in 0..3 {
+            // SAFETY: plane indices are below 6, and a plane holds WIDTH = B::N floats.
+            let (pn, pf) = unsafe {
+                (B::load(n.planes.get_unchecked(self.near[k]).as_ptr()), B::load(n.planes.get_unchecked(self.far[k]).as_ptr()))
+            };
+            let t0 = pn.sub(self.org[k]).mul(self.inv[k]);
+            let t1 = pf.sub(self.org[k]).mul(self.inv[k]).mul(self.robust);
+            lo = t0.max(lo);
+            hi = t1.min(hi);
+        }
+        (lo.le(hi).bits(), lo)
+    }
+}
+
+/// Per-ray constants of the triangle test, broadcast to the lanes.
+pub(super) struct TriRay<T> {
+    /// Origin and shear in the permuted frame of [`Prepared`].
+    org: [T; 3],
+    shear: [T; 3],
+    tmin: T,
+    robust: T,
+    /// For the lanes redone in scalar.
+    scalar: Prepared,
+}
+
+impl<T: Lanes> TriRay<T> {
+    #[inline(always)]
+    pub(super) fn new(ray: &Ray) -> Self {
+        let p = Prepared::new(ray);
+        TriRay {
+            org: p.k.map(|k| T::splat(p.org[k])),
+            shear: p.shear.map(T::splat),
+            tmin: T::splat(p.tmin),
+            robust: T::splat(ROBUST),
+            scalar: p,
+        }
+    }
+
+    /// The watertight test of `intersect` on 4 triangles, operation for operation (so the same
+    /// t to the bit): (mask of hits with tmin < t < tmax, mask of lanes to redo with
+    /// `intersect`, t per lane). The lanes to redo are those where an edge function came out
+    /// exactly zero, which `intersect` recomputes in f64; they are left out of the hits.
+    #[inline(always)]
+    pub(super) fn block(&self, b: &Tri4, tmax: f32) -> (u32, u32, T) {
+        const { assert!(T::N == BLOCK) };
+        let k = &self.scalar.k;
+        // SAFETY: k is a permutation of 0..3; each axis row holds BLOCK = T::N floats.
+        let rel = |c: usize| {
+            [0, 1, 2].map(|i| unsafe { T::load(b.v[c].get_unchecked(k[i]).as_ptr()) }.sub(self.org[i]))
+        };
+        let (a, bb, c) = (rel(0), rel(1), rel(2));
+        let [sx, sy, sz] = self.shear;
+        let (ax, ay) = (a[0].sub(sx.mul(a[2])), a[1].sub(sy.mul(a[2])));
+        let (bx, by) = (bb[0].sub(sx.mul(bb[2])), bb[1].sub(sy.mul(bb[2])));
+        let (cx, cy) = (c[0].sub(sx.mul(c[2])), c[1].sub(sy.mul(c[2])));
+        let u = cx.mul(by).sub(cy.mul(bx));
+        let v = ax.mul(cy).sub(ay.mul(cx));
+        let w = bx.mul(ay).sub(by.mul(ax));
+        let zero = T::splat(0.0);
+        let redo = u.eq(zero).or(v.eq(zero)).or(w.eq(zero));
+        let outside = u.lt(zero).or(v.lt(zero)).or(w.lt(zero)).and(u.gt(zero).or(v.gt(zero)).or(w.gt(zero)));
+        let det = u.add(v).add(w);
+        let t_scaled = sz.mul(u.mul(a[2]).add(v.mul(bb[2])).add(w.mul(c[2])));
+        // Negating both when det < 0 is flipping their sign bits by det's.
+        let sign = det.and(T::splat(-0.0));
+        let (ts, d) = (t_scaled.xor(sign), det.xor(sign));
+        let t = ts.div(d);
+        // `intersect`'s early outs (det == 0, ts <= tmin d, ts > tmax d ROBUST) and its final
+        // strict interval, as one mask.
+        let inside = ts.gt(self.tmin.mul(d)).and(ts.le(T::splat(tmax).mul(d).mul(self.robust)));
+        let inside = inside.and(t.gt(self.tmin)).and(t.lt(T::splat(tmax))).and_not(det.eq(zero));
+        let hit = inside.and_not(outside).and_not(redo);
+        (hit.bits(), redo.bits(), t)
+    }
+}
+
+/// Depth-first walk. CLOSEST: the closest hit, children visited nearest first and subtrees
+/// behind the closest hit so far skipped. Otherwise (shadow rays) the first hit found, in no
+/// particular order; `Some` with any t then.
+#[inline(always)]
+fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
+    let br = BoxRay::<B>::new(ray);
+    let tr = TriRay::<T>::new(ray);
+    let mut tmax = ray.tmax;
+    let mut tcull = tmax * CULL_SLACK;
+    let mut best = u32::MAX;
+    // Entries (child reference, entry distance). Uninitialised: only slots below `sp` are read.
+    let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
+    let mut sp = 0usize;
+    // SAFETY (the unchecked accesses below): the build makes every child reference valid and
+    // checks that its tree needs fewer than STACK entries (a visit pushes every hit child but
+    // the one it goes on with, momentarily that one too).
+    macro_rules! push {
+        ($e:expr) => {{
+            unsafe { stack.get_unchecked_mut(sp).write($e) };
+            sp += 1;
+        }};
+    }
+    let mut cur = 0u32;
+    'walk: loop {
+        if cur & child::LEAF == 0 {
+            let n = unsafe { bvh.nodes.get_unchecked(cur as usize) };
+            stats::add(WIDTH as u64, 0);
+            let (mut hit, tn) = br.enter(n, tcull);
+            if hit != 0 {
+                let i = hit.trailing_zeros() as usize;
+                hit &= hit - 1;
+                if hit == 0 || !CLOSEST {
+                    // One child, or a shadow ray: go on with the first, push the others.
+                    while hit != 0 {
+                        push!((n.child[hit.trailing_zeros() as usize], 0.0));
+                        hit &= hit - 1;
+                    }
+                    cur = n.child[i];
+                    continue;
+                }
+                let mut t = [0f32; 8];
+                tn.store(&mut t);
+                let j = hit.trailing_zeros() as usize;
+                hit &= hit - 1;
+                if hit == 0 {
+                    let (near, far) = if t[j] < t[i] { (j, i) } else { (i, j) };
+                    push!((n.child[far], t[far]));
+                    cur = n.child[near];
+                    continue;
+                }
+                // Three or more: push them all, sort that run so the nearest is on top (insertion
+                // sort: a handful of entries, stable, so ties keep lane order), take it.
+                let base = sp;
+                push!((n.child[i], t[i]));
+                push!((n.child[j], t[j]));
+                while hit != 0 {
+                    let l = hit.trailing_zeros() as usize;
+                    push!((n.child[l], t[l]));
+                    hit &= hit - 1;
+                }
+                let s = unsafe { stack.get_unchecked_mut(base..sp) };
+                for a in 1..s.len() {
+                    let e = s[a];
+                    let te = unsafe { e.assume_init().1 };
+                    let mut b = a;
+                    while b > 0 && unsafe { s[b - 1].assume_init().1 } < te {
+                        s[b] = s[b - 1];
+                        b -= 1;
+                    }
+                    s[b] = e;
+                }
+                sp -= 1;
+                cur = unsafe { stack.get_unchecked(sp).assume_init().0 };
+                continue;
+            }
+        } else {
+            let (first, count) = child::blocks(cur);
+            stats::add(0, (count * BLOCK) as u64);
+            for b in unsafe { bvh.blocks.get_unchecked(first..first + count) } {
+                let (mut hit, redo, t) = tr.block(b, tmax);
+                if hit | redo == 0 {
+                    continue;
+                }
+                let mut ts = [0f32; 8];
+                t.store(&mut ts);
+                let mut r = redo;
+                while r != 0 {
+                    let lane = r.trailing_zeros() as usize;
+                    r &= r - 1;
+                    if let Some(th) = intersect(&tr.scalar, &b.triangle(lane), ray.tmin, tmax) {
+                        ts[lane] = th;
+                        hit |= 1 << lane;
+                    }
+                }
+                if !CLOSEST && hit != 0 {
+                    return Some(Hit { t: ts[hit.trailing_zeros() as usize], prim: b.id[hit.trailing_zeros() as usize] });
+                }
+                // Lowest t, the lowest lane on a tie (all were tested against the same tmax).
+                while hit != 0 {
+                    let lane = hit.trailing_zeros() as usize;
+                    hit &= hit - 1;
+                    if ts[lane] < tmax {
+                        tmax = ts[lane];
+                        tcull = tmax * CULL_SLACK;
+                        best = b.id[lane];
+                    }
+                }
+            }
+        }
+        // Pop the next subtree still in front of the closest hit so far.
+        while sp > 0 {
+            sp -= 1;
+            let (c, tenter) = unsafe { stack.get_unchecked(sp).assume_init() };
+            if tenter <= tcull {
+                cur = c;
+                continue 'walk;
+            }
+        }
+        break;
+    }
+    (best != u32::MAX).then_some(Hit { t: tmax, prim: best })
+}
