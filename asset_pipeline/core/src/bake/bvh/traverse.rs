@@ -32,7 +32,7 @@ impl Kernel {
     pub(super) fn available() -> Vec<Kernel> {
         let mut k = vec![Kernel::Portable];
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
+        if std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("popcnt") {
             k.push(Kernel::Avx);
         }
         k
@@ -64,8 +64,8 @@ mod avx {
     use super::{Bvh, Hit, Ray};
 
     /// # Safety
-    /// The CPU must have AVX.
-    #[target_feature(enable = "avx")]
+    /// The CPU must have AVX and POPCNT.
+    #[target_feature(enable = "avx,popcnt")]
     pub(super) unsafe fn walk<const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
         super::walk::<Avx, Sse, CLOSEST>(bvh, ray)
     }
@@ -167,7 +167,9 @@ impl<T: Lanes> TriRay<T> {
         let w = bx.mul(ay).sub(by.mul(ax));
         let zero = T::splat(0.0);
         let redo = u.eq(zero).or(v.eq(zero)).or(w.eq(zero));
-        let outside = u.lt(zero).or(v.lt(zero)).or(w.lt(zero)).and(u.gt(zero).or(v.gt(zero)).or(w.gt(zero)));
+        // Mixed signs: `intersect`'s any-negative-and-any-positive, as min < 0 < max. They differ
+        // only where one of u, v, w is NaN, and such a lane fails below anyway (det and t NaN).
+        let outside = u.min(v).min(w).lt(zero).and(u.max(v).max(w).gt(zero));
         let det = u.add(v).add(w);
         let t_scaled = sz.mul(u.mul(a[2]).add(v.mul(bb[2])).add(w.mul(c[2])));
         // Negating both when det < 0 is flipping their sign bits by det's.
@@ -233,28 +235,20 @@ fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option
                     cur = n.child[near];
                     continue;
                 }
-                // Three or more: push them all, sort that run so the nearest is on top (insertion
-                // sort: a handful of entries, stable, so ties keep lane order), take it.
-                let base = sp;
-                push!((n.child[i], t[i]));
-                push!((n.child[j], t[j]));
-                while hit != 0 {
-                    let l = hit.trailing_zeros() as usize;
-                    push!((n.child[l], t[l]));
-                    hit &= hit - 1;
+                // Three or more: each goes to its rank in distance order, the farthest deepest
+                // (ties: the higher lane deeper, as above), so the nearest ends on top. Counting ranks with
+                // lane compares needs no branch per entry, unlike sorting them.
+                let all = hit | 1 << i | 1 << j;
+                let mut m = all;
+                while m != 0 {
+                    let l = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let tl = B::splat(t[l]);
+                    let deeper = tn.gt(tl).bits() | tn.eq(tl).bits() & u32::MAX << l << 1;
+                    let rank = (deeper & all).count_ones() as usize;
+                    unsafe { stack.get_unchecked_mut(sp + rank).write((n.child[l], t[l])) };
                 }
-                let s = unsafe { stack.get_unchecked_mut(base..sp) };
-                for a in 1..s.len() {
-                    let e = s[a];
-                    let te = unsafe { e.assume_init().1 };
-                    let mut b = a;
-                    while b > 0 && unsafe { s[b - 1].assume_init().1 } < te {
-                        s[b] = s[b - 1];
-                        b -= 1;
-                    }
-                    s[b] = e;
-                }
-                sp -= 1;
+                sp += all.count_ones() as usize - 1;
                 cur = unsafe { stack.get_unchecked(sp).assume_init().0 };
                 continue;
             }
