@@ -445,10 +445,11 @@ fn bvh_raw_bench() {
     }
     let (boxes, prims) = stats::take();
     println!(
-        "{n} rays, hit {:.4}, {:.2} Mrays/s, per ray: {:.1} box tests (8 per node), {:.1} triangle tests (4 per block)",
+        "{n} rays, hit {:.4}, {:.2} Mrays/s, per ray: {:.1} box tests (8 per node), {:.1} triangle tests (8 per leaf)",
         hits as f64 / n as f64,
         n as f64 / best / 1e6,
         boxes as f64 / (3 * n) as f64,
         prims as f64 / (3 * n) as f64
     );
 }
+

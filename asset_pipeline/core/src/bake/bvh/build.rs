@@ -23,8 +23,9 @@ pub(super) struct Binary {
     pub(super) ids: Vec<u32>,
 }
 
-/// Triangles per leaf at most (unless all their centroids coincide: then count splits apply).
-const MAX_LEAF: usize = 8;
+/// Triangles per leaf at most (unless all their centroids coincide: then count splits apply):
+/// one block, tested at once.
+const MAX_LEAF: usize = super::wide::BLOCK;
 const BINS: usize = 16;
 /// Cost of a box-pair test relative to one triangle test, in the SAH.
 const TRAVERSAL_COST: f32 = 1.0;

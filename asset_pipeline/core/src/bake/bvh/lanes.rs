@@ -135,94 +135,12 @@ impl<const N: usize> Lanes for Scalar<N> {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(super) use x86::{Avx, Sse};
+pub(super) use x86::Avx;
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use super::Lanes;
     use std::arch::x86_64::*;
-
-    /// 4 lanes in an SSE register (SSE2 is part of x86_64: always available).
-    #[derive(Clone, Copy)]
-    pub(in super::super) struct Sse(__m128);
-
-    // SAFETY (every intrinsic here): SSE and SSE2 are in the x86_64 baseline.
-    impl Lanes for Sse {
-        const N: usize = 4;
-        #[inline(always)]
-        unsafe fn load(p: *const f32) -> Self {
-            Sse(unsafe { _mm_loadu_ps(p) })
-        }
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            Sse(unsafe { _mm_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn add(self, o: Self) -> Self {
-            Sse(unsafe { _mm_add_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn sub(self, o: Self) -> Self {
-            Sse(unsafe { _mm_sub_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn mul(self, o: Self) -> Self {
-            Sse(unsafe { _mm_mul_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn div(self, o: Self) -> Self {
-            Sse(unsafe { _mm_div_ps(self.0, o.0) })
-        }
-        // maxps/minps return the second operand unless the comparison holds: the trait's rule.
-        #[inline(always)]
-        fn max(self, o: Self) -> Self {
-            Sse(unsafe { _mm_max_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn min(self, o: Self) -> Self {
-            Sse(unsafe { _mm_min_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn lt(self, o: Self) -> Self {
-            Sse(unsafe { _mm_cmplt_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn le(self, o: Self) -> Self {
-            Sse(unsafe { _mm_cmple_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn gt(self, o: Self) -> Self {
-            Sse(unsafe { _mm_cmpgt_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn eq(self, o: Self) -> Self {
-            Sse(unsafe { _mm_cmpeq_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn and(self, o: Self) -> Self {
-            Sse(unsafe { _mm_and_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn or(self, o: Self) -> Self {
-            Sse(unsafe { _mm_or_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn and_not(self, o: Self) -> Self {
-            Sse(unsafe { _mm_andnot_ps(o.0, self.0) })
-        }
-        #[inline(always)]
-        fn xor(self, o: Self) -> Self {
-            Sse(unsafe { _mm_xor_ps(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            unsafe { _mm_movemask_ps(self.0) as u32 }
-        }
-        #[inline(always)]
-        fn store(self, out: &mut [f32; 8]) {
-            unsafe { _mm_storeu_ps(out.as_mut_ptr(), self.0) }
-        }
-    }
 
     /// 8 lanes in an AVX register. Only used inside functions compiled with the `avx` target
     /// feature, which are only called once `is_x86_feature_detected!("avx")` said yes (see

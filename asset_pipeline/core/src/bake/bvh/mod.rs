@@ -8,13 +8,14 @@
 //!   several references with the boxes of their clipped parts, up to 2x as many references as
 //!   triangles in all; a triangle can then be tested in several leaves.
 //! - Layout ([`wide`]): the binary tree collapsed into 8-wide nodes (opening the largest child
-//!   first), child boxes stored plane by plane; leaves are blocks of 4 triangles stored lane by
-//!   lane.
+//!   first), child boxes stored plane by plane; a leaf is one block of up to 8 triangles stored
+//!   lane by lane.
 //! - Traversal ([`traverse`]): explicit stack; a visit tests the 8 child boxes at once, goes on
-//!   with the nearest hit child and pushes the others sorted by entry distance, so a subtree is
+//!   with the nearest hit child and pushes the others in entry-distance order, so a subtree is
 //!   skipped once a closer hit is known (the book's "shrink t1", notes §4.2). Shadow rays stop at
-//!   the first hit. The lanes ([`lanes`]) are AVX registers where the CPU has AVX (checked at run
-//!   time) and plain arrays elsewhere; both give the same bits.
+//!   the first hit. A leaf's 8 triangles are tested at once. The lanes ([`lanes`]) are AVX
+//!   registers where the CPU has AVX (checked at run time) and plain arrays elsewhere; both give
+//!   the same bits.
 //! - Triangle test ([`triangle`]): watertight (Woop, Benthin, Wald 2013): a ray through a shared
 //!   edge or vertex hits at least one of the triangles, never neither. Edge functions that come
 //!   out exactly zero are recomputed in f64, as the paper recommends (those lanes are redone one
@@ -77,8 +78,8 @@ pub struct Hit {
 pub struct Bvh {
     /// 8-wide nodes, the root first.
     nodes: Vec<wide::Wide>,
-    /// Leaf triangles, 4 to a block.
-    blocks: Vec<wide::Tri4>,
+    /// Leaf triangles, a block of 8 per leaf.
+    blocks: Vec<wide::Tris>,
     /// The implementation queries run with: the fastest this CPU has.
     kernel: traverse::Kernel,
 }

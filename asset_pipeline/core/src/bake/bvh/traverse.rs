@@ -1,10 +1,10 @@
-//! Walking the wide tree: 8 child boxes per visit, 4 triangles per test. One generic source,
+//! Walking the wide tree: 8 child boxes per visit, 8 triangles per test. One generic source,
 //! instantiated as the portable kernel (plain arrays) and, on x86_64 CPUs that have it, the AVX
 //! kernel; both compute the same bits (see [`super::lanes`]), so results do not depend on it.
 
 use super::lanes::{Lanes, Scalar};
 use super::triangle::{intersect, Prepared, ROBUST};
-use super::wide::{child, Tri4, Wide, BLOCK, WIDTH};
+use super::wide::{child, Tris, Wide, BLOCK, WIDTH};
 use super::{stats, Bvh, Hit, Ray};
 use std::mem::MaybeUninit;
 
@@ -41,7 +41,7 @@ impl Kernel {
 
 pub(super) fn closest(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
     match bvh.kernel {
-        Kernel::Portable => walk::<Scalar<WIDTH>, Scalar<BLOCK>, true>(bvh, ray),
+        Kernel::Portable => walk::<Scalar<WIDTH>, true>(bvh, ray),
         // SAFETY: `Bvh` only holds a kernel that `Kernel::available` listed.
         #[cfg(target_arch = "x86_64")]
         Kernel::Avx => unsafe { avx::walk::<true>(bvh, ray) },
@@ -50,7 +50,7 @@ pub(super) fn closest(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
 
 pub(super) fn any(bvh: &Bvh, ray: &Ray) -> bool {
     match bvh.kernel {
-        Kernel::Portable => walk::<Scalar<WIDTH>, Scalar<BLOCK>, false>(bvh, ray),
+        Kernel::Portable => walk::<Scalar<WIDTH>, false>(bvh, ray),
         // SAFETY: as in `closest`.
         #[cfg(target_arch = "x86_64")]
         Kernel::Avx => unsafe { avx::walk::<false>(bvh, ray) },
@@ -60,14 +60,14 @@ pub(super) fn any(bvh: &Bvh, ray: &Ray) -> bool {
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::super::lanes::{Avx, Sse};
+    use super::super::lanes::Avx;
     use super::{Bvh, Hit, Ray};
 
     /// # Safety
     /// The CPU must have AVX and POPCNT.
     #[target_feature(enable = "avx,popcnt")]
     pub(super) unsafe fn walk<const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
-        super::walk::<Avx, Sse, CLOSEST>(bvh, ray)
+        super::walk::<Avx, CLOSEST>(bvh, ray)
     }
 }
 
@@ -75,12 +75,13 @@ mod avx {
 struct BoxRay<B> {
     org: [B; 3],
     inv: [B; 3],
+    /// `inv` times ROBUST, for the far planes.
+    inv_far: [B; 3],
     /// Plane indices (see `Wide::planes`) of the near and far side per axis: the box's max is
     /// the near side where the direction is negative (sign bit, so -0 counts as negative).
     near: [usize; 3],
     far: [usize; 3],
     tmin: B,
-    robust: B,
 }
 
 impl<B: Lanes> BoxRay<B> {
@@ -93,15 +94,17 @@ impl<B: Lanes> BoxRay<B> {
             inv: ray.dir.map(|x| B::splat(1.0 / x)),
             near: [0, 1, 2].map(|k| 2 * k + neg[k]),
             far: [0, 1, 2].map(|k| 2 * k + 1 - neg[k]),
+            // The far distance is widened by ROBUST (pbrt's bound: gamma(3) covers the subtraction,
+            // the reciprocal and the product), so rounding never culls a real hit. Folding it into
+            // the reciprocal rounds once more, which the bound's factor 2 leaves room for.
+            inv_far: ray.dir.map(|x| B::splat(1.0 / x * ROBUST)),
             tmin: B::splat(ray.tmin),
-            robust: B::splat(ROBUST),
         }
     }
 
     /// Slab test of the 8 child boxes: (mask of those the ray overlaps within (tmin, tcull),
-    /// their entry distances). The far distance is widened by ROBUST (pbrt's bound), so
-    /// rounding never culls a real hit; a NaN (origin on a slab plane, direction 0 on that
-    /// axis) leaves the bound as it was, which keeps the box: conservative.
+    /// their entry distances). A NaN (origin on a slab plane, direction 0 on that axis) leaves
+    /// the bound as it was, which keeps the box: conservative.
     #[inline(always)]
     fn enter(&self, n: &Wide, tcull: f32) -> (u32, B) {
         const { assert!(B::N == WIDTH) };
@@ -113,7 +116,7 @@ impl<B: Lanes> BoxRay<B> {
                 (B::load(n.planes.get_unchecked(self.near[k]).as_ptr()), B::load(n.planes.get_unchecked(self.far[k]).as_ptr()))
             };
             let t0 = pn.sub(self.org[k]).mul(self.inv[k]);
-            let t1 = pf.sub(self.org[k]).mul(self.inv[k]).mul(self.robust);
+            let t1 = pf.sub(self.org[k]).mul(self.inv_far[k]);
             lo = t0.max(lo);
             hi = t1.min(hi);
         }
@@ -145,12 +148,12 @@ impl<T: Lanes> TriRay<T> {
         }
     }
 
-    /// The watertight test of `intersect` on 4 triangles, operation for operation (so the same
+    /// The watertight test of `intersect` on a block of triangles, operation for operation (so the same
     /// t to the bit): (mask of hits with tmin < t < tmax, mask of lanes to redo with
     /// `intersect`, t per lane). The lanes to redo are those where an edge function came out
     /// exactly zero, which `intersect` recomputes in f64; they are left out of the hits.
     #[inline(always)]
-    pub(super) fn block(&self, b: &Tri4, tmax: f32) -> (u32, u32, T) {
+    pub(super) fn block(&self, b: &Tris, tmax: f32) -> (u32, u32, T) {
         const { assert!(T::N == BLOCK) };
         let k = &self.scalar.k;
         // SAFETY: k is a permutation of 0..3; each axis row holds BLOCK = T::N floats.
@@ -189,9 +192,9 @@ impl<T: Lanes> TriRay<T> {
 /// behind the closest hit so far skipped. Otherwise (shadow rays) the first hit found, in no
 /// particular order; `Some` with any t then.
 #[inline(always)]
-fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
-    let br = BoxRay::<B>::new(ray);
-    let tr = TriRay::<T>::new(ray);
+fn walk<L: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
+    let br = BoxRay::<L>::new(ray);
+    let tr = TriRay::<L>::new(ray);
     let mut tmax = ray.tmax;
     let mut tcull = tmax * CULL_SLACK;
     let mut best = u32::MAX;
@@ -243,7 +246,7 @@ fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option
                 while m != 0 {
                     let l = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let tl = B::splat(t[l]);
+                    let tl = L::splat(t[l]);
                     let deeper = tn.gt(tl).bits() | tn.eq(tl).bits() & u32::MAX << l << 1;
                     let rank = (deeper & all).count_ones() as usize;
                     unsafe { stack.get_unchecked_mut(sp + rank).write((n.child[l], t[l])) };
@@ -253,13 +256,10 @@ fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option
                 continue;
             }
         } else {
-            let (first, count) = child::blocks(cur);
-            stats::add(0, (count * BLOCK) as u64);
-            for b in unsafe { bvh.blocks.get_unchecked(first..first + count) } {
-                let (mut hit, redo, t) = tr.block(b, tmax);
-                if hit | redo == 0 {
-                    continue;
-                }
+            let b = unsafe { bvh.blocks.get_unchecked(child::block(cur)) };
+            stats::add(0, BLOCK as u64);
+            let (mut hit, redo, t) = tr.block(b, tmax);
+            if hit | redo != 0 {
                 let mut ts = [0f32; 8];
                 t.store(&mut ts);
                 let mut r = redo;
@@ -272,7 +272,8 @@ fn walk<B: Lanes, T: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option
                     }
                 }
                 if !CLOSEST && hit != 0 {
-                    return Some(Hit { t: ts[hit.trailing_zeros() as usize], prim: b.id[hit.trailing_zeros() as usize] });
+                    let lane = hit.trailing_zeros() as usize;
+                    return Some(Hit { t: ts[lane], prim: b.id[lane] });
                 }
                 // Lowest t, the lowest lane on a tie (all were tested against the same tmax).
                 while hit != 0 {

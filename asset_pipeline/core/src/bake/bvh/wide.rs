@@ -1,13 +1,13 @@
 //! The traversed layout: the binary tree collapsed into 8-wide nodes whose child boxes are
-//! stored plane by plane (8 boxes tested in one pass of 8-lane arithmetic), and leaves of
-//! triangles packed 4 at a time, corner coordinates lane by lane (4 tested at once).
+//! stored plane by plane (8 boxes tested in one pass of 8-lane arithmetic), and leaves of up to
+//! 8 triangles packed in one block, corner coordinates lane by lane (tested at once).
 
 use super::build::Binary;
 
 /// Children per node.
 pub(super) const WIDTH: usize = 8;
-/// Triangles per block.
-pub(super) const BLOCK: usize = 4;
+/// Triangles per block (one leaf): the lanes of one test.
+pub(super) const BLOCK: usize = 8;
 
 /// An 8-wide node: 256 bytes, 4 cache lines.
 #[derive(Clone, Copy, Debug)]
@@ -34,37 +34,32 @@ impl Wide {
     };
 }
 
-/// Child references: a node index, or (top bit set) a leaf of consecutive triangle blocks.
+/// Child references: a node index, or (top bit set) a leaf, which is one triangle block.
 pub(super) mod child {
     pub const LEAF: u32 = 1 << 31;
-    /// Leaf block counts are stored minus one in these bits, under the top one.
-    const COUNT_SHIFT: u32 = 28;
-    pub const MAX_BLOCKS: usize = 8;
-    pub const MAX_FIRST: usize = (1 << COUNT_SHIFT) - 1;
 
-    pub fn leaf(first: usize, blocks: usize) -> u32 {
-        assert!((1..=MAX_BLOCKS).contains(&blocks) && first <= MAX_FIRST, "BVH leaf out of range");
-        LEAF | ((blocks as u32 - 1) << COUNT_SHIFT) | first as u32
+    pub fn leaf(block: usize) -> u32 {
+        assert!(block < LEAF as usize, "BVH too large");
+        LEAF | block as u32
     }
-    /// (first block, block count) of a leaf reference.
     #[inline(always)]
-    pub fn blocks(c: u32) -> (usize, usize) {
-        ((c & ((1 << COUNT_SHIFT) - 1)) as usize, ((c >> COUNT_SHIFT & 7) + 1) as usize)
+    pub fn block(c: u32) -> usize {
+        (c & !LEAF) as usize
     }
 }
 
-/// Four triangles; a leaf with fewer repeats its last triangle (the repeat gives the same hit
+/// A leaf's triangles; a leaf of fewer than 8 repeats its last triangle (the repeat gives the same hit
 /// at the same t, and ties keep the lowest lane, so it never changes a result).
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(16))]
-pub(super) struct Tri4 {
+#[repr(C, align(32))]
+pub(super) struct Tris {
     /// Corner coordinates, `[corner][axis][lane]`.
     pub(super) v: [[[f32; BLOCK]; 3]; 3],
     /// Index of each lane's triangle in the list given to `Bvh::build`.
     pub(super) id: [u32; BLOCK],
 }
 
-impl Tri4 {
+impl Tris {
     pub(super) fn triangle(&self, lane: usize) -> [[f32; 3]; 3] {
         self.v.map(|corner| corner.map(|axis| axis[lane]))
     }
@@ -74,7 +69,7 @@ impl Tri4 {
 /// traversal can need at most.
 pub(super) struct Collapsed {
     pub(super) nodes: Vec<Wide>,
-    pub(super) blocks: Vec<Tri4>,
+    pub(super) blocks: Vec<Tris>,
     pub(super) stack: usize,
 }
 
@@ -120,20 +115,18 @@ fn node(bin: &Binary, at: usize, positions: &[[f32; 3]], triangles: &[[u32; 3]],
     kids.len() - 1 + deepest
 }
 
-fn leaf(ids: &[u32], positions: &[[f32; 3]], triangles: &[[u32; 3]], blocks: &mut Vec<Tri4>) -> u32 {
-    let first = blocks.len();
-    for chunk in ids.chunks(BLOCK) {
-        let mut b = Tri4 { v: [[[0.0; BLOCK]; 3]; 3], id: [0; BLOCK] };
-        for lane in 0..BLOCK {
-            let id = chunk[lane.min(chunk.len() - 1)];
-            b.id[lane] = id;
-            for (c, &v) in triangles[id as usize].iter().enumerate() {
-                for a in 0..3 {
-                    b.v[c][a][lane] = positions[v as usize][a];
-                }
+fn leaf(ids: &[u32], positions: &[[f32; 3]], triangles: &[[u32; 3]], blocks: &mut Vec<Tris>) -> u32 {
+    assert!((1..=BLOCK).contains(&ids.len()), "the build makes leaves of one block");
+    let mut b = Tris { v: [[[0.0; BLOCK]; 3]; 3], id: [0; BLOCK] };
+    for lane in 0..BLOCK {
+        let id = ids[lane.min(ids.len() - 1)];
+        b.id[lane] = id;
+        for (c, &v) in triangles[id as usize].iter().enumerate() {
+            for a in 0..3 {
+                b.v[c][a][lane] = positions[v as usize][a];
             }
         }
-        blocks.push(b);
     }
-    child::leaf(first, blocks.len() - first)
+    blocks.push(b);
+    child::leaf(blocks.len() - 1)
 }
