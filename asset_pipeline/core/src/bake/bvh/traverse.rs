@@ -84,20 +84,24 @@ struct BoxRay<B> {
     tmin: B,
 }
 
+// No `array::map` or closures over lanes in this file's hot code: those are not inlined into the
+// AVX kernel, and an intrinsic outside it becomes a function call per operation.
 impl<B: Lanes> BoxRay<B> {
     #[inline(always)]
     fn new(ray: &Ray) -> Self {
-        let neg = ray.dir.map(|x| x.is_sign_negative() as usize);
+        let (o, d) = (ray.origin, ray.dir);
+        let neg = [d[0].is_sign_negative() as usize, d[1].is_sign_negative() as usize, d[2].is_sign_negative() as usize];
+        // IEEE infinities handle zero components.
+        let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2]];
         BoxRay {
-            org: ray.origin.map(B::splat),
-            // IEEE infinities handle zero components.
-            inv: ray.dir.map(|x| B::splat(1.0 / x)),
-            near: [0, 1, 2].map(|k| 2 * k + neg[k]),
-            far: [0, 1, 2].map(|k| 2 * k + 1 - neg[k]),
+            org: [B::splat(o[0]), B::splat(o[1]), B::splat(o[2])],
+            inv: [B::splat(inv[0]), B::splat(inv[1]), B::splat(inv[2])],
             // The far distance is widened by ROBUST (pbrt's bound: gamma(3) covers the subtraction,
             // the reciprocal and the product), so rounding never culls a real hit. Folding it into
             // the reciprocal rounds once more, which the bound's factor 2 leaves room for.
-            inv_far: ray.dir.map(|x| B::splat(1.0 / x * ROBUST)),
+            inv_far: [B::splat(inv[0] * ROBUST), B::splat(inv[1] * ROBUST), B::splat(inv[2] * ROBUST)],
+            near: [neg[0], 2 + neg[1], 4 + neg[2]],
+            far: [1 - neg[0], 3 - neg[1], 5 - neg[2]],
             tmin: B::splat(ray.tmin),
         }
     }
@@ -139,9 +143,11 @@ impl<T: Lanes> TriRay<T> {
     #[inline(always)]
     pub(super) fn new(ray: &Ray) -> Self {
         let p = Prepared::new(ray);
+        let [kx, ky, kz] = p.k;
+        let [sx, sy, sz] = p.shear;
         TriRay {
-            org: p.k.map(|k| T::splat(p.org[k])),
-            shear: p.shear.map(T::splat),
+            org: [T::splat(p.org[kx]), T::splat(p.org[ky]), T::splat(p.org[kz])],
+            shear: [T::splat(sx), T::splat(sy), T::splat(sz)],
             tmin: T::splat(p.tmin),
             robust: T::splat(ROBUST),
             scalar: p,
@@ -155,12 +161,15 @@ impl<T: Lanes> TriRay<T> {
     #[inline(always)]
     pub(super) fn block(&self, b: &Tris, tmax: f32) -> (u32, u32, T) {
         const { assert!(T::N == BLOCK) };
-        let k = &self.scalar.k;
+        let [kx, ky, kz] = self.scalar.k;
+        let [ox, oy, oz] = self.org;
         // SAFETY: k is a permutation of 0..3; each axis row holds BLOCK = T::N floats.
-        let rel = |c: usize| {
-            [0, 1, 2].map(|i| unsafe { T::load(b.v[c].get_unchecked(k[i]).as_ptr()) }.sub(self.org[i]))
-        };
-        let (a, bb, c) = (rel(0), rel(1), rel(2));
+        let load = |c: usize, k: usize| unsafe { T::load(b.v[c].get_unchecked(k).as_ptr()) };
+        let (a, bb, c) = (
+            [load(0, kx).sub(ox), load(0, ky).sub(oy), load(0, kz).sub(oz)],
+            [load(1, kx).sub(ox), load(1, ky).sub(oy), load(1, kz).sub(oz)],
+            [load(2, kx).sub(ox), load(2, ky).sub(oy), load(2, kz).sub(oz)],
+        );
         let [sx, sy, sz] = self.shear;
         let (ax, ay) = (a[0].sub(sx.mul(a[2])), a[1].sub(sy.mul(a[2])));
         let (bx, by) = (bb[0].sub(sx.mul(bb[2])), bb[1].sub(sy.mul(bb[2])));

@@ -18,7 +18,7 @@ pub(super) const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3
 impl Prepared {
     pub(super) fn new(ray: &Ray) -> Prepared {
         let d = ray.dir;
-        let a = d.map(f32::abs);
+        let a = [d[0].abs(), d[1].abs(), d[2].abs()];
         let kz = if a[0] > a[1] { if a[0] > a[2] { 0 } else { 2 } } else if a[1] > a[2] { 1 } else { 2 };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
