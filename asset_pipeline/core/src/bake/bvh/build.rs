@@ -27,8 +27,14 @@ pub(super) struct Binary {
 /// one block, tested at once.
 const MAX_LEAF: usize = super::wide::BLOCK;
 const BINS: usize = 16;
-/// Cost of a box-pair test relative to one triangle test, in the SAH.
+/// Cost of a box-pair test relative to one leaf (block) test, in the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
+
+/// SAH cost of `n` references in leaves: block tests, since a block's triangles cost one test
+/// however many of its lanes are used (so a node of up to a block always becomes a leaf).
+fn leaf_tests(n: usize) -> f32 {
+    n.div_ceil(MAX_LEAF) as f32
+}
 /// Pre-splitting: references' boxes are halved while longer than this fraction of the scene's
 /// largest extent, to at most `PRESPLIT_BUDGET` references per triangle on average.
 const PRESPLIT_EXTENT: f32 = 1.0 / 32.0;
@@ -144,7 +150,7 @@ fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<No
             if nl == 0 || nr == 0 {
                 continue;
             }
-            let cost = nl as f32 * left.area() + nr as f32 * right_area[i + 1];
+            let cost = leaf_tests(nl) * left.area() + leaf_tests(nr) * right_area[i + 1];
             if best.is_none_or(|b| cost < b.0) {
                 best = Some((cost, axis, i + 1));
             }
@@ -153,7 +159,7 @@ fn build_node(prims: &mut [Prim], first: usize, depth: usize, nodes: &mut Vec<No
     let area = bounds.area();
     let mid = match best {
         Some((cost, axis, split)) => {
-            let leaf_cost = n as f32 * area;
+            let leaf_cost = leaf_tests(n) * area;
             if n <= MAX_LEAF && leaf_cost <= TRAVERSAL_COST * area + cost {
                 return leaf(nodes);
             }
