@@ -1,9 +1,10 @@
 //! Ray queries against a triangle soup: a binned-SAH BVH collapsed into 8-wide nodes, traversed
 //! with SIMD lanes.
 //!
-//! - Build ([`build`]): binned surface-area heuristic (16 bins per axis over centroid bounds),
-//!   leaves costed in block tests: a node of at most 8 references (one block) is a leaf; when
-//!   every centroid falls in one bin (duplicates, degenerate soups) it is split by count.
+//! - Build ([`build`]): surface-area heuristic, exact (every split of the centroid order) for
+//!   nodes of up to 4096 references, 16 bins per axis above; leaves costed in block tests: a
+//!   node of at most 8 references (one block) is a leaf; when every centroid coincides
+//!   (duplicates, degenerate soups) it is split by count.
 //!   Pre-splitting (early split clipping): triangles much longer than the scene's size / 32 get
 //!   several references with the boxes of their clipped parts, up to 2x as many references as
 //!   triangles in all; a triangle can then be tested in several leaves.
