@@ -16,7 +16,7 @@ pub(super) const STACK: usize = (WIDTH - 1) * 80 + WIDTH;
 /// a few ulps under the true distance (a ray through a shared vertex on a box's corner gets
 /// t = 0.9999999 from one triangle, 0.99999994 from its neighbour, box entry 1.0): without the
 /// slack, the first found would hide the other and the closest hit would depend on the order
-/// of the walk. Visiting the odd box entered just behind the closest hit costs nothing.
+/// of the walk. Boxes entered that little behind the closest hit are rare: the cost is noise.
 const CULL_SLACK: f32 = 1.0 + 1.0 / 4096.0;
 
 /// The implementations the queries can run with.
