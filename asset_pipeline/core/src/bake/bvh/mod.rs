@@ -1,0 +1,128 @@
+//! Ray queries against a triangle soup: a binned-SAH BVH collapsed into 8-wide nodes, traversed
+//! with SIMD lanes.
+//!
+//! - Build ([`build`]): surface-area heuristic, exact (every split of the centroid order) for
+//!   nodes of up to 4096 references, 16 bins per axis above; leaves costed in block tests: a
+//!   node of at most 8 references (one block) is a leaf; when every centroid coincides
+//!   (duplicates, degenerate soups) it is split by count.
+//!   Pre-splitting (early split clipping): triangles much longer than the scene's size / 32 get
+//!   several references with the boxes of their clipped parts, up to 2x as many references as
+//!   triangles in all; a triangle can then be tested in several leaves.
+//! - Layout ([`wide`]): the binary tree collapsed into 8-wide nodes (opening the largest child
+//!   first), child boxes stored plane by plane; a leaf is one block of up to 8 triangles stored
+//!   lane by lane.
+//! - Traversal ([`traverse`]): explicit stack; a visit tests the 8 child boxes at once, goes on
+//!   with the nearest hit child and pushes the others in entry-distance order, so a subtree is
+//!   skipped once a closer hit is known (the book's "shrink t1", notes §4.2). Shadow rays stop at
+//!   the first hit. A leaf's 8 triangles are tested at once. The lanes ([`lanes`]) are AVX
+//!   registers where the CPU has AVX (checked at run time) and plain arrays elsewhere; both give
+//!   the same bits.
+//! - Triangle test ([`triangle`]): watertight (Woop, Benthin, Wald 2013): a ray through a shared
+//!   edge or vertex hits at least one of the triangles, never neither. Edge functions that come
+//!   out exactly zero are recomputed in f64, as the paper recommends (those lanes are redone one
+//!   by one with the scalar test).
+//! - Box test: slabs with the reciprocal direction (IEEE infinities handle zero components; a
+//!   NaN from 0*inf is dropped by `max`/`min`, which keeps the box, conservatively), and the far
+//!   distance widened by 1+2*gamma(3) (pbrt's robust bound) so rounding never culls a real hit.
+//! - [`offset_ray`]: the origin offset of Wächter & Binder ("A Fast and Robust Method for Avoiding
+//!   Self-Intersection", Ray Tracing Gems ch. 6): a few ulps along the normal, scaled with the
+//!   position's magnitude, instead of a fixed epsilon.
+
+mod build;
+mod lanes;
+mod offset;
+mod traverse;
+mod triangle;
+mod wide;
+
+pub use offset::offset_ray;
+pub use triangle::{closest_brute, intersect_triangle};
+
+/// Box and triangle test counters of the current thread (test builds only), for the benchmark.
+#[cfg(test)]
+pub mod stats {
+    use std::cell::Cell;
+    thread_local!(static C: Cell<(u64, u64)> = const { Cell::new((0, 0)) });
+    pub fn add(boxes: u64, prims: u64) {
+        C.with(|c| {
+            let (a, b) = c.get();
+            c.set((a + boxes, b + prims))
+        });
+    }
+    /// (box tests, triangle tests) since the last call.
+    pub fn take() -> (u64, u64) {
+        C.with(|c| c.replace((0, 0)))
+    }
+}
+#[cfg(not(test))]
+mod stats {
+    #[inline(always)]
+    pub fn add(_: u64, _: u64) {}
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub origin: [f32; 3],
+    /// Need not be unit length; `t` is in multiples of it. Must not be all zero.
+    pub dir: [f32; 3],
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    /// Index into the triangle list given to [`Bvh::build`].
+    pub prim: u32,
+}
+
+pub struct Bvh {
+    /// 8-wide nodes, the root first.
+    nodes: Vec<wide::Wide>,
+    /// Leaf triangles, a block of 8 per leaf.
+    blocks: Vec<wide::Tris>,
+    /// The implementation queries run with: the fastest this CPU has.
+    kernel: traverse::Kernel,
+}
+
+impl Bvh {
+    /// Build over `triangles` (indices into `positions`). Triangles with an index out of range
+    /// or a non-finite corner are left out (they can never be hit).
+    pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Bvh {
+        let kernel = *traverse::Kernel::available().last().expect("the portable kernel");
+        let Some(bin) = build::binary(positions, triangles) else {
+            return Bvh { nodes: vec![wide::Wide::EMPTY], blocks: Vec::new(), kernel };
+        };
+        let w = wide::collapse(&bin, positions, triangles);
+        assert!(w.stack < traverse::STACK, "BVH deeper than the traversal stack");
+        Bvh { nodes: w.nodes, blocks: w.blocks, kernel }
+    }
+
+    /// Closest hit with `tmin < t < tmax`, or None.
+    pub fn closest(&self, ray: &Ray) -> Option<Hit> {
+        traverse::closest(self, ray)
+    }
+
+    /// Closest hits of many rays (t in (0, inf)) in parallel on the current rayon pool:
+    /// (t, triangle) per ray, (inf, u32::MAX) on a miss.
+    pub fn closest_many(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]]) -> (Vec<f32>, Vec<u32>) {
+        use rayon::prelude::*;
+        origins
+            .par_iter()
+            .zip(dirs.par_iter())
+            .with_min_len(1024)
+            .map(|(o, d)| match self.closest(&Ray { origin: *o, dir: *d, tmin: 0.0, tmax: f32::INFINITY }) {
+                Some(h) => (h.t, h.prim),
+                None => (f32::INFINITY, u32::MAX),
+            })
+            .unzip()
+    }
+
+    /// Whether anything is hit with `tmin < t < tmax` (shadow rays): stops at the first hit.
+    pub fn any(&self, ray: &Ray) -> bool {
+        traverse::any(self, ray)
+    }
+}
+
+#[cfg(test)]
+mod tests;

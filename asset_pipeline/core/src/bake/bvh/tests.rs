@@ -1,0 +1,221 @@
+//! The wide layout and the kernels: every kernel gives the portable one's hits to the bit, the
+//! SIMD lanes compute what plain arrays compute, the 8-triangle test what `intersect` does.
+//! (Hits against brute force are checked in `bake::tests`.)
+
+use super::lanes::{Lanes, Scalar};
+use super::traverse::{Kernel, TriRay};
+use super::triangle::{intersect, Prepared};
+use super::wide::{child, Tris, BLOCK};
+use super::*;
+use crate::bake::sampling::Rng;
+use crate::bake::tests::{rand3, random_rays};
+
+/// Box of a node's child slot as (min, max); min > max for an unused slot.
+fn child_box(n: &wide::Wide, slot: usize) -> ([f32; 3], [f32; 3]) {
+    ([0, 1, 2].map(|k| n.planes[2 * k][slot]), [0, 1, 2].map(|k| n.planes[2 * k + 1][slot]))
+}
+
+fn used(n: &wide::Wide, slot: usize) -> bool {
+    n.planes[0][slot] <= n.planes[1][slot]
+}
+
+impl Bvh {
+    /// Asserts that every node's child boxes lie inside the box its parent keeps for it.
+    pub(crate) fn assert_boxes_nested(&self) {
+        for (i, n) in self.nodes.iter().enumerate() {
+            for slot in 0..wide::WIDTH {
+                let c = n.child[slot];
+                let (lo, hi) = child_box(n, slot);
+                if !used(n, slot) || c & child::LEAF != 0 {
+                    continue;
+                }
+                let inner = &self.nodes[c as usize];
+                for s in (0..wide::WIDTH).filter(|&s| used(inner, s)) {
+                    let (a, b) = child_box(inner, s);
+                    assert!((0..3).all(|k| a[k] >= lo[k] && b[k] <= hi[k]), "node {i} slot {slot}: child {c} slot {s}");
+                }
+            }
+        }
+    }
+
+    pub(crate) fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn with_kernel(mut self, k: Kernel) -> Bvh {
+        assert!(Kernel::available().contains(&k));
+        self.kernel = k;
+        self
+    }
+}
+
+fn soup(r: &mut Rng, n: u32, spread: f32, size: f32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut pos = Vec::new();
+    for _ in 0..n {
+        let c = rand3(r, -spread, spread);
+        pos.extend((0..3).map(|_| {
+            let d = rand3(r, -size, size);
+            [c[0] + d[0], c[1] + d[1], c[2] + d[2]]
+        }));
+    }
+    (pos, (0..n).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect())
+}
+
+#[test]
+fn every_kernel_gives_the_portable_hits_to_the_bit() {
+    let mut r = Rng::for_sample(11, 0, 0);
+    // A random soup, plus a grid sheet with shared edges (edge functions of exactly zero, the
+    // lanes redone in scalar) crossed by rays aimed at its vertices.
+    let (mut pos, mut tris) = soup(&mut r, 2000, 10.0, 1.0);
+    let g = 16u32;
+    let base = pos.len() as u32;
+    pos.extend((0..=g).flat_map(|y| (0..=g).map(move |x| [x as f32 - 8.0, y as f32 - 8.0, 0.0])));
+    for y in 0..g {
+        for x in 0..g {
+            let i = base + y * (g + 1) + x;
+            tris.extend([[i, i + 1, i + g + 2], [i, i + g + 2, i + g + 1]]);
+        }
+    }
+    let mut rays = random_rays(&mut r, 20000, -12.0, 12.0);
+    rays.extend((0..2000).map(|k| {
+        let target = [(k % 15) as f32 - 7.0, ((k / 15) % 15) as f32 - 7.0, 0.0];
+        let o = rand3(&mut r, -12.0, 12.0);
+        Ray { origin: o, dir: [0, 1, 2].map(|i| target[i] - o[i]), tmin: 0.0, tmax: f32::INFINITY }
+    }));
+    // Finite tmax and tmin too, to exercise both bounds.
+    rays.extend(random_rays(&mut r, 2000, -12.0, 12.0).into_iter().map(|ray| Ray { tmin: 0.5, tmax: 6.0, ..ray }));
+    let portable = Bvh::build(&pos, &tris).with_kernel(Kernel::Portable);
+    let want: Vec<_> = rays.iter().map(|ray| (portable.closest(ray), portable.any(ray))).collect();
+    assert!(want.iter().filter(|w| w.0.is_some()).count() > rays.len() / 4);
+    for k in Kernel::available() {
+        let bvh = Bvh::build(&pos, &tris).with_kernel(k);
+        for (i, ray) in rays.iter().enumerate() {
+            let got = (bvh.closest(ray), bvh.any(ray));
+            assert_eq!(got, want[i], "{k:?}, ray {i}: {ray:?}");
+            if let Some(h) = got.0 {
+                assert_eq!(Some(h.t), closest_brute(&pos, &tris, ray).map(|b| b.t), "{k:?} ray {i}");
+            }
+        }
+    }
+}
+
+#[test]
+fn wide_tree_holds_every_usable_triangle_and_fits_the_stack() {
+    let mut r = Rng::for_sample(12, 0, 0);
+    for n in [1u32, 3, 4, 5, 9, 100, 5000] {
+        let (pos, mut tris) = soup(&mut r, n, 10.0, 1.0);
+        tris.push([0, 1, pos.len() as u32]); // out of range: left out
+        let bvh = Bvh::build(&pos, &tris);
+        let mut seen = vec![false; tris.len()];
+        let mut stack = vec![0u32];
+        while let Some(c) = stack.pop() {
+            let node = &bvh.nodes[c as usize];
+            for slot in (0..wide::WIDTH).filter(|&s| used(node, s)) {
+                let c = node.child[slot];
+                if c & child::LEAF == 0 {
+                    stack.push(c);
+                } else {
+                    bvh.blocks[child::block(c)].id.iter().for_each(|&id| seen[id as usize] = true);
+                }
+            }
+        }
+        assert!(seen[..n as usize].iter().all(|&s| s) && !seen[n as usize], "{n} triangles");
+    }
+}
+
+/// Inputs that hit every IEEE case the tests meet: signed zeros, infinities, NaN, tiny and huge.
+fn special_values(r: &mut Rng, n: usize) -> Vec<f32> {
+    let special = [0.0, -0.0, 1.0, -1.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 1e-30, -1e30, f32::MIN_POSITIVE];
+    (0..n).map(|i| if i % 3 == 0 { special[(r.next_u32() as usize) % special.len()] } else { (r.next_f32() - 0.5) * 8.0 }).collect()
+}
+
+/// Every operation of lanes `L` against `Scalar<N>` on the same inputs, bit for bit.
+fn assert_lanes_match<L: Lanes, const N: usize>() {
+    let mut r = Rng::for_sample(13, N as u64, 0);
+    for _ in 0..2000 {
+        let (a, b) = (special_values(&mut r, N), special_values(&mut r, N));
+        let (la, lb) = unsafe { (L::load(a.as_ptr()), L::load(b.as_ptr())) };
+        let (sa, sb) = unsafe { (Scalar::<N>::load(a.as_ptr()), Scalar::<N>::load(b.as_ptr())) };
+        let out = |x: L| {
+            let mut o = [0f32; 8];
+            x.store(&mut o);
+            o.map(f32::to_bits)[..N].to_vec()
+        };
+        let want = |x: Scalar<N>| {
+            let mut o = [0f32; 8];
+            x.store(&mut o);
+            o.map(f32::to_bits)[..N].to_vec()
+        };
+        let ops: [(fn(L, L) -> L, fn(Scalar<N>, Scalar<N>) -> Scalar<N>, &str); 14] = [
+            (L::add, Scalar::add, "add"),
+            (L::sub, Scalar::sub, "sub"),
+            (L::mul, Scalar::mul, "mul"),
+            (L::div, Scalar::div, "div"),
+            (L::max, Scalar::max, "max"),
+            (L::min, Scalar::min, "min"),
+            (L::lt, Scalar::lt, "lt"),
+            (L::le, Scalar::le, "le"),
+            (L::gt, Scalar::gt, "gt"),
+            (L::eq, Scalar::eq, "eq"),
+            (L::and, Scalar::and, "and"),
+            (L::or, Scalar::or, "or"),
+            (L::and_not, Scalar::and_not, "and_not"),
+            (L::xor, Scalar::xor, "xor"),
+        ];
+        for (l, s, name) in ops {
+            let (got, exp) = (out(l(la, lb)), want(s(sa, sb)));
+            // NaN payloads may differ; a NaN must stay a NaN.
+            let same = got.iter().zip(&exp).all(|(g, e)| g == e || (f32::from_bits(*g).is_nan() && f32::from_bits(*e).is_nan()));
+            assert!(same, "{name}({a:?}, {b:?}): {got:x?} vs {exp:x?}");
+        }
+        assert_eq!(la.bits(), sa.bits(), "bits of {a:?}");
+        assert_eq!(out(L::splat(a[0])), want(Scalar::<N>::splat(a[0])));
+    }
+}
+
+#[test]
+fn simd_lanes_compute_what_plain_arrays_compute() {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx") {
+            assert_lanes_match::<super::lanes::Avx, 8>();
+        }
+    }
+    // Elsewhere there is only the portable kernel: nothing to compare.
+}
+
+/// The block test against `intersect` on each lane: the same hits and the same t bits.
+fn assert_block_matches_intersect<T: Lanes>() {
+    let mut r = Rng::for_sample(14, 0, 0);
+    let (pos, tris) = soup(&mut r, 4000, 1.0, 1.0);
+    let mut hits = 0;
+    for (i, ray) in random_rays(&mut r, 4000, -2.0, 2.0).iter().enumerate() {
+        let mut b = Tris { v: [[[0.0; BLOCK]; 3]; 3], id: [0; BLOCK] };
+        for lane in 0..BLOCK {
+            for (c, &v) in tris[(BLOCK * i + lane) % tris.len()].iter().enumerate() {
+                (0..3).for_each(|a| b.v[c][a][lane] = pos[v as usize][a]);
+            }
+        }
+        let tmax = if i % 2 == 0 { f32::INFINITY } else { 1.5 };
+        let (hit, redo, t) = TriRay::<T>::new(ray).block(&b, tmax);
+        let mut ts = [0f32; 8];
+        t.store(&mut ts);
+        let p = Prepared::new(ray);
+        for lane in (0..BLOCK).filter(|l| redo >> l & 1 == 0) {
+            let want = intersect(&p, &b.triangle(lane), ray.tmin, tmax);
+            assert_eq!((hit >> lane & 1 == 1).then_some(ts[lane]), want, "ray {i} lane {lane}");
+            hits += want.is_some() as usize;
+        }
+    }
+    assert!(hits > 100);
+}
+
+#[test]
+fn block_triangle_test_equals_the_scalar_one() {
+    assert_block_matches_intersect::<Scalar<BLOCK>>();
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        assert_block_matches_intersect::<super::lanes::Avx>();
+    }
+}
+
