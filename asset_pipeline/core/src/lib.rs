@@ -19,6 +19,7 @@ pub mod wire;
 pub mod exr_io;
 pub mod lightmap_post;
 pub mod lod;
+pub mod mips;
 
 pub use error::CookError;
 pub use pack;
