@@ -117,12 +117,17 @@ impl Edge {
     }
 }
 
-/// The taps of one axis of a resample from `n_in` to `n_out` texels: for output i, the source
-/// indices `index[start[i]..start[i + 1]]` with weights that sum to 1.
+/// The taps of one axis of a resample from `n_in` to `n_out` texels. Output i reads the `count`
+/// consecutive source positions from `first[i]` with `weight[i * count..][..count]`, which sum to
+/// 1. Positions may lie outside `0..n_in`: with `Edge::Wrap` they wrap around, with
+/// `Edge::Clamp` their weight is 0. A fixed count and consecutive positions let the inner loops
+/// run without index lists (see `resample`).
 #[derive(Debug, Clone)]
 pub struct Taps {
-    pub start: Vec<usize>,
-    pub index: Vec<u32>,
+    pub n_in: usize,
+    pub edge: Edge,
+    pub first: Vec<isize>,
+    pub count: usize,
     pub weight: Vec<f32>,
 }
 
@@ -131,61 +136,59 @@ impl Taps {
     /// texel coordinates with `dx = n_in / n_out`, so odd sizes keep every texel and the level
     /// lines up with the sampler's texel centres (not `2i + 0.5`, which drifts for odd n). The
     /// filter is scaled by dx (its area stays 1) and each output's taps are renormalised to sum
-    /// to 1, so a constant stays exactly constant (eq 9.4).
+    /// to 1, so a constant stays exactly constant (eq 9.4); at a clamped edge that is the
+    /// book's renormalisation over the taps inside (L5758).
     pub fn downsample(n_in: usize, n_out: usize, filter: Filter, edge: Edge) -> Taps {
         assert!(n_out >= 1 && n_out <= n_in);
-        let mut taps = Taps { start: vec![0], index: Vec::new(), weight: Vec::new() };
         if n_in == n_out {
             // This axis is already as small as it gets (1 texel, or the other axis is longer):
             // a copy, not a blur.
-            taps.index.extend(0..n_in as u32);
-            taps.weight.resize(n_in, 1.0);
-            taps.start.extend(1..=n_in);
-            return taps;
+            return Taps { n_in, edge, first: (0..n_in as isize).collect(), count: 1, weight: vec![1.0; n_in] };
         }
         let dx = n_in as f64 / n_out as f64;
         let support = filter.radius() * dx;
-        let mut row: Vec<(u32, f64)> = Vec::new();
+        let centre = |i: usize| -0.5 + dx * (i as f64 + 0.5);
+        let span = |i: usize| ((centre(i) - support).ceil() as isize, (centre(i) + support).floor() as isize);
+        let count = (0..n_out).map(|i| span(i)).map(|(lo, hi)| (hi - lo + 1) as usize).max().unwrap_or(1);
+        let mut taps = Taps { n_in, edge, first: Vec::with_capacity(n_out), count, weight: Vec::with_capacity(n_out * count) };
+        let mut row = vec![0.0f64; count];
         for i in 0..n_out {
-            let centre = -0.5 + dx * (i as f64 + 0.5);
-            row.clear();
-            let lo = (centre - support).ceil() as i64;
-            let hi = (centre + support).floor() as i64;
-            for j in lo..=hi {
-                let w = filter.eval((j as f64 - centre) / dx);
-                if w == 0.0 {
-                    continue;
-                }
-                let src = match edge {
-                    Edge::Wrap => j.rem_euclid(n_in as i64) as u32,
-                    Edge::Clamp if j < 0 || j >= n_in as i64 => continue,
-                    Edge::Clamp => j as u32,
-                };
-                // A small image wraps onto itself: merge repeated sources into one tap.
-                match row.iter_mut().find(|(s, _)| *s == src) {
-                    Some(t) => t.1 += w,
-                    None => row.push((src, w)),
-                }
+            let (lo, _) = span(i);
+            for (k, w) in row.iter_mut().enumerate() {
+                let j = lo + k as isize;
+                let inside = (0..n_in as isize).contains(&j);
+                *w = if edge == Edge::Clamp && !inside { 0.0 } else { filter.eval((j as f64 - centre(i)) / dx) };
             }
-            let sum: f64 = row.iter().map(|t| t.1).sum();
+            let sum: f64 = row.iter().sum();
             debug_assert!(sum > 0.0, "every output has a positive weight sum");
-            // Ascending source order: the vertical pass finds rows by binary search.
-            row.sort_by_key(|t| t.0);
-            for &(src, w) in &row {
-                taps.index.push(src);
-                taps.weight.push((w / sum) as f32);
-            }
-            taps.start.push(taps.index.len());
+            taps.first.push(lo);
+            taps.weight.extend(row.iter().map(|w| (w / sum) as f32));
         }
         taps
     }
 
     pub fn len(&self) -> usize {
-        self.start.len() - 1
+        self.first.len()
     }
 
+    /// The source index of position `j` (wrapped, or clamped where the weight is 0 anyway).
+    pub fn source(&self, j: isize) -> usize {
+        match self.edge {
+            Edge::Wrap => j.rem_euclid(self.n_in as isize) as usize,
+            Edge::Clamp => j.clamp(0, self.n_in as isize - 1) as usize,
+        }
+    }
+
+    /// Output i's (source index, weight) pairs with a non-zero weight.
     pub fn of(&self, i: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
-        let r = self.start[i]..self.start[i + 1];
-        self.index[r.clone()].iter().zip(&self.weight[r]).map(|(&j, &w)| (j as usize, w))
+        let w = &self.weight[i * self.count..(i + 1) * self.count];
+        w.iter().enumerate().filter(|(_, &w)| w != 0.0).map(move |(k, &w)| (self.source(self.first[i] + k as isize), w))
+    }
+
+    /// How far positions reach before 0 and past `n_in - 1`.
+    pub fn padding(&self) -> (usize, usize) {
+        let lo = self.first.iter().map(|&f| (-f).max(0) as usize).max().unwrap_or(0);
+        let hi = self.first.iter().map(|&f| (f + self.count as isize - self.n_in as isize).max(0) as usize).max().unwrap_or(0);
+        (lo, hi)
     }
 }

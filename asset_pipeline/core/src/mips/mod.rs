@@ -16,7 +16,8 @@ pub use resample::{downsample, Image, Texel};
 use rayon::prelude::*;
 
 /// What a texture's texels are, which decides how its levels are made.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Usage {
     /// sRGB-encoded colour with straight alpha (base colour): filtered in linear light,
     /// premultiplied.
@@ -31,6 +32,37 @@ pub enum Usage {
 }
 
 impl Usage {
+    /// What a texture of `format` is when nothing says otherwise.
+    pub fn of_format(format: pack::TextureFormat) -> Usage {
+        match format {
+            pack::TextureFormat::Rgba8Srgb => Usage::Color,
+            pack::TextureFormat::Rgba8Unorm => Usage::Data,
+            pack::TextureFormat::Rgba16Float => Usage::Hdr,
+        }
+    }
+
+    /// Colour is stored sRGB, data and normals UNORM, HDR as half floats.
+    pub fn check_format(self, format: pack::TextureFormat) -> Result<(), String> {
+        let want = match self {
+            Usage::Color => pack::TextureFormat::Rgba8Srgb,
+            Usage::Data | Usage::Normal => pack::TextureFormat::Rgba8Unorm,
+            Usage::Hdr => pack::TextureFormat::Rgba16Float,
+        };
+        if format != want {
+            return Err(format!("usage {} needs format {want:?}, not {format:?}", self.name()));
+        }
+        Ok(())
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Usage::Color => "color",
+            Usage::Data => "data",
+            Usage::Normal => "normal",
+            Usage::Hdr => "hdr",
+        }
+    }
+
     pub fn parse(name: &str) -> Result<Usage, String> {
         match name {
             "color" => Ok(Usage::Color),
@@ -208,7 +240,8 @@ pub fn finish_texel(usage: Usage, t: Texel) -> Texel {
             if a <= 1.0 / 65536.0 {
                 return [0.0, 0.0, 0.0, a];
             }
-            [(t[0] / t[3]).clamp(0.0, 1.0), (t[1] / t[3]).clamp(0.0, 1.0), (t[2] / t[3]).clamp(0.0, 1.0), a]
+            let inv = 1.0 / t[3];
+            [(t[0] * inv).clamp(0.0, 1.0), (t[1] * inv).clamp(0.0, 1.0), (t[2] * inv).clamp(0.0, 1.0), a]
         }
         Usage::Normal => {
             let n = [t[0], t[1], t[2]];

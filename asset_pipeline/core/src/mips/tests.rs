@@ -384,3 +384,4 @@ fn bad_input_is_a_one_line_error() {
     let cut = MipSettings { alpha_cutoff: Some(1.5), ..s };
     assert!(mips_rgba8(1, 1, &[0; 4], &cut).unwrap_err().contains("alpha cutoff"));
 }
+
