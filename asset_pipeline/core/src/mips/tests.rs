@@ -385,3 +385,4 @@ fn bad_input_is_a_one_line_error() {
     assert!(mips_rgba8(1, 1, &[0; 4], &cut).unwrap_err().contains("alpha cutoff"));
 }
 
+
