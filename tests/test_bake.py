@@ -108,7 +108,7 @@ def cooked(room, tmp_path_factory):
 
 def test_bake_writes_exr_pages_and_puts_lightmaps_and_probes_in_the_pack(cooked):
     out, result = cooked
-    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "write"]
+    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "textures", "write"]
     exr = out.with_name("room.lightmap0.exr")
     img = read_exr(exr)
     # Readable by the OpenEXR package as well, as half floats.
@@ -123,6 +123,8 @@ def test_bake_writes_exr_pages_and_puts_lightmaps_and_probes_in_the_pack(cooked)
     summary = asset_pipeline.read_pack_summary(out)
     assert summary["lightmap_pages"] == 1 and summary["lightmaps_baked"] == 1, summary
     assert summary["probes"] > 0, summary
+    # Material textures get their mip chains; the lightmap page (the last texture) keeps one level.
+    assert summary["texture_mips"][-1] == 1 and all(m > 1 for m in summary["texture_mips"][:-1]), summary
 
     # HDR kept (sunlit ground is thousands of nits, no clamp at 1), nothing negative or NaN.
     assert np.isfinite(img).all() and img.min() >= 0.0

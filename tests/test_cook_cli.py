@@ -79,7 +79,7 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
     s = asset_pipeline.read_pack_summary(out)
     assert s == {
         "meshes": 1, "submeshes": 1, "vertices": 24, "indices": 36, "triangles": 12, "materials": 1,
-        "textures": 1, "texture_sizes": [[256, 256]], "nodes": 2, "bytes": out.stat().st_size,
+        "textures": 1, "texture_sizes": [[256, 256]], "texture_mips": [9], "nodes": 2, "bytes": out.stat().st_size,
         "lightmap_pages": 0, "lightmaps_baked": 0, "probes": 0,
     }
     assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "box.pack", "box.report.md"]

@@ -50,7 +50,7 @@ def test_recook_with_nothing_changed_does_no_work_and_touches_nothing(level_copy
     first = cook_detailed(level_copy, out, progress=False, settings=QUICK)
     assert not first.up_to_date
     names = [s.name for s in first.stages]
-    assert names == ["level", "uv2", "lod", "bake", "write"], names
+    assert names == ["level", "uv2", "lod", "bake", "textures", "write"], names
     assert all(s.cached == 0 for s in first.stages)
     assert out.with_suffix(".report.md").exists() and out.with_name("temple.lightmap0.exr").exists()
     before = snapshot(out_dir)
@@ -77,6 +77,7 @@ def test_a_comment_in_the_level_reruns_only_the_level_stage(level_copy, tmp_path
     assert table["uv2"][1] == table["uv2"][0] > 0, f"lightmap UVs should come from the cache: {table}"
     assert table["lod"][1] == table["lod"][0] > 0, f"LODs should come from the cache: {table}"
     assert table["bake"][1] == table["bake"][0] > 0, f"the bake should come from the cache: {table}"
+    assert table["textures"][1] == table["textures"][0] > 0, f"mip chains should come from the cache: {table}"
 
 
 def test_force_rebuilds_every_stage_and_gives_the_same_pack(level_copy, tmp_path):

@@ -60,6 +60,7 @@ pub(crate) fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyD
     d.set_item("materials", s.materials)?;
     d.set_item("textures", s.textures)?;
     d.set_item("texture_sizes", s.texture_sizes.clone())?;
+    d.set_item("texture_mips", s.texture_mips.clone())?;
     d.set_item("nodes", s.nodes)?;
     d.set_item("lightmap_pages", s.lightmap_pages)?;
     d.set_item("lightmaps_baked", s.lightmaps_baked)?;
@@ -76,6 +77,7 @@ mod measure;
 mod bake;
 mod lightmap_post;
 mod lod;
+mod mips;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -89,5 +91,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bake::register(m)?;
     lightmap_post::register(m)?;
     lod::register(m)?;
+    mips::register(m)?;
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! The scene IR on the Rust side: what glTF import produces and the pack writer consumes. It
 //! mirrors `asset_pipeline/ir.py`; `wire` converts between the two.
 
+use crate::mips::Usage;
 use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
 
 /// One level of detail: per-vertex attributes (all the same length) and triangles.
@@ -37,6 +38,8 @@ pub struct TextureIr {
     pub width: u32,
     pub height: u32,
     pub format: TextureFormat,
+    /// How its mip levels are made (colour, data, normal map, HDR).
+    pub usage: Usage,
     /// Tightly packed texels per mip level, level 0 first.
     pub mips: Vec<Vec<u8>>,
 }

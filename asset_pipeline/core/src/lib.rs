@@ -19,6 +19,7 @@ pub mod wire;
 pub mod exr_io;
 pub mod lightmap_post;
 pub mod lod;
+pub mod mips;
 
 pub use error::CookError;
 pub use pack;
@@ -156,6 +157,8 @@ pub struct Summary {
     pub textures: usize,
     /// (width, height) of each texture, in pack order.
     pub texture_sizes: Vec<[u32; 2]>,
+    /// Mip levels of each texture, in pack order.
+    pub texture_mips: Vec<usize>,
     pub nodes: usize,
     /// Lightmap atlas pages, and how many of them are baked.
     pub lightmap_pages: usize,
@@ -181,6 +184,7 @@ impl Summary {
             materials: m.materials.len(),
             textures: m.textures.len(),
             texture_sizes: m.textures.iter().map(|t| [t.width, t.height]).collect(),
+            texture_mips: m.textures.iter().map(|t| t.mips.len()).collect(),
             nodes: m.nodes.len(),
             lightmap_pages: m.lightmap.as_ref().map_or(0, |l| l.pages.len()),
             lightmaps_baked: m.lightmap.as_ref().map_or(0, |l| l.textures.len()),

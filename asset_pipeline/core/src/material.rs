@@ -4,6 +4,7 @@ use crate::load::{read_uri, Source};
 use crate::{accessor::view_bytes, label};
 use gltf::material::AlphaMode;
 use crate::ir::TextureIr;
+use crate::mips::Usage;
 use pack::TextureFormat;
 use std::collections::HashMap;
 
@@ -74,5 +75,5 @@ fn decode(image: &gltf::Image, src: &Source) -> Result<TextureIr, String> {
     let rgba = image::load_from_memory(&bytes).map_err(|e| format!("cannot decode: {e}"))?.to_rgba8();
     let name = image.name().map(str::to_string).or(name).unwrap_or_else(|| format!("image{}", image.index()));
     let (width, height) = rgba.dimensions();
-    Ok(TextureIr { name, width, height, format: TextureFormat::Rgba8Srgb, mips: vec![rgba.into_raw()] })
+    Ok(TextureIr { name, width, height, format: TextureFormat::Rgba8Srgb, usage: Usage::Color, mips: vec![rgba.into_raw()] })
 }

@@ -3,6 +3,7 @@
 //! shape, little-endian bytes). See `to_wire` / `from_wire` in ir.py for the other side.
 
 use crate::ir::{LodIr, MeshIr, ProbesIr, SceneIr, TextureIr};
+use crate::mips::Usage;
 use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -71,6 +72,9 @@ struct WireTexture {
     width: u32,
     height: u32,
     format: TextureFormat,
+    /// color | data | normal | hdr; absent: what the format implies.
+    #[serde(default)]
+    usage: Option<Usage>,
     mips: Vec<usize>,
 }
 
@@ -186,7 +190,9 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             }
             mips.push(a.bytes.clone());
         }
-        textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips });
+        let usage = t.usage.unwrap_or(Usage::of_format(t.format));
+        usage.check_format(t.format).map_err(|e| format!("texture {i} '{}': {e}", t.name))?;
+        textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage, mips });
     }
     let probes = match &w.probes {
         None => None,
@@ -298,7 +304,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                     w.push(dtype, shape, t.mips[l].clone())
                 })
                 .collect();
-            WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips }
+            WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage: Some(t.usage), mips }
         })
         .collect();
     let probes = scene.probes.as_ref().map(|p| WireProbes {

@@ -47,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
     parser.add_argument("--no-report", action="store_true", help="do not write OUT.report.md")
+    parser.add_argument("--no-mips", action="store_true", help="skip the textures stage (textures keep one level)")
+    parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
+                        help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
     bake = parser.add_argument_group("baking (lightmaps and probes, for levels with lightmap UVs)")
     bake.add_argument("--no-bake", action="store_true", help="skip the bake stage")
     bake.add_argument("--quality", choices=PRESETS, default="medium", help="bake preset: samples and bounces (default: medium)")
@@ -59,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
                                  seed=args.seed, threads=args.threads)
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
-                            lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report)
+                            lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report,
+                            mips=not args.no_mips, mip_filter=args.mip_filter)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
     except CookError as e:

@@ -32,6 +32,11 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
 }
 
 
+# Texture usages and the format each is stored in.
+USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr"}
+FORMAT_OF_USAGE = {"color": "Rgba8Srgb", "data": "Rgba8Unorm", "normal": "Rgba8Unorm", "hdr": "Rgba16Float"}
+
+
 class IrError(ValueError):
     """An IR value breaks its invariants (a cooker bug or bad data from a stage)."""
 
@@ -106,6 +111,13 @@ class Texture:
     height: int
     format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float
     mips: list[np.ndarray]  # level 0 first; (h, w, 4) uint8, or float16 for Rgba16Float
+    # How its mip levels are made: color (sRGB) | data (linear) | normal | hdr. None: what the
+    # format implies (Rgba8Srgb colour, Rgba8Unorm data, Rgba16Float hdr).
+    usage: str | None = None
+
+    def __post_init__(self):
+        if self.usage is None:
+            self.usage = USAGE_OF_FORMAT.get(self.format, "color")
 
 
 @dataclass
@@ -258,7 +270,7 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
         "source": scene.source,
         "meshes": [{"name": m.name, "static": m.static, "texels_per_metre": m.texels_per_metre, "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
         "materials": [dataclasses.asdict(m) for m in scene.materials],
-        "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "mips": [put(m) for m in t.mips]} for t in scene.textures],
+        "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "usage": t.usage, "mips": [put(m) for m in t.mips]} for t in scene.textures],
         "nodes": [dataclasses.asdict(n) for n in scene.nodes],
         "lights": [dataclasses.asdict(l) for l in scene.lights],
         "spawns": [dataclasses.asdict(s) for s in scene.spawns],
@@ -288,7 +300,7 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
         source=doc["source"],
         meshes=[Mesh(name=m["name"], static=m.get("static", True), texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]]) for m in doc["meshes"]],
         materials=[tup(m, Material) for m in doc["materials"]],
-        textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]]) for t in doc["textures"]],
+        textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]], t.get("usage")) for t in doc["textures"]],
         nodes=[tup(n, Node) for n in doc["nodes"]],
         lights=[tup(l, Light) for l in doc.get("lights", [])],
         spawns=[tup(s, Spawn) for s in doc.get("spawns", [])],

@@ -6,7 +6,8 @@ made from the same key, nothing runs and no file is touched.
 
 Stage order: lightmap UVs come before LODs, so every LOD carries LOD 0's lightmap UVs as an
 attribute and one baked lightmap serves the whole chain. The bake writes its pages into the pack
-(half-float textures) and beside it as OpenEXR files, `<pack>.lightmap<N>.exr`.
+(half-float textures) and beside it as OpenEXR files, `<pack>.lightmap<N>.exr`. The textures
+stage then gives every material texture its mip chain (lightmap pages keep one level).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ class CookSettings:
     lods: bool = True
     lightmap_uvs: bool = True
     baking: bool = True  # bake lightmaps and probes (when the scene has lightmap UVs)
+    mips: bool = True  # mip chains for material textures (lightmaps keep one level)
+    mip_filter: str | None = None  # box|tent|bspline|mitchell|catmull-rom|lanczos3; None = per usage (mitchell, tent for hdr)
     force: bool = False  # ignore every cache entry and rebuild
     cache_dir: Path | None = None  # default: .cook-cache beside the output
     report: bool = True
@@ -179,6 +182,10 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     bake_stats: dict = {}
     if settings.baking and scene.lightmap is not None and scene.lightmap.pages:
         scene, bake_stats, rec = _bake_stage(scene, settings, cache, progress)
+        stages.append(rec)
+
+    if settings.mips and scene.textures:
+        scene, rec = _textures_stage(scene, settings, cache, progress)
         stages.append(rec)
 
     rec = StageRecord("write", items=1)
@@ -354,3 +361,56 @@ def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, prog
         cache.store("bake", key, {"probes": probes, "stats": baked.stats}, arrays)
     rec.seconds = time.perf_counter() - t0
     return attach(scene, baked), baked.stats, rec
+
+
+# ---- textures -------------------------------------------------------------------------------------
+
+
+def _alpha_cutoffs(scene: ir.Scene) -> dict[int, float]:
+    """Base colour textures of alpha-tested (Mask) materials -> the cutoff whose coverage their
+    levels keep (the lowest, when materials share a texture with different cutoffs)."""
+    cutoffs: dict[int, float] = {}
+    for m in scene.materials:
+        if m.alpha_mode == "Mask" and m.base_color_texture is not None:
+            t = m.base_color_texture
+            cutoffs[t] = min(cutoffs.get(t, 1.0), float(m.alpha_cutoff))
+    return cutoffs
+
+
+def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    """Every material texture gets its full mip chain by its usage (cook_core::mips): colour in
+    linear light with premultiplied alpha, data per channel, normals renormalised, HDR with a
+    non-negative kernel; alpha-tested base colours keep their coverage. Levels wrap at the edges,
+    as the runtime's sampler repeats. Lightmap pages are left at one level: they are magnified,
+    and their 2-texel chart gutters would bleed neighbouring charts into level 1 and below.
+    Textures that arrive with more than one level keep theirs."""
+    from asset_pipeline._core import mip_chain
+
+    skip = set(scene.lightmap.textures) if scene.lightmap is not None else set()
+    cutoffs = _alpha_cutoffs(scene)
+    todo = [i for i, t in enumerate(scene.textures) if i not in skip and len(t.mips) == 1 and max(t.width, t.height) > 1]
+    rec = StageRecord("textures", items=len(todo))
+    t0 = time.perf_counter()
+    textures = list(scene.textures)
+    with progress.stage("textures", len(todo)) as bar:
+        for i in todo:
+            t = textures[i]
+            job = {"usage": t.usage, "filter": settings.mip_filter, "edge": "wrap", "alpha_cutoff": cutoffs.get(i)}
+            key = Hasher("textures").settings(job).array(t.mips[0]).key()
+            hit = cache.load("textures", key)
+            if hit is not None:
+                levels = hit[1]
+                rec.cached += 1
+            else:
+                level0 = t.mips[0].view(np.uint16) if t.usage == "hdr" else t.mips[0]
+                try:
+                    levels = mip_chain(np.ascontiguousarray(level0), t.usage, filter=job["filter"], edge="wrap", alpha_cutoff=job["alpha_cutoff"])
+                except ValueError as e:
+                    raise CookError(f"{scene.source}: texture {i} '{t.name}': {e}") from None
+                if t.usage == "hdr":
+                    levels = [l.view(np.float16) for l in levels]
+                cache.store("textures", key, {}, levels)
+            textures[i] = dataclasses.replace(t, mips=[t.mips[0], *levels])
+            bar.advance()
+    rec.seconds = time.perf_counter() - t0
+    return dataclasses.replace(scene, textures=textures), rec
