@@ -90,15 +90,39 @@ fn cube_builder(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -
 
 const WHITE4: [[u8; 4]; 4] = [[255; 4]; 4];
 
+/// A headless target, a renderer and an uploaded pack: what the renderer tests draw with.
+struct Rig {
+    target: Offscreen,
+    renderer: Renderer,
+    scene: GpuScene,
+}
+
+impl Rig {
+    fn new(gpu: &Gpu, pack: &Pack, w: u32, h: u32) -> Rig {
+        let target = Offscreen::new(gpu, w, h).unwrap();
+        let renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
+        let scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
+        Rig { target, renderer, scene }
+    }
+
+    /// Draw another pack with the same target and renderer (and its state).
+    fn reload(&mut self, gpu: &Gpu, pack: &Pack) {
+        self.scene.destroy(gpu);
+        self.scene = GpuScene::upload(gpu, pack, self.renderer.layouts()).unwrap();
+    }
+
+    fn destroy(mut self, gpu: &Gpu) {
+        self.scene.destroy(gpu);
+        self.renderer.destroy(gpu);
+        self.target.destroy(gpu);
+    }
+}
+
 fn render(gpu: &Gpu, pack: &Pack, camera: &Camera, w: u32, h: u32) -> Vec<u8> {
-    let mut target = Offscreen::new(gpu, w, h).unwrap();
-    let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
-    target.render(gpu, &mut renderer, &scene, camera, &Lighting::default(), true).unwrap();
-    let px = target.pixels().to_vec();
-    scene.destroy(gpu);
-    renderer.destroy(gpu);
-    target.destroy(gpu);
+    let mut rig = Rig::new(gpu, pack, w, h);
+    rig.target.render(gpu, &mut rig.renderer, &rig.scene, camera, &Lighting::default(), true).unwrap();
+    let px = rig.target.pixels().to_vec();
+    rig.destroy(gpu);
     px
 }
 
@@ -269,21 +293,17 @@ fn renderer_culls_the_notes_known_scene_exactly() {
         .collect();
     let pack = cube_pack(&placements, WHITE4, Material::default());
     let cam = Camera { position: Vec3::ZERO, yaw: 0.0, pitch: 0.0, fov_y: 90f32.to_radians(), near: 0.1 };
-    let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
-    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
-    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
-    let culled = target.pixels().to_vec();
-    let c = renderer.visibility.counts;
+    let mut rig = Rig::new(&gpu, &pack, 64, 64);
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let culled = rig.target.pixels().to_vec();
+    let c = rig.renderer.visibility.counts;
     assert_eq!((c.cull.tested, c.cull.visible, c.cull.culled, c.cull.inside), (441, 121, 320, 100));
     assert_eq!(c.triangles, 121 * 12);
-    renderer.visibility.culling = false;
-    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
-    assert_eq!(renderer.visibility.counts.cull.visible, 441);
-    assert!(target.pixels() == culled.as_slice(), "culling changed the image");
-    scene.destroy(&gpu);
-    renderer.destroy(&gpu);
-    target.destroy(&gpu);
+    rig.renderer.visibility.culling = false;
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(rig.renderer.visibility.counts.cull.visible, 441);
+    assert!(rig.target.pixels() == culled.as_slice(), "culling changed the image");
+    rig.destroy(&gpu);
     assert_clean(&gpu);
 }
 
@@ -302,15 +322,13 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
         l.error = error;
         pack.manifest.meshes[0].lods.push(l);
     }
-    let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
-    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut rig = Rig::new(&gpu, &pack, 64, 64);
     let mut last = 0u8;
     let mut seen = vec![];
     for step in 0..40 {
         let distance = 1.5 * 1.25f32.powi(step);
-        target.render(&gpu, &mut renderer, &scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
-        let v = &renderer.visibility;
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
+        let v = &rig.renderer.visibility;
         assert_eq!(v.draws.len(), 1);
         let lod = v.draws[0].lod;
         assert!(lod >= last, "LOD went from {last} to {lod} moving away at {distance} m");
@@ -321,9 +339,7 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
         last = lod;
     }
     assert_eq!(seen, vec![0, 1, 2]);
-    scene.destroy(&gpu);
-    renderer.destroy(&gpu);
-    target.destroy(&gpu);
+    rig.destroy(&gpu);
     assert_clean(&gpu);
 }
 
@@ -365,15 +381,13 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
     let gpu = gpu();
     let (w, h) = (64u32, 48u32);
     let pack = screen_triangles_pack(&[8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0]);
-    let mut target = Offscreen::new(&gpu, w, h).unwrap();
-    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut rig = Rig::new(&gpu, &pack, w, h);
     let cam = looking_down_neg_z(0.0);
-    renderer.count_fragments = true;
+    rig.renderer.count_fragments = true;
     let mut run = |prepass: bool| {
-        renderer.prepass = prepass;
-        target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
-        (target.pixels().to_vec(), renderer.fragment_count(0).expect("lavapipe can count"), renderer.pass_stats(&gpu, 0))
+        rig.renderer.prepass = prepass;
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+        (rig.target.pixels().to_vec(), rig.renderer.fragment_count(0).expect("lavapipe can count"), rig.renderer.pass_stats(&gpu, 0))
     };
     let (without, f0, s0) = run(false);
     let (with, f1, s1) = run(true);
@@ -385,9 +399,7 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
         assert_eq!((s0.prepass, s0.shading.vertex), (None, 24));
         assert_eq!((s1.prepass.map(|p| p.vertex), s1.shading.vertex), (Some(24), 24));
     }
-    scene.destroy(&gpu);
-    renderer.destroy(&gpu);
-    target.destroy(&gpu);
+    rig.destroy(&gpu);
     assert_clean(&gpu);
 }
 
@@ -401,13 +413,11 @@ fn baked_light_lightmaps_for_static_geometry_probes_for_dynamic() {
     let b_nits = 200.0f32;
     let mut pack = quads_like_lightmapped(b_nits);
     let (w, h) = (64u32, 64u32);
-    let mut target = Offscreen::new(&gpu, w, h).unwrap();
-    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
-    assert!(scene.baked.is_some());
+    let mut rig = Rig::new(&gpu, &pack, w, h);
+    assert!(rig.scene.baked.is_some());
     let cam = looking_down_neg_z(3.0);
-    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
-    let px = target.pixels().to_vec();
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let px = rig.target.pixels().to_vec();
     let want = srgb_encode(0.36 / 1.36);
     let quad = pixel(&px, w, 8, 32); // the static quad fills the left half
     let cube = pixel(&px, w, 48, 32); // the dynamic cube's front face on the right
@@ -416,14 +426,11 @@ fn baked_light_lightmaps_for_static_geometry_probes_for_dynamic() {
             assert!((p[c] as i32 - want as i32).abs() <= 2, "{what}: {p:?}, want {want}");
         }
     }
-    scene.destroy(&gpu);
     pack.manifest.probes = None;
-    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
-    target.render(&gpu, &mut renderer, &scene, &cam, &Lighting::default(), true).unwrap();
-    assert_eq!(pixel(target.pixels(), w, 48, 32)[..3], [0, 0, 0], "without probes or sun a dynamic object is unlit");
-    scene.destroy(&gpu);
-    renderer.destroy(&gpu);
-    target.destroy(&gpu);
+    rig.reload(&gpu, &pack);
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(pixel(rig.target.pixels(), w, 48, 32)[..3], [0, 0, 0], "without probes or sun a dynamic object is unlit");
+    rig.destroy(&gpu);
     assert_clean(&gpu);
 }
 
@@ -482,17 +489,13 @@ fn backface_culling_shades_a_closed_mesh_once_per_pixel_and_twice_without() {
     let pose = Mat4::from_rotation_y(0.7137) * Mat4::from_rotation_x(0.4321);
     let count = |double_sided: bool| {
         let pack = cube_pack(&[pose], WHITE4, Material { double_sided, ..Material::default() });
-        let mut target = Offscreen::new(&gpu, 64, 64).unwrap();
-        let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-        let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
-        (renderer.count_fragments, renderer.prepass, renderer.depth_test) = (true, false, false);
-        target.render(&gpu, &mut renderer, &scene, &looking_down_neg_z(2.5), &Lighting::default(), true).unwrap();
-        let clear = pixel(target.pixels(), 64, 0, 0);
-        let covered = target.pixels().chunks_exact(4).filter(|p| *p != clear).count() as u32;
-        let n = renderer.fragment_count(0).unwrap();
-        scene.destroy(&gpu);
-        renderer.destroy(&gpu);
-        target.destroy(&gpu);
+        let mut rig = Rig::new(&gpu, &pack, 64, 64);
+        (rig.renderer.count_fragments, rig.renderer.prepass, rig.renderer.depth_test) = (true, false, false);
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(2.5), &Lighting::default(), true).unwrap();
+        let clear = pixel(rig.target.pixels(), 64, 0, 0);
+        let covered = rig.target.pixels().chunks_exact(4).filter(|p| *p != clear).count() as u32;
+        let n = rig.renderer.fragment_count(0).unwrap();
+        rig.destroy(&gpu);
         (n, covered)
     };
     let (once, covered) = count(false);
