@@ -57,31 +57,33 @@ fn cube_pack(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> P
     cube_builder(placements, colors, material).finish()
 }
 
+/// Append a one-LOD mesh of `verts` and `idx` (one submesh, material 0) with bounds from its
+/// vertices; returns its mesh index.
+fn push_mesh(b: &mut PackBuilder, name: &str, verts: &[Vertex], idx: &[u32], lightmap_page: Option<u32>, is_static: bool) -> u32 {
+    let vertices = b.push_bytes(Vertex::slice_as_bytes(verts));
+    let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+    let indices = b.push_bytes(&index_bytes);
+    let (lo, hi) = verts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| (lo.min(Vec3::from(v.position)), hi.max(Vec3::from(v.position))));
+    let count = idx.len() as u32;
+    b.manifest.meshes.push(Mesh {
+        name: name.into(),
+        lods: vec![MeshLod { vertices, vertex_count: verts.len() as u32, indices, index_count: count, submeshes: vec![Submesh { first_index: 0, index_count: count, material: 0, lightmap_page }], error: 0.0 }],
+        bounds_min: lo.to_array(),
+        bounds_max: hi.to_array(),
+        is_static,
+    });
+    b.manifest.meshes.len() as u32 - 1
+}
+
 /// `cube_pack`, still open for more.
 fn cube_builder(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> PackBuilder {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = cube_vertices();
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
-    let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
-    let indices = b.push_bytes(&index_bytes);
+    push_mesh(&mut b, "cube", &verts, &idx, None, false);
     let texels: Vec<u8> = colors.iter().flatten().copied().collect();
     let mip0 = b.push_bytes(&texels);
     b.manifest.textures.push(Texture { name: "checker".into(), width: 2, height: 2, format: TextureFormat::Rgba8Srgb, mips: vec![mip0] });
     b.manifest.materials.push(Material { base_color_texture: Some(0), ..material });
-    b.manifest.meshes.push(Mesh {
-        name: "cube".into(),
-        lods: vec![MeshLod {
-            vertices,
-            vertex_count: verts.len() as u32,
-            indices,
-            index_count: idx.len() as u32,
-            submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0, lightmap_page: None }],
-            error: 0.0,
-        }],
-        bounds_min: [-0.5; 3],
-        bounds_max: [0.5; 3],
-        is_static: false,
-    });
     for (i, m) in placements.iter().enumerate() {
         b.manifest.nodes.push(Node { name: format!("cube{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
     }
@@ -352,17 +354,8 @@ fn screen_triangles_pack(depths: &[f32]) -> Pack {
         .iter()
         .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], color: [255; 4], ..Default::default() })
         .collect();
-    let idx: Vec<u8> = [0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect();
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
-    let indices = b.push_bytes(&idx);
+    push_mesh(&mut b, "triangle", &verts, &[0, 1, 2], None, false);
     b.manifest.materials.push(Material::default());
-    b.manifest.meshes.push(Mesh {
-        name: "triangle".into(),
-        lods: vec![MeshLod { vertices, vertex_count: 3, indices, index_count: 3, submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_page: None }], error: 0.0 }],
-        bounds_min: [-1.0, -1.0, 0.0],
-        bounds_max: [3.0, 3.0, 0.0],
-        is_static: false,
-    });
     for (i, d) in depths.iter().enumerate() {
         // Centred on the view axis: the triangle's inscribed centre is at (1/3, 1/3).
         let m = Mat4::from_translation(Vec3::new(0.0, 0.0, -d)) * Mat4::from_scale(Vec3::splat(4.0 * d)) * Mat4::from_translation(Vec3::new(-1.0 / 3.0, -1.0 / 3.0, 0.0));
@@ -443,18 +436,9 @@ fn quads_like_lightmapped(b: f32) -> Pack {
         .iter()
         .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [(x + 1.0) * 0.5, (1.0 - y) * 0.5], color: [255; 4], ..Default::default() })
         .collect();
-    let idx: Vec<u8> = [0u32, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
-    let vertices = bld.push_bytes(Vertex::slice_as_bytes(&verts));
-    let indices = bld.push_bytes(&idx);
-    bld.manifest.meshes.push(Mesh {
-        name: "floor".into(),
-        lods: vec![MeshLod { vertices, vertex_count: 4, indices, index_count: 6, submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: Some(0) }], error: 0.0 }],
-        bounds_min: [-1.0, -1.0, 0.0],
-        bounds_max: [1.0, 1.0, 0.0],
-        is_static: true,
-    });
+    let floor = push_mesh(&mut bld, "floor", &verts, &[0, 1, 2, 0, 2, 3], Some(0), true);
     let quad_at = Mat4::from_translation(Vec3::new(-1.3, 0.0, 0.0)) * Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
-    bld.manifest.nodes.push(Node { name: "floor".into(), parent: None, local: quad_at.to_cols_array(), mesh: Some(1) });
+    bld.manifest.nodes.push(Node { name: "floor".into(), parent: None, local: quad_at.to_cols_array(), mesh: Some(floor) });
     let half = half_bits(b);
     let texel: Vec<u8> = [half, half, half, half_bits(1.0)].iter().flat_map(|v| v.to_le_bytes()).collect();
     let page = bld.push_bytes(&texel.repeat(16));
@@ -512,29 +496,10 @@ fn backface_culling_shades_a_closed_mesh_once_per_pixel_and_twice_without() {
 /// given levels (level 0 first, tightly packed RGBA8).
 fn mesh_pack(verts: &[Vertex], idx: &[u32], format: TextureFormat, size: u32, levels: &[Vec<u8>], material: Material) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(verts));
-    let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
-    let indices = b.push_bytes(&index_bytes);
+    push_mesh(&mut b, "mesh", verts, idx, None, true);
     let mips = levels.iter().map(|l| b.push_bytes(l)).collect();
     b.manifest.textures.push(Texture { name: "tex".into(), width: size, height: size, format, mips });
     b.manifest.materials.push(Material { base_color_texture: Some(0), ..material });
-    let (lo, hi) = verts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
-        (lo.min(Vec3::from(v.position)), hi.max(Vec3::from(v.position)))
-    });
-    b.manifest.meshes.push(Mesh {
-        name: "mesh".into(),
-        lods: vec![MeshLod {
-            vertices,
-            vertex_count: verts.len() as u32,
-            indices,
-            index_count: idx.len() as u32,
-            submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0, lightmap_page: None }],
-            error: 0.0,
-        }],
-        bounds_min: lo.to_array(),
-        bounds_max: hi.to_array(),
-        is_static: true,
-    });
     b.manifest.nodes.push(Node { name: "mesh".into(), parent: None, local: Mat4::IDENTITY.to_cols_array(), mesh: Some(0) });
     b.finish()
 }
