@@ -6,6 +6,7 @@ import base64
 import io
 import json
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -44,9 +45,23 @@ def coverage(level: np.ndarray, cutoff: float) -> float:
 
 
 def png_bytes(rgba: np.ndarray) -> bytes:
+    if rgba.dtype == np.uint16:
+        return png16_bytes(rgba)
     buf = io.BytesIO()
     Image.fromarray(rgba, "RGBA").save(buf, "PNG")
     return buf.getvalue()
+
+
+def png16_bytes(rgba: np.ndarray) -> bytes:
+    """A 16-bit RGBA PNG (Pillow writes no 16-bit RGBA), straight from the PNG spec."""
+    h, w, _ = rgba.shape
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    rows = b"".join(b"\0" + rgba[y].astype(">u2").tobytes() for y in range(h))
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, 6, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b"")
 
 
 def quad_gltf(png: bytes, alpha_mode: str = "MASK", cutoff: float = 0.5) -> dict:
@@ -205,12 +220,95 @@ def test_stage_follows_usage_and_leaves_lightmaps_at_one_level(tmp_path):
     scene = ir.Scene("s", "s.gltf", textures=textures, lightmap=ir.LightmapLayout(5.0, [(n, n)], textures=[2]))
     out, rec = _textures_stage(scene, CookSettings(), StageCache(tmp_path / "cache", enabled=False), Progress(enabled=False))
     assert rec.items == 2 and [len(t.mips) for t in out.textures] == [6, 6, 1]
-    for level in out.textures[0].mips[1:]:
-        v = level[..., :3].astype(np.float64) / 127.5 - 1.0
-        assert np.all(np.abs(np.linalg.norm(v, axis=-1) - 1.0) <= np.sqrt(3) / 255), "normals are renormalised"
-    assert (np.abs(out.textures[0].mips[1][..., 0].astype(int) - 128) <= 1).all(), "opposite tilts average to flat"
+    # Normal maps leave 16-bit at every level, level 0 included, each texel unit length (1e-3).
+    assert out.textures[0].format == "Rgba16Unorm"
+    for level in out.textures[0].mips:
+        assert level.dtype == np.uint16
+        v = level[..., :3].astype(np.float64) / 65535.0 * 2.0 - 1.0
+        assert np.abs(np.linalg.norm(v, axis=-1) - 1.0).max() <= 1e-3, "normals are renormalised"
+    assert (np.abs(out.textures[0].mips[1][..., 0].astype(int) - 32768) <= 300).all(), "opposite tilts average to flat"
     for level in out.textures[1].mips[1:]:
         assert level.dtype == np.float16 and float(level.min()) >= 0.0
     # Usage survives the crossing to Rust and back.
     text, arrays = ir.to_wire(out)
     assert [t.usage for t in ir.from_wire(text, arrays).textures] == ["normal", "hdr", "hdr"]
+
+
+def material_gltf(images: list[bytes], material: dict) -> dict:
+    """The textured quad of `quad_gltf` with several images (texture i = image i) and `material`."""
+    doc = quad_gltf(images[0])
+    doc["materials"] = [material]
+    doc["textures"] = [{"source": i} for i in range(len(images))]
+    doc["images"] = [{"name": f"img{i}", "uri": "data:image/png;base64," + base64.b64encode(png).decode()} for i, png in enumerate(images)]
+    return doc
+
+
+def bumpy_normals(n: int, bits: int) -> np.ndarray:
+    """A tangent-space normal map of a bumpy height field, UNORM with `bits` per channel."""
+    y, x = np.mgrid[0:n, 0:n].astype(np.float64)
+    dx, dy = 1.4 * np.cos(x * 0.7) * np.cos(y * 0.45), -0.9 * np.sin(x * 0.7) * np.sin(y * 0.45)
+    v = np.stack([-dx, -dy, np.ones_like(dx)], axis=-1)
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    top = (1 << bits) - 1
+    out = np.full((n, n, 4), top, np.uint16 if bits == 16 else np.uint8)
+    out[..., :3] = np.rint((v * 0.5 + 0.5) * top)
+    return out
+
+
+def test_gltf_material_textures_are_imported_by_what_they_hold(tmp_path):
+    # One image as base colour and emission (colour, sRGB), one as normal map (vectors, 16-bit
+    # out), one as metallic-roughness and occlusion (linear data): each slot gets the texture its
+    # usage makes, an image read two ways becomes two textures, one read twice the same way one.
+    colour = foliage_rgba(32)
+    colour[..., 3] = 255
+    data = np.zeros((32, 32, 4), np.uint8)
+    data[..., 0] = np.arange(32)[None, :] * 8  # occlusion ramp
+    data[..., 1] = 200  # roughness
+    data[..., 2] = np.arange(32)[:, None] * 8  # metalness ramp
+    data[..., 3] = 255
+    material = {
+        "name": "rock",
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 2}},
+        "normalTexture": {"index": 1, "scale": 0.8},
+        "occlusionTexture": {"index": 2, "strength": 0.5},
+        "emissiveTexture": {"index": 0},
+        "emissiveFactor": [1, 1, 1],
+    }
+    src = tmp_path / "rock.gltf"
+    src.write_text(json.dumps(material_gltf([png_bytes(colour), png_bytes(bumpy_normals(32, 8)), png_bytes(data)], material)))
+    out = tmp_path / "rock.pack"
+    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    manifest = json.loads(_core.read_pack_manifest(str(out)))
+    [m] = manifest["materials"]
+    assert m["base_color_texture"] == m["emissive_texture"], "one image read as colour twice is one texture"
+    assert m["metallic_roughness_texture"] == m["occlusion_texture"]
+    assert len({m["base_color_texture"], m["normal_texture"], m["occlusion_texture"]}) == 3
+    assert (m["normal_scale"], m["occlusion_strength"]) == (pytest.approx(0.8), pytest.approx(0.5))
+    formats = [t["format"] for t in manifest["textures"]]
+    assert formats[m["base_color_texture"]] == "Rgba8Srgb"
+    assert formats[m["normal_texture"]] == "Rgba16Unorm"
+    assert formats[m["occlusion_texture"]] == "Rgba8Unorm"
+    # Every level of the cooked normal map holds unit vectors (1e-3); the data texture is
+    # filtered per channel in linear space (the ramp's mean is kept, not pulled toward sRGB).
+    fmt, levels = _core.read_pack_texture(str(out), m["normal_texture"])
+    assert fmt == "Rgba16Unorm" and len(levels) == 6
+    for level in levels:
+        v = level[..., :3].astype(np.float64) / 65535.0 * 2.0 - 1.0
+        assert np.abs(np.linalg.norm(v, axis=-1) - 1.0).max() <= 1e-3
+    _, data_levels = _core.read_pack_texture(str(out), m["occlusion_texture"])
+    assert abs(float(data_levels[1][..., 0].mean()) - float(data[..., 0].mean())) <= 1.0
+    assert np.all(data_levels[2][..., 1] == 200)
+
+
+def test_a_16_bit_normal_map_keeps_its_bits(tmp_path):
+    normals16 = bumpy_normals(16, 16)
+    src = tmp_path / "n.gltf"
+    material = {"name": "m", "normalTexture": {"index": 0}}
+    src.write_text(json.dumps(material_gltf([png_bytes(normals16)], material)))
+    out = tmp_path / "n.pack"
+    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    fmt, levels = _core.read_pack_texture(str(out), 0)
+    # Level 0 is only renormalised: within a few 16-bit steps of the authored texels, which
+    # an 8-bit detour would have moved by ~128 steps.
+    assert fmt == "Rgba16Unorm"
+    assert np.abs(levels[0].astype(np.int64) - normals16.astype(np.int64)).max() <= 4

@@ -50,6 +50,14 @@ fn read_pack_summary(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyDict>> {
     summary(py, &cook_core::Summary::of(&pack, bytes))
 }
 
+/// Read and fully validate a pack; return its manifest (meshes, materials, textures, nodes,
+/// lights, ...; no bulk data) as JSON text. For tests and tools that inspect what was cooked.
+#[pyfunction]
+fn read_pack_manifest(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    let pack = py.detach(|| cook_core::read_pack(&path)).map_err(raise)?;
+    serde_json::to_string(&pack.manifest).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))
+}
+
 pub(crate) fn summary(py: Python<'_>, s: &cook_core::Summary) -> PyResult<Py<PyDict>> {
     let d = PyDict::new(py);
     d.set_item("meshes", s.meshes)?;
@@ -85,6 +93,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("COOKER", cook_core::COOKER)?;
     m.add_function(wrap_pyfunction!(cook_gltf, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_summary, m)?)?;
+    m.add_function(wrap_pyfunction!(read_pack_manifest, m)?)?;
     scene::register(m)?;
     uv_raster::register(m)?;
     measure::register(m)?;

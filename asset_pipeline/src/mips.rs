@@ -40,6 +40,38 @@ fn mip_chain(py: Python<'_>, level0: &Bound<'_, PyAny>, usage: &str, filter: Opt
     levels.into_iter().zip(sizes(w, h)).map(|(v, (w, h))| array(py, v, w, h)).collect()
 }
 
+/// Every level of a normal map, level 0 included, as (h, w, 4) uint16 (16-bit UNORM, the
+/// pack's Rgba16Unorm): `normal_chain(level0, filter=None, edge="wrap")`. `level0` is an
+/// (h, w, 4) C-contiguous uint8 or uint16 UNORM array (rgb = n * 0.5 + 0.5, alpha is data).
+/// The vectors are filtered, then every texel of every level is renormalised to unit length.
+#[pyfunction]
+#[pyo3(signature = (level0, filter=None, edge="wrap"))]
+fn normal_chain(py: Python<'_>, level0: &Bound<'_, PyAny>, filter: Option<&str>, edge: &str) -> PyResult<Vec<Py<PyAny>>> {
+    let bad = |m: String| PyValueError::new_err(m);
+    let settings = MipSettings {
+        usage: Usage::Normal,
+        filter: filter.map(Filter::parse).transpose().map_err(bad)?.unwrap_or(Usage::Normal.default_filter()),
+        edge: Edge::parse(edge).map_err(bad)?,
+        alpha_cutoff: None,
+    };
+    let levels = if let Ok(a) = level0.extract::<PyReadonlyArray3<'_, u8>>() {
+        let (w, h) = shape(a.shape())?;
+        let texels = a.as_slice().map_err(|_| bad("level 0 must be C-contiguous".into()))?;
+        (w, h, py.detach(|| mips::normal_levels(w as u32, h as u32, mips::NormalTexels::Unorm8(texels), &settings)).map_err(bad)?)
+    } else if let Ok(a) = level0.extract::<PyReadonlyArray3<'_, u16>>() {
+        let (w, h) = shape(a.shape())?;
+        let texels = a.as_slice().map_err(|_| bad("level 0 must be C-contiguous".into()))?;
+        (w, h, py.detach(|| mips::normal_levels(w as u32, h as u32, mips::NormalTexels::Unorm16(texels), &settings)).map_err(bad)?)
+    } else {
+        return Err(bad("normal map level 0 must be an (h, w, 4) uint8 or uint16 array".into()));
+    };
+    let (w, h, levels) = levels;
+    levels.into_iter().enumerate().map(|(l, v)| {
+        let (lw, lh) = mips::level_size(w as u32, h as u32, l as u32);
+        array(py, v, lw, lh)
+    }).collect()
+}
+
 fn shape(s: &[usize]) -> PyResult<(usize, usize)> {
     if s[2] != 4 || s[0] == 0 || s[1] == 0 || s[0] > 1 << 16 || s[1] > 1 << 16 {
         return Err(PyValueError::new_err(format!("level 0 has shape {s:?}, expected (h, w, 4) with 1 <= w, h <= 65536")));
@@ -53,7 +85,7 @@ fn array<T: numpy::Element>(py: Python<'_>, v: Vec<T>, w: u32, h: u32) -> PyResu
 }
 
 /// Every level of texture `index` in the pack at `path`, as written: `(format, [level arrays])`,
-/// each (h, w, 4) uint8, or float16 for Rgba16Float. For tests and tools.
+/// each (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm. For tests and tools.
 #[pyfunction]
 fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> PyResult<(String, Vec<Py<PyAny>>)> {
     let pack = py.detach(|| cook_core::read_pack(&path)).map_err(crate::raise)?;
@@ -68,7 +100,8 @@ fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> 
                 let a = array(py, bits, w, h)?;
                 a.call_method1(py, "view", ("float16",))?
             }
-            _ => array(py, bytes, w, h)?,
+            pack::TextureFormat::Rgba16Unorm => array(py, bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect::<Vec<u16>>(), w, h)?,
+            pack::TextureFormat::Rgba8Srgb | pack::TextureFormat::Rgba8Unorm => array(py, bytes, w, h)?,
         });
     }
     Ok((format!("{:?}", t.format), levels))
@@ -76,6 +109,7 @@ fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> 
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mip_chain, m)?)?;
+    m.add_function(wrap_pyfunction!(normal_chain, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_texture, m)?)?;
     Ok(())
 }

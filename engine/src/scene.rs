@@ -100,7 +100,22 @@ fn vk_format(f: TextureFormat) -> vk::Format {
         TextureFormat::Rgba8Srgb => vk::Format::R8G8B8A8_SRGB,
         TextureFormat::Rgba8Unorm => vk::Format::R8G8B8A8_UNORM,
         TextureFormat::Rgba16Float => vk::Format::R16G16B16A16_SFLOAT,
+        TextureFormat::Rgba16Unorm => vk::Format::R16G16B16A16_UNORM,
     }
+}
+
+/// Whether the device can sample `format` with linear filtering (every format the pack uses is
+/// guaranteed by Vulkan except 16-bit UNORM).
+fn can_filter(gpu: &Gpu, format: vk::Format) -> bool {
+    let props = unsafe { gpu.instance.get_physical_device_format_properties(gpu.physical_device, format) };
+    props.optimal_tiling_features.contains(vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR)
+}
+
+/// 16-bit UNORM texels as half floats, for devices that cannot filter R16G16B16A16_UNORM
+/// (half float is mandatory). Values in [0, 1] keep 11 significant bits: a cooked unit normal
+/// stays within 1e-3 of unit length.
+pub fn unorm16_to_half(bytes: &[u8]) -> Vec<u8> {
+    bytes.chunks_exact(2).flat_map(|b| half::f16::from_f32(u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0).to_le_bytes()).collect()
 }
 
 /// Largest axis scale of a transform's 3x3 part.
@@ -193,10 +208,16 @@ impl GpuScene {
 
         let mut textures = Vec::with_capacity(m.textures.len());
         for t in &m.textures {
-            let mips: Vec<&[u8]> = t.mips.iter().map(|r| pack.bytes(*r)).collect();
+            let mut format = vk_format(t.format);
+            let mut mips: Vec<std::borrow::Cow<[u8]>> = t.mips.iter().map(|r| pack.bytes(*r).into()).collect();
+            if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, format) {
+                format = vk::Format::R16G16B16A16_SFLOAT;
+                mips = mips.iter().map(|m| unorm16_to_half(m).into()).collect();
+            }
+            let mips: Vec<&[u8]> = mips.iter().map(|m| m.as_ref()).collect();
             let extent = vk::Extent2D { width: t.width, height: t.height };
             textures.push(
-                Image::sampled_with_mips(gpu, &t.name, vk_format(t.format), extent, &mips)
+                Image::sampled_with_mips(gpu, &t.name, format, extent, &mips)
                     .with_context(|| format!("uploading texture '{}'", t.name))?,
             );
         }

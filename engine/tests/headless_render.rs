@@ -622,3 +622,47 @@ fn a_grazing_floor_does_not_shimmer_when_the_camera_moves_one_texel() {
     assert!(mean0 > 4.0 * mean.max(0.25), "without mips the floor should shimmer (mean {mean0}): the test has teeth");
     assert_clean(&gpu);
 }
+
+#[test]
+fn sixteen_bit_unorm_textures_sample_like_their_eight_bit_originals() {
+    // Cooked normal maps are Rgba16Unorm. The same levels stored 8-bit (g) and 16-bit (g * 257,
+    // the same value in [0, 1]) must render the same image: the upload picks the right format
+    // (or the half-float fallback) and the sampler reads UNORM, not raw integers.
+    let gpu = gpu();
+    let size = 16u32;
+    let grey = |k: usize| [40 + 50 * k as u8, 200 - 30 * k as u8, 90, 255];
+    let levels8: Vec<Vec<u8>> = (0..5).map(|k| grey(k).repeat(((size >> k) * (size >> k)) as usize)).collect();
+    let levels16: Vec<Vec<u8>> = levels8.iter().map(|l| l.iter().flat_map(|&b| (b as u16 * 257).to_le_bytes()).collect()).collect();
+    let (verts, idx) = cube_vertices();
+    let (w, h) = (64u32, 64u32);
+    let camera = looking_down_neg_z(3.0);
+    let a = render(&gpu, &mesh_pack(&verts, &idx, TextureFormat::Rgba8Unorm, size, &levels8, Material::default()), &camera, w, h);
+    let b = render(&gpu, &mesh_pack(&verts, &idx, TextureFormat::Rgba16Unorm, size, &levels16, Material::default()), &camera, w, h);
+    let centre = pixel(&a, w, w / 2, h / 2);
+    assert!(centre[0] != centre[1], "the face shows the texture: {centre:?}");
+    let worst = a.iter().zip(&b).map(|(p, q)| p.abs_diff(*q)).max().unwrap();
+    assert!(worst <= 1, "8-bit and 16-bit renders differ by up to {worst}");
+    assert_clean(&gpu);
+}
+
+#[test]
+fn the_half_float_fallback_keeps_cooked_normals_unit_length() {
+    // Devices that cannot filter R16G16B16A16_UNORM get the texels as half floats.
+    let mut worst = 0.0f64;
+    for i in 0..2000 {
+        let (a, b) = (i as f64 * 0.7391, i as f64 * 0.0123);
+        let n = [a.cos() * b.sin(), a.sin() * b.sin(), b.cos()];
+        let texel: Vec<u8> = n.iter().chain([1.0].iter()).flat_map(|&c| (((c * 0.5 + 0.5) * 65535.0).round() as u16).to_le_bytes()).collect();
+        let halves = engine::scene::unorm16_to_half(&texel);
+        let v: Vec<f64> = halves.chunks_exact(2).take(3).map(|h| half_to_f64(u16::from_le_bytes([h[0], h[1]])) * 2.0 - 1.0).collect();
+        worst = worst.max(((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs());
+    }
+    assert!(worst <= 1e-3, "half-float normals are {worst} from unit length");
+}
+
+/// IEEE half to f64, written out here so the test does not trust the conversion it checks.
+fn half_to_f64(h: u16) -> f64 {
+    let (e, m) = ((h >> 10) & 0x1f, (h & 0x3ff) as f64);
+    assert!(h >> 15 == 0 && e != 0x1f, "unexpected half {h:#x}");
+    if e == 0 { m * 2f64.powi(-24) } else { (1.0 + m / 1024.0) * 2f64.powi(e as i32 - 15) }
+}

@@ -53,10 +53,20 @@ pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result
     let src = load::open(source, &file)?;
     let doc = &src.document;
 
-    let images: HashSet<usize> = doc
+    // Progress counts images once per material slot that reads them (a rough total is enough).
+    let images: HashSet<(usize, &str)> = doc
         .materials()
-        .filter_map(|m| m.pbr_metallic_roughness().base_color_texture())
-        .map(|info| info.texture().source().index())
+        .flat_map(|m| {
+            let pbr = m.pbr_metallic_roughness();
+            [
+                pbr.base_color_texture().map(|t| (t.texture().source().index(), "colour")),
+                pbr.metallic_roughness_texture().map(|t| (t.texture().source().index(), "data")),
+                m.normal_texture().map(|t| (t.texture().source().index(), "normal")),
+                m.occlusion_texture().map(|t| (t.texture().source().index(), "data")),
+                m.emissive_texture().map(|t| (t.texture().source().index(), "colour")),
+            ]
+        })
+        .flatten()
         .collect();
     let total = (images.len() + doc.meshes().len() + 1) as f32;
     let mut done = 0usize;

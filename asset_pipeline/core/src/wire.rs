@@ -295,7 +295,8 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         .map(|t| {
             let (dtype, channel_bytes) = match t.format {
                 TextureFormat::Rgba16Float => ("<f2", 2),
-                _ => ("|u1", 1),
+                TextureFormat::Rgba16Unorm => ("<u2", 2),
+                TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => ("|u1", 1),
             };
             let mips = (0..t.mips.len())
                 .map(|l| {

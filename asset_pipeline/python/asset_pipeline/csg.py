@@ -152,8 +152,7 @@ def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray
     not modified."""
     mesh0, mat0, tex0 = len(scene.meshes), len(scene.materials), len(scene.textures)
     scene.textures += prop.textures
-    scene.materials += [dataclasses.replace(mt, base_color_texture=None if mt.base_color_texture is None
-                                            else mt.base_color_texture + tex0) for mt in prop.materials]
+    scene.materials += [mt.with_textures_offset(tex0) for mt in prop.materials]
     scene.meshes += [dataclasses.replace(me, static=static, lods=[
         dataclasses.replace(l, materials=(l.materials + mat0).astype(np.uint32)) for l in me.lods]) for me in prop.meshes]
     root = len(scene.nodes)

@@ -33,8 +33,7 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
 
 
 # Texture usages and the format each is stored in.
-USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr"}
-FORMAT_OF_USAGE = {"color": "Rgba8Srgb", "data": "Rgba8Unorm", "normal": "Rgba8Unorm", "hdr": "Rgba16Float"}
+USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr", "Rgba16Unorm": "normal"}
 
 
 class IrError(ValueError):
@@ -102,6 +101,20 @@ class Material:
     alpha_mode: str = "Opaque"  # Opaque | Mask | Blend
     alpha_cutoff: float = 0.5
     double_sided: bool = False
+    normal_texture: int | None = None  # tangent-space normal map (usage "normal")
+    normal_scale: float = 1.0
+    metallic_roughness_texture: int | None = None  # roughness in g, metalness in b (usage "data")
+    occlusion_texture: int | None = None  # ambient occlusion in r (usage "data")
+    occlusion_strength: float = 1.0
+    emissive_texture: int | None = None  # emission colour, sRGB (usage "color")
+
+    def with_textures_offset(self, offset: int) -> "Material":
+        """The material with every texture index moved by `offset` (scenes being merged)."""
+        return dataclasses.replace(self, **{s: getattr(self, s) + offset for s in TEXTURE_SLOTS if getattr(self, s) is not None})
+
+
+# Material fields that hold a texture index.
+TEXTURE_SLOTS = ("base_color_texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture", "emissive_texture")
 
 
 @dataclass
@@ -109,10 +122,12 @@ class Texture:
     name: str
     width: int
     height: int
-    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float
-    mips: list[np.ndarray]  # level 0 first; (h, w, 4) uint8, or float16 for Rgba16Float
+    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float | Rgba16Unorm
+    # Level 0 first; (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm.
+    mips: list[np.ndarray]
     # How its mip levels are made: color (sRGB) | data (linear) | normal | hdr. None: what the
-    # format implies (Rgba8Srgb colour, Rgba8Unorm data, Rgba16Float hdr).
+    # format implies (Rgba8Srgb colour, Rgba8Unorm data, Rgba16Float hdr, Rgba16Unorm normal).
+    # Normal maps arrive as Rgba8Unorm (or Rgba16Unorm) and leave the textures stage Rgba16Unorm.
     usage: str | None = None
 
     def __post_init__(self):

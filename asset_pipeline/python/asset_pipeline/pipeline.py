@@ -379,12 +379,13 @@ def _alpha_cutoffs(scene: ir.Scene) -> dict[int, float]:
 
 def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
     """Every material texture gets its full mip chain by its usage (cook_core::mips): colour in
-    linear light with premultiplied alpha, data per channel, normals renormalised, HDR with a
+    linear light with premultiplied alpha, data per channel, normals renormalised and stored
+    16-bit at every level (level 0 re-encoded: 8 bits cannot hold a unit vector), HDR with a
     non-negative kernel; alpha-tested base colours keep their coverage. Levels wrap at the edges,
     as the runtime's sampler repeats. Lightmap pages are left at one level: they are magnified,
     and their 2-texel chart gutters would bleed neighbouring charts into level 1 and below.
     Textures that arrive with more than one level keep theirs."""
-    from asset_pipeline._core import mip_chain
+    from asset_pipeline._core import mip_chain, normal_chain
 
     skip = set(scene.lightmap.textures) if scene.lightmap is not None else set()
     cutoffs = _alpha_cutoffs(scene)
@@ -397,20 +398,28 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
             t = textures[i]
             job = {"usage": t.usage, "filter": settings.mip_filter, "edge": "wrap", "alpha_cutoff": cutoffs.get(i)}
             key = Hasher("textures").settings(job).array(t.mips[0]).key()
+            # Normal maps come back whole (level 0 re-encoded 16-bit), the rest as levels 1..
+            normal = t.usage == "normal"
             hit = cache.load("textures", key)
             if hit is not None:
                 levels = hit[1]
                 rec.cached += 1
             else:
-                level0 = t.mips[0].view(np.uint16) if t.usage == "hdr" else t.mips[0]
+                level0 = np.ascontiguousarray(t.mips[0].view(np.uint16) if t.usage == "hdr" else t.mips[0])
                 try:
-                    levels = mip_chain(np.ascontiguousarray(level0), t.usage, filter=job["filter"], edge="wrap", alpha_cutoff=job["alpha_cutoff"])
+                    if normal:
+                        levels = normal_chain(level0, filter=job["filter"], edge="wrap")
+                    else:
+                        levels = mip_chain(level0, t.usage, filter=job["filter"], edge="wrap", alpha_cutoff=job["alpha_cutoff"])
                 except ValueError as e:
                     raise CookError(f"{scene.source}: texture {i} '{t.name}': {e}") from None
                 if t.usage == "hdr":
                     levels = [l.view(np.float16) for l in levels]
                 cache.store("textures", key, {}, levels)
-            textures[i] = dataclasses.replace(t, mips=[t.mips[0], *levels])
+            if normal:
+                textures[i] = dataclasses.replace(t, format="Rgba16Unorm", mips=list(levels))
+            else:
+                textures[i] = dataclasses.replace(t, mips=[t.mips[0], *levels])
             bar.advance()
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, textures=textures), rec

@@ -229,6 +229,32 @@ pub struct Material {
     pub alpha_mode: AlphaMode,
     pub alpha_cutoff: f32,
     pub double_sided: bool,
+    /// Tangent-space normal map (Rgba16Unorm once cooked: rgb = n * 0.5 + 0.5) and the scale of
+    /// its xy (glTF `normalTexture.scale`).
+    pub normal_texture: Option<u32>,
+    pub normal_scale: f32,
+    /// glTF metallic-roughness: roughness in g, metalness in b, linear (Rgba8Unorm); multiplies
+    /// `roughness` and `metallic`.
+    pub metallic_roughness_texture: Option<u32>,
+    /// Ambient occlusion in r, linear (Rgba8Unorm), mixed in by `occlusion_strength`.
+    pub occlusion_texture: Option<u32>,
+    pub occlusion_strength: f32,
+    /// Emission colour (Rgba8Srgb), multiplies `emissive`.
+    pub emissive_texture: Option<u32>,
+}
+
+impl Material {
+    /// Every texture slot with the formats it accepts: what readers and tools iterate over.
+    pub fn texture_slots(&self) -> [(&'static str, Option<u32>, &'static [TextureFormat]); 5] {
+        use TextureFormat::*;
+        [
+            ("base colour", self.base_color_texture, &[Rgba8Srgb, Rgba8Unorm]),
+            ("normal", self.normal_texture, &[Rgba16Unorm, Rgba8Unorm]),
+            ("metallic-roughness", self.metallic_roughness_texture, &[Rgba8Unorm]),
+            ("occlusion", self.occlusion_texture, &[Rgba8Unorm]),
+            ("emissive", self.emissive_texture, &[Rgba8Srgb]),
+        ]
+    }
 }
 
 impl Default for Material {
@@ -243,6 +269,12 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             alpha_cutoff: 0.5,
             double_sided: false,
+            normal_texture: None,
+            normal_scale: 1.0,
+            metallic_roughness_texture: None,
+            occlusion_texture: None,
+            occlusion_strength: 1.0,
+            emissive_texture: None,
         }
     }
 }
@@ -251,17 +283,19 @@ impl Default for Material {
 pub enum TextureFormat {
     /// 8-bit RGBA, sRGB-encoded colour (sampled through an _SRGB format).
     Rgba8Srgb,
-    /// 8-bit RGBA, linear data (normal maps, roughness, masks).
+    /// 8-bit RGBA, linear data (roughness, masks; normal maps as authored).
     Rgba8Unorm,
     /// Half-float RGBA, linear HDR (lightmaps).
     Rgba16Float,
+    /// 16-bit RGBA, linear (cooked normal maps: rgb = n * 0.5 + 0.5, unit length within 3e-5).
+    Rgba16Unorm,
 }
 
 impl TextureFormat {
     pub fn bytes_per_texel(self) -> u64 {
         match self {
             TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => 4,
-            TextureFormat::Rgba16Float => 8,
+            TextureFormat::Rgba16Float | TextureFormat::Rgba16Unorm => 8,
         }
     }
 }
@@ -333,9 +367,14 @@ impl Manifest {
             }
         }
         for (i, m) in self.materials.iter().enumerate() {
-            if let Some(t) = m.base_color_texture {
-                if t as usize >= self.textures.len() {
-                    return bad(format!("material {i} '{}': texture {t} does not exist", m.name));
+            for (slot, t, formats) in m.texture_slots() {
+                let Some(t) = t else { continue };
+                match self.textures.get(t as usize) {
+                    None => return bad(format!("material {i} '{}': {slot} texture {t} does not exist", m.name)),
+                    Some(tex) if !formats.contains(&tex.format) => {
+                        return bad(format!("material {i} '{}': {slot} texture {t} '{}' is {:?}, expected one of {formats:?}", m.name, tex.name, tex.format));
+                    }
+                    Some(_) => {}
                 }
             }
         }

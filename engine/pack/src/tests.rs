@@ -178,6 +178,16 @@ fn dangling_references_are_rejected_before_writing() {
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("lightmap page 3 does not exist"), "{e}");
 
+    // Every material texture slot is checked: it must exist and hold what the slot reads.
+    let mut p = sample();
+    p.manifest.materials[0].occlusion_texture = Some(4);
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("material 0 'default': occlusion texture 4 does not exist"), "{e}");
+    let mut p = sample();
+    p.manifest.materials[0].normal_texture = Some(0);
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("normal texture 0 't' is Rgba8Srgb, expected one of [Rgba16Unorm, Rgba8Unorm]"), "{e}");
+
     let mut p = sample();
     p.manifest.meshes[0].lods[1].error = -1.0;
     let e = p.to_bytes().unwrap_err().to_string();

@@ -16,7 +16,7 @@ pub use resample::{downsample, Image, Texel};
 use rayon::prelude::*;
 
 /// What a texture's texels are, which decides how its levels are made.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Usage {
     /// sRGB-encoded colour with straight alpha (base colour): filtered in linear light,
@@ -25,7 +25,9 @@ pub enum Usage {
     /// Linear 8-bit data (roughness, metalness, occlusion, masks): each channel on its own.
     Data,
     /// Tangent-space normals in rgb (UNORM, 0..1 -> -1..1): the vectors are averaged and
-    /// renormalised; alpha is data.
+    /// renormalised; alpha is data. Every level, level 0 included, is stored as 16-bit UNORM:
+    /// 8 bits cannot hold a unit vector closer than ~5e-3 to unit length, 16 bits hold it
+    /// within 3e-5 (the notes' gate is 1e-3).
     Normal,
     /// Linear half-float HDR (lightmaps, emission): never clamped, non-negative kernels only.
     Hdr,
@@ -38,18 +40,28 @@ impl Usage {
             pack::TextureFormat::Rgba8Srgb => Usage::Color,
             pack::TextureFormat::Rgba8Unorm => Usage::Data,
             pack::TextureFormat::Rgba16Float => Usage::Hdr,
+            pack::TextureFormat::Rgba16Unorm => Usage::Normal,
         }
     }
 
-    /// Colour is stored sRGB, data and normals UNORM, HDR as half floats.
+    /// Colour is stored sRGB, data UNORM, normals UNORM (8-bit as authored, 16-bit once
+    /// cooked), HDR as half floats.
     pub fn check_format(self, format: pack::TextureFormat) -> Result<(), String> {
-        let want = match self {
-            Usage::Color => pack::TextureFormat::Rgba8Srgb,
-            Usage::Data | Usage::Normal => pack::TextureFormat::Rgba8Unorm,
-            Usage::Hdr => pack::TextureFormat::Rgba16Float,
+        use pack::TextureFormat as F;
+        let ok = match self {
+            Usage::Color => format == F::Rgba8Srgb,
+            Usage::Data => format == F::Rgba8Unorm,
+            Usage::Normal => format == F::Rgba8Unorm || format == F::Rgba16Unorm,
+            Usage::Hdr => format == F::Rgba16Float,
         };
-        if format != want {
-            return Err(format!("usage {} needs format {want:?}, not {format:?}", self.name()));
+        if !ok {
+            let want = match self {
+                Usage::Color => "Rgba8Srgb",
+                Usage::Data => "Rgba8Unorm",
+                Usage::Normal => "Rgba8Unorm or Rgba16Unorm",
+                Usage::Hdr => "Rgba16Float",
+            };
+            return Err(format!("usage {} needs format {want}, not {format:?}", self.name()));
         }
         Ok(())
     }
@@ -123,12 +135,14 @@ pub fn level_size(width: u32, height: u32, level: u32) -> (u32, u32) {
 }
 
 /// Levels 1.. of an 8-bit RGBA texture (`texels`: level 0, tightly packed), each tightly packed.
-/// Usage Color, Data or Normal.
+/// Usage Color or Data (normal maps: `normal_levels`).
 pub fn mips_rgba8(width: u32, height: u32, texels: &[u8], s: &MipSettings) -> Result<Vec<Vec<u8>>, String> {
     s.check()?;
     check_size(width, height, texels.len(), 4)?;
-    if s.usage == Usage::Hdr {
-        return Err("an hdr texture must be half float, not 8-bit".into());
+    match s.usage {
+        Usage::Hdr => return Err("an hdr texture must be half float, not 8-bit".into()),
+        Usage::Normal => return Err("a normal map's levels are 16-bit (normal_levels), not 8-bit".into()),
+        Usage::Color | Usage::Data => {}
     }
     let (w, h) = (width as usize, height as usize);
     let level0 = |y: usize, row: &mut [Texel]| decode_row(s.usage, &texels[y * w * 4..(y + 1) * w * 4], row);
@@ -145,6 +159,71 @@ pub fn mips_rgba8(width: u32, height: u32, texels: &[u8], s: &MipSettings) -> Re
         out.push(bytes);
     });
     Ok(out)
+}
+
+/// A normal map's level 0 as authored: 8-bit (PNG) or 16-bit UNORM texels, tightly packed RGBA.
+#[derive(Debug, Clone, Copy)]
+pub enum NormalTexels<'a> {
+    Unorm8(&'a [u8]),
+    Unorm16(&'a [u16]),
+}
+
+impl NormalTexels<'_> {
+    fn len(&self) -> usize {
+        match self {
+            NormalTexels::Unorm8(t) => t.len(),
+            NormalTexels::Unorm16(t) => t.len(),
+        }
+    }
+
+    /// Row `y` decoded to vectors in [-1, 1] (rgb) and alpha in [0, 1].
+    fn decode_row(&self, w: usize, y: usize, row: &mut [Texel]) {
+        fn snorm(v: f32) -> f32 {
+            v * 2.0 - 1.0
+        }
+        match self {
+            NormalTexels::Unorm8(t) => decode_row(Usage::Normal, &t[y * w * 4..(y + 1) * w * 4], row),
+            NormalTexels::Unorm16(t) => {
+                for (o, t) in row.iter_mut().zip(t[y * w * 4..(y + 1) * w * 4].chunks_exact(4)) {
+                    let f: [f32; 4] = std::array::from_fn(|c| t[c] as f32 / 65535.0);
+                    *o = [snorm(f[0]), snorm(f[1]), snorm(f[2]), f[3]];
+                }
+            }
+        }
+    }
+}
+
+/// Every level of a normal map, level 0 included, as 16-bit UNORM RGBA (`pack::TextureFormat::
+/// Rgba16Unorm`). Level 0 is renormalised too: authored 8-bit vectors are only unit length to
+/// within their quantisation, and the shader should see one consistent encoding at every level.
+pub fn normal_levels(width: u32, height: u32, level0: NormalTexels<'_>, s: &MipSettings) -> Result<Vec<Vec<u16>>, String> {
+    s.check()?;
+    check_size(width, height, level0.len(), 4)?;
+    if s.usage != Usage::Normal {
+        return Err(format!("normal_levels needs usage normal, not {}", s.usage.name()));
+    }
+    let (w, h) = (width as usize, height as usize);
+    let mut first = Image { width: w, height: h, texels: vec![[0.0; 4]; w * h] };
+    first.texels.par_chunks_mut(w).enumerate().for_each(|(y, row)| level0.decode_row(w, y, row));
+    let mut out = vec![encode_normal16(&first)];
+    // Levels 1.. filter the decoded, not-yet-renormalised level 0 (renormalising first would
+    // weight steep texels the same as flat ones and lose the averaging the notes ask for).
+    chain(width, height, |y, row| row.copy_from_slice(first.row(y)), s, |img| out.push(encode_normal16(img)));
+    Ok(out)
+}
+
+fn unorm16(v: f32) -> u16 {
+    (v.clamp(0.0, 1.0) * 65535.0 + 0.5) as u16
+}
+
+fn encode_normal16(img: &Image) -> Vec<u16> {
+    img.texels
+        .par_iter()
+        .flat_map_iter(|&t| {
+            let f = finish_texel(Usage::Normal, t);
+            [unorm16(f[0] * 0.5 + 0.5), unorm16(f[1] * 0.5 + 0.5), unorm16(f[2] * 0.5 + 0.5), unorm16(f[3])]
+        })
+        .collect()
 }
 
 /// Levels 1.. of a half-float RGBA texture (`texels`: level 0 as f16 bits). Usage Hdr.
@@ -265,8 +344,9 @@ fn encode(usage: Usage, img: &Image) -> Vec<u8> {
             let f = finish_texel(usage, t);
             let rgb: [u8; 3] = match usage {
                 Usage::Color => std::array::from_fn(|c| srgb::encode_byte(f[c])),
-                Usage::Normal => std::array::from_fn(|c| unorm8(f[c] * 0.5 + 0.5)),
-                Usage::Data | Usage::Hdr => std::array::from_fn(|c| unorm8(f[c])),
+                Usage::Data => std::array::from_fn(|c| unorm8(f[c])),
+                // mips_rgba8 turns these away: normals are 16-bit, HDR half float.
+                Usage::Normal | Usage::Hdr => unreachable!("8-bit encode of {usage:?}"),
             };
             o.copy_from_slice(&[rgb[0], rgb[1], rgb[2], unorm8(f[3])]);
         }

@@ -68,15 +68,20 @@ fn a_constant_image_stays_constant_at_every_level() {
     for (w, h) in [(64, 64), (5, 3), (7, 1), (1, 9), (33, 17)] {
         for filter in Filter::ALL {
             for edge in [Edge::Wrap, Edge::Clamp] {
-                for usage in [Usage::Color, Usage::Data, Usage::Normal] {
-                    let c = [200, 37, 90, 255];
-                    let px = rgba8(w, h, |_, _| c);
+                let c = [200, 37, 90, 255];
+                let px = rgba8(w, h, |_, _| c);
+                for usage in [Usage::Color, Usage::Data] {
                     let s = settings(usage, filter, edge);
                     for (l, level) in mips_rgba8(w as u32, h as u32, &px, &s).unwrap().iter().enumerate() {
-                        // Normals are renormalised: a constant non-unit vector becomes unit.
-                        let want = if usage == Usage::Normal { level[..4].to_vec() } else { c.to_vec() };
-                        assert!(level.chunks_exact(4).all(|t| t == want), "{w}x{h} {filter:?} {edge:?} {usage:?} level {}: {:?}", l + 1, &level[..4]);
+                        assert!(level.chunks_exact(4).all(|t| t == c), "{w}x{h} {filter:?} {edge:?} {usage:?} level {}: {:?}", l + 1, &level[..4]);
                     }
+                }
+                // Normals are renormalised: a constant non-unit vector becomes one unit vector,
+                // the same at every level as at level 0.
+                let levels = normal_levels(w as u32, h as u32, NormalTexels::Unorm8(&px), &settings(Usage::Normal, filter, edge)).unwrap();
+                let want = levels[0][..4].to_vec();
+                for (l, level) in levels.iter().enumerate() {
+                    assert!(level.chunks_exact(4).all(|t| t == want), "{w}x{h} {filter:?} {edge:?} normal level {l}: {:?}", &level[..4]);
                 }
                 let hdr = half::f16::from_f32(1234.5).to_bits();
                 let px = vec![hdr; w * h * 4];
@@ -299,23 +304,33 @@ fn normal_map_levels_are_unit_vectors() {
         }
     }
     assert!(worst_f32 <= 1e-3, "f32 level normal length error {worst_f32}");
-    // Stored bytes: within 8-bit quantisation (each component within half a step of 2/255).
-    let mut worst_u8 = 0.0f32;
-    for level in mips_rgba8(n as u32, n as u32, &px, &s).unwrap() {
-        for t in level.chunks_exact(4) {
-            let v = [unorm_to_snorm(t[0]), unorm_to_snorm(t[1]), unorm_to_snorm(t[2])];
-            worst_u8 = worst_u8.max(((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs());
-        }
-    }
-    eprintln!("normal length error: f32 {worst_f32:e}, stored bytes {worst_u8:e}");
-    assert!(worst_u8 <= 3f32.sqrt() / 255.0, "stored normal length error {worst_u8}");
+    // What the pack stores: every texel of every level, level 0 included, 16-bit UNORM.
+    let unit_error = |t: &[u16]| {
+        let v = [0, 1, 2].map(|c| t[c] as f64 / 65535.0 * 2.0 - 1.0);
+        ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs()
+    };
+    let stored = normal_levels(n as u32, n as u32, NormalTexels::Unorm8(&px), &s).unwrap();
+    assert_eq!(stored.len(), level_count(n as u32, n as u32) as usize);
+    let worst_stored = stored.iter().flat_map(|l| l.chunks_exact(4)).map(unit_error).fold(0.0, f64::max);
+    // The 8-bit input itself is not unit length: the re-encode of level 0 is what fixes it.
+    let worst_input = px.chunks_exact(4).map(|t| unit_error(&[t[0], t[1], t[2]].map(|b| b as u16 * 257))).fold(0.0, f64::max);
+    eprintln!("normal length error: f32 {worst_f32:e}, stored 16-bit {worst_stored:e}, 8-bit input {worst_input:e}");
+    assert!(worst_stored <= 1e-3, "stored normal length error {worst_stored}");
+    assert!(worst_input > 1e-3, "the 8-bit input should miss the gate ({worst_input}): the test has teeth");
+    // 16-bit input takes the same path.
+    let px16: Vec<u16> = px.iter().map(|&b| b as u16 * 257).collect();
+    assert_eq!(normal_levels(n as u32, n as u32, NormalTexels::Unorm16(&px16), &s).unwrap(), stored);
 
-    // Flat stays exactly flat; opposite tilts average to flat.
-    let flat = rgba8(8, 8, |_, _| [128, 128, 255, 255]);
-    assert!(mips_rgba8(8, 8, &flat, &s).unwrap().iter().flatten().collect::<Vec<_>>().chunks_exact(4).all(|t| [*t[0], *t[1], *t[2]] == [128, 128, 255]));
+    // Flat stays exactly flat: (0, 0, 1) encodes to (32768, 32768, 65535) at every level.
+    let flat: Vec<u16> = (0..8 * 8).flat_map(|_| [32768, 32768, 65535, 65535]).collect();
+    let flat_levels = normal_levels(8, 8, NormalTexels::Unorm16(&flat), &s).unwrap();
+    assert!(flat_levels.iter().flatten().collect::<Vec<_>>().chunks_exact(4).all(|t| [*t[0], *t[1], *t[2]] == [32768, 32768, 65535]));
+    // Opposite tilts average to flat.
     let tilts = rgba8(8, 8, |x, _| if x % 2 == 0 { [218, 128, 218, 255] } else { [37, 128, 218, 255] });
-    let l1 = &mips_rgba8(8, 8, &tilts, &settings(Usage::Normal, Filter::Box, Edge::Wrap)).unwrap()[0];
-    assert!(l1.chunks_exact(4).all(|t| t[0].abs_diff(128) <= 1 && t[2] == 255), "{:?}", &l1[..4]);
+    let l1 = &normal_levels(8, 8, NormalTexels::Unorm8(&tilts), &settings(Usage::Normal, Filter::Box, Edge::Wrap)).unwrap()[1];
+    assert!(l1.chunks_exact(4).all(|t| t[0].abs_diff(32768) <= 300 && t[2] >= 65534), "{:?}", &l1[..4]);
+    // 8-bit chains refuse normal maps rather than store them short.
+    assert!(mips_rgba8(8, 8, &tilts, &s).unwrap_err().contains("16-bit"));
 }
 
 #[test]
