@@ -276,7 +276,7 @@ impl State {
             d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
-        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target);
+        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
         barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
         let rendered = self.swapchain.rendered[i];
         unsafe {
