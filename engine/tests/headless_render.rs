@@ -813,22 +813,24 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
     let lit_l = probe_b + sun_lux * towards_sun.dot(Vec3::Z) / std::f32::consts::PI;
     let lit = tone_mapped_bytes([lit_l; 3], exposure, s);
     assert!(lit[0] > shaded[0] + 50, "the test needs the sun to matter: {shaded:?} vs {lit:?}");
-    let mut centre = |cube_x: f32| {
+    let mut centre = |cube_x: f32, map_size: u32| {
         let pack = roof_pack(cube_x, probe_b, sun_lux, towards_sun);
         let mut rig = Rig::new(&gpu, &pack, 64, 64);
         rig.renderer.tonemap.saturation = s;
+        rig.renderer.set_shadow_map_size(&gpu, map_size).unwrap();
         let cam = Camera { position: Vec3::new(cube_x, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
         let p = pixel(rig.target.pixels(), 64, 32, 32);
         let casters = rig.renderer.shadow_casters;
+        eprintln!("cube at x = {cube_x}, {map_size}^2 map: {:?}", rig.renderer.pass_times_ms(&gpu, 0));
         // The face's corners are 0.5 m from its centre: a 3x3 block of pixels around the centre
         // must agree (no acne speckles on a face that is fully lit or fully shadowed).
         let block: Vec<[u8; 4]> = (28..=36).step_by(4).flat_map(|y| (28..=36).step_by(4).map(move |x| (x, y))).map(|(x, y)| pixel(rig.target.pixels(), 64, x, y)).collect();
         rig.destroy(&gpu);
         (p, casters, block)
     };
-    let (under, casters_under, block_under) = centre(0.0);
-    let (out, casters_out, block_out) = centre(8.0);
+    let (under, casters_under, block_under) = centre(0.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
+    let (out, casters_out, block_out) = centre(8.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
     eprintln!("under the roof {under:?} (probe only {shaded:?}); out {out:?} (with sun {lit:?})");
     assert_eq!((casters_under, casters_out), (2, 2), "roof and cube cast");
     assert_bytes_near("under the roof", under, shaded, 1);
@@ -838,6 +840,10 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
             assert_bytes_near(what, p, want, 1);
         }
     }
+    // The map size is a setting: a small map still shadows the cube (and the frame set points at
+    // the new map).
+    let (small_under, ..) = centre(0.0, 256);
+    assert_bytes_near("under the roof, 256^2 map", small_under, shaded, 1);
     assert_clean(&gpu);
 }
 
