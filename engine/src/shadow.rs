@@ -110,9 +110,18 @@ impl SunShadow {
         let n = frames_in_flight as u32;
         // The renderer's set 0 layout: uniforms, the fragment counter, the shadow map.
         let sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: n },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: n },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::UNIFORM_BUFFER,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::STORAGE_BUFFER,
+                descriptor_count: n,
+            },
+            vk::DescriptorPoolSize {
+                ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                descriptor_count: n,
+            },
         ];
         let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)? };
         let mut ubos = Vec::new();
@@ -121,13 +130,32 @@ impl SunShadow {
             let ubo = Buffer::new(gpu, "sun shadow uniforms", ubo_size, vk::BufferUsageFlags::UNIFORM_BUFFER, MemoryLocation::CpuToGpu)?;
             let layouts = [frame_layout];
             let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
-            let info = [vk::DescriptorBufferInfo { buffer: ubo.buffer, offset: 0, range: vk::WHOLE_SIZE }];
-            let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(0).descriptor_type(vk::DescriptorType::UNIFORM_BUFFER).buffer_info(&info);
+            let info = [vk::DescriptorBufferInfo {
+                buffer: ubo.buffer,
+                offset: 0,
+                range: vk::WHOLE_SIZE,
+            }];
+            let write = vk::WriteDescriptorSet::default()
+                .dst_set(set)
+                .dst_binding(0)
+                .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+                .buffer_info(&info);
             unsafe { d.update_descriptor_sets(&[write], &[]) };
             ubos.push(ubo);
             sets.push(set);
         }
-        Ok(SunShadow { size, format, image, sampler, view_proj: Mat4::IDENTITY, texel_m: 1.0, casters: Vec::new(), ubos, sets, pool })
+        Ok(SunShadow {
+            size,
+            format,
+            image,
+            sampler,
+            view_proj: Mat4::IDENTITY,
+            texel_m: 1.0,
+            casters: Vec::new(),
+            ubos,
+            sets,
+            pool,
+        })
     }
 
     pub fn view(&self) -> vk::ImageView {
@@ -152,7 +180,10 @@ impl SunShadow {
         self.casters.clear();
         for (i, inst) in scene.instances.iter().enumerate() {
             let mesh = &scene.meshes[inst.mesh as usize];
-            self.casters.push(Draw { instance: i as u32, lod: shadow_lod(&mesh.errors, inst.scale, self.texel_m) as u8 });
+            self.casters.push(Draw {
+                instance: i as u32,
+                lod: shadow_lod(&mesh.errors, inst.scale, self.texel_m) as u8,
+            });
         }
     }
 
@@ -164,7 +195,10 @@ impl SunShadow {
     /// Begin the depth-only rendering into the map (cleared to the far depth, 1).
     pub fn begin(&self, gpu: &Gpu, cb: vk::CommandBuffer) -> vk::Rect2D {
         barrier(gpu, cb, self.image.image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::SAMPLED_TO_DEPTH_ATTACHMENT_DISCARD);
-        vk::Rect2D { offset: vk::Offset2D::default(), extent: vk::Extent2D { width: self.size, height: self.size } }
+        vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent: vk::Extent2D { width: self.size, height: self.size },
+        }
     }
 
     /// After the pass: the map becomes readable by the shading pass.

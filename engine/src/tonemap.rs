@@ -48,11 +48,16 @@ impl ToneMap {
             .descriptor_count(1)
             .stage_flags(vk::ShaderStageFlags::FRAGMENT)];
         let set_layout = unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding), None)? };
-        let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(std::mem::size_of::<ToneMapPush>() as u32)];
+        let push = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::FRAGMENT)
+            .size(std::mem::size_of::<ToneMapPush>() as u32)];
         let set_layouts = [set_layout];
         let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
         let pipeline = create_pipeline(gpu, layout, display_format)?;
-        let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: 1 }];
+        let sizes = [vk::DescriptorPoolSize {
+            ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+            descriptor_count: 1,
+        }];
         let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)? };
         let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&set_layouts))?[0] };
         // The shader reads texels with texelFetch: the sampler only has to exist.
@@ -67,7 +72,16 @@ impl ToneMap {
                 None,
             )?
         };
-        Ok(ToneMap { saturation: DEFAULT_SATURATION, set_layout, layout, pipeline, pool, set, sampler, hdr: None })
+        Ok(ToneMap {
+            saturation: DEFAULT_SATURATION,
+            set_layout,
+            layout,
+            pipeline,
+            pool,
+            set,
+            sampler,
+            hdr: None,
+        })
     }
 
     /// The HDR target for a frame of `extent`, (re)made when the size changes (first frame,
@@ -88,8 +102,16 @@ impl ToneMap {
                 vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::SAMPLED,
                 vk::ImageAspectFlags::COLOR,
             )?;
-            let info = [vk::DescriptorImageInfo { sampler: self.sampler, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
-            let write = vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&info);
+            let info = [vk::DescriptorImageInfo {
+                sampler: self.sampler,
+                image_view: image.view,
+                image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+            }];
+            let write = vk::WriteDescriptorSet::default()
+                .dst_set(self.set)
+                .dst_binding(0)
+                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .image_info(&info);
             unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
             self.hdr = Some(image);
         }
@@ -104,7 +126,10 @@ impl ToneMap {
         let d = &gpu.device;
         let hdr = self.hdr.as_ref().expect("hdr_target() before record()");
         barrier(gpu, cb, hdr.image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_SAMPLED);
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent };
+        let area = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent,
+        };
         // Every pixel is written: nothing to load.
         let color = [vk::RenderingAttachmentInfo::default()
             .image_view(target_view)
@@ -112,10 +137,23 @@ impl ToneMap {
             .load_op(vk::AttachmentLoadOp::DONT_CARE)
             .store_op(vk::AttachmentStoreOp::STORE)];
         let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color);
-        let push = ToneMapPush { params: Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0) };
+        let push = ToneMapPush {
+            params: Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0),
+        };
         unsafe {
             d.cmd_begin_rendering(cb, &rendering);
-            d.cmd_set_viewport(cb, 0, &[vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 }]);
+            d.cmd_set_viewport(
+                cb,
+                0,
+                &[vk::Viewport {
+                    x: 0.0,
+                    y: 0.0,
+                    width: extent.width as f32,
+                    height: extent.height as f32,
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                }],
+            );
             d.cmd_set_scissor(cb, 0, &[area]);
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[self.set], &[]);
@@ -154,7 +192,10 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, format: vk::Format) ->
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
     let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default().polygon_mode(vk::PolygonMode::FILL).cull_mode(vk::CullModeFlags::NONE).line_width(1.0);
+    let raster = vk::PipelineRasterizationStateCreateInfo::default()
+        .polygon_mode(vk::PolygonMode::FILL)
+        .cull_mode(vk::CullModeFlags::NONE)
+        .line_width(1.0);
     let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
     let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
     let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
