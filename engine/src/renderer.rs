@@ -476,6 +476,10 @@ impl Renderer {
         if size == self.shadow.size {
             return Ok(());
         }
+        let max = unsafe { gpu.instance.get_physical_device_properties(gpu.physical_device) }.limits.max_image_dimension2_d;
+        if size == 0 || size > max {
+            anyhow::bail!("shadow map size {size} is out of range (1..={max} on {})", gpu.caps.device_name);
+        }
         gpu.wait_idle();
         self.shadow.resize(gpu, size)?;
         for &set in self.frame_sets.iter().chain(&self.shadow.sets) {

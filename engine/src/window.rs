@@ -27,6 +27,8 @@ pub struct WindowOptions {
     pub height: u32,
     /// Close after this many presented frames (for tests); run until closed when `None`.
     pub max_frames: Option<u64>,
+    /// Texels per side of the sun's shadow map.
+    pub shadow_map_size: u32,
     pub title: String,
 }
 
@@ -198,7 +200,7 @@ impl State {
         };
         let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
-        let scene = match GpuScene::upload(&gpu, pack, renderer.layouts()) {
+        let scene = match renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| GpuScene::upload(&gpu, pack, renderer.layouts())) {
             Ok(s) => s,
             Err(e) => {
                 renderer.destroy(&gpu);
