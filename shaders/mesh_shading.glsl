@@ -23,6 +23,10 @@ layout(std430, set = 2, binding = 2) readonly buffer Emission {
     vec4 emission[]; // rgb emitted radiance per material
 } materials;
 
+// The sun's shadow map (depth, 0 nearest the sun), sampled with a LESS_OR_EQUAL comparison and
+// linear filtering: each lookup is a 2x2 PCF in hardware. Set 0 is the renderer's.
+layout(set = 0, binding = 2) uniform sampler2DShadow sun_shadow_map;
+
 layout(location = 0) in vec3 in_normal;
 layout(location = 1) in vec2 in_uv0;
 layout(location = 2) in vec4 in_color;
@@ -99,25 +103,54 @@ vec4 probe_light(vec3 p, vec3 n) {
     return vec4(max(acc.rgb, 0.0), acc.w);
 }
 
+// Fraction of the sun that reaches p (normal n) on a dynamic object: the shadow map with a 3x3
+// PCF of 2x2-filtered taps when the renderer drew it this frame, else the probes' baked view of
+// the sun (`probe_vis`), the stand-in.
+float sun_visibility(vec3 p, vec3 n, float probe_vis) {
+    if (frame.shadow.x < 0.5) {
+        return probe_vis;
+    }
+    // Normal offset: look up a point 1.5 texels off the surface, so that the surface does not
+    // shadow itself where its depth varies across a texel (acne); the rasteriser's slope-scaled
+    // bias in the shadow pass covers the rest.
+    vec4 c = frame.sun_view_proj * vec4(p + n * (1.5 * frame.shadow.y), 1.0);
+    vec3 s = c.xyz / c.w;
+    vec2 uv = s.xy * 0.5 + 0.5;
+    float depth = min(s.z, 1.0);
+    float lit = 0.0;
+    for (int dy = -1; dy <= 1; dy++) {
+        for (int dx = -1; dx <= 1; dx++) {
+            lit += texture(sun_shadow_map, vec3(uv + vec2(dx, dy) * frame.shadow.z, depth));
+        }
+    }
+    return lit / 9.0;
+}
+
+// Largest finite half float: the HDR target would store inf above it (and the tone map would
+// turn that into NaN).
+const float HALF_MAX = 65504.0;
+
+// The fragment's linear radiance for the HDR target; alpha 1 marks it covered (the tone-map pass
+// leaves alpha-0 pixels, the clear colour, as they are).
 vec4 shade(vec4 a) {
     // Double-sided faces seen from behind shade with the flipped normal.
     vec3 n = normalize(gl_FrontFacing ? in_normal : -in_normal);
     float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
     if (frame.exposure.y < 0.5) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
-        return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), a.a);
+        return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
     // Physical: B = H/pi from the lightmap (static geometry: it holds the sun too) or from the
-    // probes plus the sun scaled by the probes' view of it (dynamic objects).
+    // probes plus the sun where the shadow map sees it (dynamic objects).
     vec3 b;
     if (draw.normal_cols[1].w > 0.5) {
         b = texture(lightmap, in_uv1).rgb;
     } else {
         vec4 pl = probe_light(in_world, n);
-        b = pl.rgb + frame.sun_color.rgb * ndotl * pl.w / PI;
+        b = pl.rgb + frame.sun_color.rgb * ndotl * sun_visibility(in_world, n, pl.w) / PI;
     }
+    // Emission adds radiance on top of the reflected light, before exposure and tone mapping
+    // (both in the tone-map pass).
     vec3 l = a.rgb * b + materials.emission[int(draw.normal_cols[2].w)].rgb;
-    // Exposure, then Reinhard's global operator per channel (textures.md §5.4).
-    vec3 ls = l * frame.exposure.x;
-    return vec4(ls / (1.0 + ls), a.a);
+    return vec4(min(l, HALF_MAX), 1.0);
 }

@@ -107,7 +107,7 @@ impl Offscreen {
                 d.cmd_write_timestamp2(self.cb, vk::PipelineStageFlags2::TOP_OF_PIPE, q, 0);
             }
         }
-        renderer.record(gpu, self.cb, 0, scene, camera, lighting, &target);
+        renderer.record(gpu, self.cb, 0, scene, camera, lighting, &target)?;
         unsafe {
             if capture {
                 barrier(gpu, self.cb, self.color.image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_TRANSFER_SRC);

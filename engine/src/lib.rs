@@ -8,7 +8,9 @@ pub mod lod_select;
 pub mod renderer;
 pub mod scene;
 pub mod shaders;
+pub mod shadow;
 pub mod stats;
+pub mod tonemap;
 pub mod visibility;
 pub mod window;
 

@@ -1,11 +1,14 @@
-//! The forward renderer: one graphics pipeline (dynamic rendering, reversed-Z depth) that draws a
-//! `GpuScene` into any colour + depth attachment pair. Used by the headless target and the window.
+//! The forward renderer (dynamic rendering, reversed-Z depth): per frame the sun's shadow map
+//! (`shadow`), a depth pre-pass, the shading pass into an HDR target, and the tone map into any
+//! colour + depth attachment pair (`tonemap`). Used by the headless target and the window.
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
-use crate::visibility::Visibility;
+use crate::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE, DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
+use crate::tonemap::{ToneMap, HDR_FORMAT};
+use crate::visibility::{Draw, Visibility};
 use anyhow::Result;
 use ash::vk;
 use glam::{Mat3, Mat4, Vec3, Vec4};
@@ -16,13 +19,19 @@ use gpu_allocator::MemoryLocation;
 #[derive(Debug, Clone, Copy)]
 pub struct FrameUniforms {
     pub view_proj: Mat4,
+    /// World -> the sun's shadow map (`shadow::sun_view_proj`).
+    pub sun_view_proj: Mat4,
     pub camera_pos: Vec4,
     pub sun_dir: Vec4,
     pub sun_color: Vec4,
     pub ambient: Vec4,
     /// x: exposure; y: 1 when lighting is physical (baked lightmaps, probes, sun in lux) and
-    /// tone-mapped, 0 for the stand-in lighting (already display-referred).
+    /// tone-mapped, 0 for the stand-in lighting (already display-referred). Read by the
+    /// tone-map pass; the shading pass only tells the two lighting paths apart by y.
     pub exposure: Vec4,
+    /// x: 1 when this frame drew the shadow map (dynamic objects read it; otherwise the probes'
+    /// sun visibility); y: one map texel in metres; z: 1 / map size in texels.
+    pub shadow: Vec4,
 }
 
 /// Mirrors the push-constant block of shaders/mesh.vert (128 bytes).
@@ -68,7 +77,8 @@ impl Lighting {
 
 pub const CLEAR_COLOR: [f32; 4] = [0.32, 0.42, 0.55, 1.0];
 
-/// The attachments one frame renders into.
+/// The attachments one frame renders into: the display colour image (an `_SRGB` format: the
+/// tone-map pass writes linear values and the hardware encodes them) and the depth buffer.
 pub struct FrameTarget {
     pub color_image: vk::Image,
     pub color_view: vk::ImageView,
@@ -78,6 +88,7 @@ pub struct FrameTarget {
 }
 
 pub struct Renderer {
+    /// The display target's format (what the tone-map pass writes); shading renders to `HDR_FORMAT`.
     pub color_format: vk::Format,
     pub depth_format: vk::Format,
     pub material_layout: vk::DescriptorSetLayout,
@@ -91,8 +102,15 @@ pub struct Renderer {
     stats_pool: Option<vk::QueryPool>,
     /// Whether the frame recorded in each slot ran the pre-pass (its query was begun).
     slot_prepass: Vec<bool>,
-    /// GPU timestamps per frame slot: before the pre-pass, between the passes, after shading.
+    /// GPU timestamps per frame slot (`TIMESTAMPS_PER_FRAME`): before the shadow pass, then after
+    /// each of the shadow, pre-pass, shading and tone-map passes.
     timestamps: Option<vk::QueryPool>,
+    /// The HDR target and the pass that tone-maps it to the display target.
+    pub tonemap: ToneMap,
+    /// The sun's shadow map for dynamic objects.
+    pub shadow: SunShadow,
+    /// Casters the last recorded frame drew into the shadow map (0 when it skipped the pass).
+    pub shadow_casters: u32,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -118,6 +136,22 @@ struct Pipelines {
     /// Pre-pass: depth only, no fragment shader; and with the alpha-test discard.
     depth: vk::Pipeline,
     depth_masked: vk::Pipeline,
+    /// The shadow pass: the same two into the shadow map's format, standard depth (0 nearest the
+    /// sun), no culling, with depth bias.
+    shadow: vk::Pipeline,
+    shadow_masked: vk::Pipeline,
+}
+
+/// Timestamps written per frame slot.
+const TIMESTAMPS_PER_FRAME: u32 = 5;
+
+/// GPU milliseconds of each pass of one frame (0 for a pass the frame skipped).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PassTimes {
+    pub shadow_ms: f64,
+    pub prepass_ms: f64,
+    pub shading_ms: f64,
+    pub tonemap_ms: f64,
 }
 
 /// Shader invocations counted by the pipeline statistics queries.
@@ -155,6 +189,11 @@ impl Renderer {
                 .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(2)
+                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
         ];
         let material_binding = [vk::DescriptorSetLayoutBinding::default()
             .binding(0)
@@ -181,17 +220,21 @@ impl Renderer {
             d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?
         };
         let reversed_z_nearer = vk::CompareOp::GREATER_OR_EQUAL;
-        let shade = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(color_format), depth_format, Some(shaders::MESH_FRAG), true, reversed_z_nearer, count);
-        let shade_equal = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(color_format), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, count);
+        let shade = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, reversed_z_nearer, count, None);
+        let shade_equal = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, count, None);
+        let shadow = SunShadow::new(gpu, frame_layout, std::mem::size_of::<FrameUniforms>() as u64, frames_in_flight, DEFAULT_SHADOW_MAP_SIZE)?;
+        let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
         let pipelines = Pipelines {
             shade: shade(false)?,
             shade_equal: shade_equal(false)?,
             shade_counting: if gpu.caps.fragment_atomics { Some((shade(true)?, shade_equal(true)?)) } else { None },
-            depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, false)?,
-            depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, false)?,
+            depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, false, None)?,
+            depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, false, None)?,
+            shadow: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, None, true, vk::CompareOp::LESS_OR_EQUAL, false, bias)?,
+            shadow_masked: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, false, bias)?,
         };
         let timestamps = if gpu.caps.timestamps {
-            let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(3 * frames_in_flight as u32);
+            let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS_PER_FRAME * frames_in_flight as u32);
             Some(unsafe { d.create_query_pool(&info, None)? })
         } else {
             None
@@ -210,6 +253,7 @@ impl Renderer {
         let pool_sizes = [
             vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: n },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: n },
         ];
         let pool = unsafe {
             d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&pool_sizes), None)?
@@ -235,6 +279,13 @@ impl Renderer {
                 vk::WriteDescriptorSet::default().dst_set(set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&counter_info),
             ];
             unsafe { d.update_descriptor_sets(&writes, &[]) };
+            write_shadow_map_descriptor(gpu, set, &shadow);
+            // The shadow pass's set 0 gets the same bindings 1 and 2: its pipelines do not read
+            // them, but lavapipe 22.3 crashes binding a set with unwritten descriptors.
+            let shadow_set = shadow.sets[frame_sets.len()];
+            let counter_write = vk::WriteDescriptorSet::default().dst_set(shadow_set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&counter_info);
+            unsafe { d.update_descriptor_sets(&[counter_write], &[]) };
+            write_shadow_map_descriptor(gpu, shadow_set, &shadow);
             frame_ubos.push(ubo);
             counters.push(counter);
             frame_sets.push(set);
@@ -251,6 +302,9 @@ impl Renderer {
             stats_pool,
             slot_prepass: vec![false; frames_in_flight],
             timestamps,
+            tonemap: ToneMap::new(gpu, color_format)?,
+            shadow,
+            shadow_casters: 0,
             prepass: true,
             count_fragments: false,
             depth_test: true,
@@ -266,64 +320,102 @@ impl Renderer {
         SceneLayouts { material: self.material_layout, scene: self.scene_layout }
     }
 
-    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`), attachments from
-    /// UNDEFINED to attachment layouts, clear, draw what is visible. The colour image is left in
-    /// COLOR_ATTACHMENT_OPTIMAL for the caller to present or copy. `slot` selects the per-frame
-    /// uniform buffer, which must not be in use by the GPU.
+    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`); the sun's shadow
+    /// map when dynamic objects in view need it; depth pre-pass; shading into the HDR target;
+    /// tone map into `target`'s colour image. Attachments go from UNDEFINED to attachment
+    /// layouts; the colour image is left in COLOR_ATTACHMENT_OPTIMAL for the caller to present
+    /// or copy. `slot` selects the per-frame uniform buffer, which must not be in use by the GPU.
+    /// Fails only when the HDR target cannot be (re)made for a new size.
     #[allow(clippy::too_many_arguments)]
-    pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, target: &FrameTarget) {
+    pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, target: &FrameTarget) -> Result<()> {
         let d = &gpu.device;
         let aspect = target.extent.width as f32 / target.extent.height as f32;
         let view_proj = camera.view_proj(aspect);
         self.visibility.update(scene, view_proj, camera.position, camera.fov_y, target.extent.height as f32);
+        let (hdr_image, hdr_view) = self.tonemap.hdr_target(gpu, target.extent)?;
+        // The shadow map serves dynamic objects lit by a physical sun: skip it when none is in
+        // view (and lavapipe 22.3 crashes on a depth-only rendering without draws).
+        let sun = scene.baked.filter(|b| b.sun_lux.max_element() > 0.0);
+        let dynamic_in_view = self.visibility.draws.iter().any(|dr| !scene.meshes[scene.instances[dr.instance as usize].mesh as usize].is_static);
+        let draw_shadow = match sun {
+            Some(b) if dynamic_in_view && !scene.instances.is_empty() => {
+                self.shadow.prepare(scene, b.sun_dir);
+                true
+            }
+            _ => false,
+        };
+        self.shadow_casters = if draw_shadow { self.shadow.casters.len() as u32 } else { 0 };
+        let shadow_params = Vec4::new(draw_shadow as u32 as f32, self.shadow.texel_m, 1.0 / self.shadow.size as f32, 0.0);
         // A baked scene is lit by its lightmaps, probes and sun in physical units, exposed and
         // tone-mapped; otherwise the stand-in `lighting`.
         let uniforms = match scene.baked {
             Some(b) => FrameUniforms {
                 view_proj,
+                sun_view_proj: self.shadow.view_proj,
                 camera_pos: camera.position.extend(1.0),
                 sun_dir: b.sun_dir.extend(0.0),
                 sun_color: b.sun_lux.extend(0.0),
                 ambient: Vec4::ZERO,
                 exposure: Vec4::new(b.exposure, 1.0, 0.0, 0.0),
+                shadow: shadow_params,
             },
             None => FrameUniforms {
                 view_proj,
+                sun_view_proj: self.shadow.view_proj,
                 camera_pos: camera.position.extend(1.0),
                 sun_dir: lighting.sun_dir.normalize().extend(0.0),
                 sun_color: lighting.sun_color.extend(0.0),
                 ambient: lighting.ambient.extend(0.0),
                 exposure: Vec4::new(1.0, 0.0, 0.0, 0.0),
+                shadow: shadow_params,
             },
         };
-        // SAFETY: FrameUniforms is repr(C) plain floats.
-        let bytes = unsafe {
-            std::slice::from_raw_parts(&uniforms as *const _ as *const u8, std::mem::size_of::<FrameUniforms>())
-        };
-        self.frame_ubos[slot].mapped()[..bytes.len()].copy_from_slice(bytes);
+        self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(uniform_bytes(&uniforms));
+        if draw_shadow {
+            // The shadow pass runs mesh.vert with the sun's transform as its view_proj.
+            self.shadow.write_uniforms(slot, uniform_bytes(&FrameUniforms { view_proj: self.shadow.view_proj, ..uniforms }));
+        }
 
         barrier(gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_DISCARD);
+        barrier(gpu, cb, hdr_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::SAMPLED_TO_COLOR_ATTACHMENT_DISCARD);
         barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_ATTACHMENT_DISCARD);
         let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
         let (query_a, query_b) = (2 * slot as u32, 2 * slot as u32 + 1);
         if let Some(pool) = self.stats_pool {
             unsafe { d.cmd_reset_query_pool(cb, pool, query_a, 2) };
         }
+        let first_stamp = TIMESTAMPS_PER_FRAME * slot as u32;
         let stamp = |i: u32| {
             if let Some(pool) = self.timestamps {
-                unsafe { d.cmd_write_timestamp2(cb, vk::PipelineStageFlags2::ALL_COMMANDS, pool, 3 * slot as u32 + i) };
+                unsafe { d.cmd_write_timestamp2(cb, vk::PipelineStageFlags2::ALL_COMMANDS, pool, first_stamp + i) };
             }
         };
         if let Some(pool) = self.timestamps {
-            unsafe { d.cmd_reset_query_pool(cb, pool, 3 * slot as u32, 3) };
+            unsafe { d.cmd_reset_query_pool(cb, pool, first_stamp, TIMESTAMPS_PER_FRAME) };
         }
         stamp(0);
+        if draw_shadow {
+            let shadow_area = self.shadow.begin(gpu, cb);
+            let depth_attachment = vk::RenderingAttachmentInfo::default()
+                .image_view(self.shadow.view())
+                .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                .load_op(vk::AttachmentLoadOp::CLEAR)
+                .store_op(vk::AttachmentStoreOp::STORE)
+                .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
+            let rendering = vk::RenderingInfo::default().render_area(shadow_area).layer_count(1).depth_attachment(&depth_attachment);
+            let p = &self.pipelines;
+            let pass = PassSetup { frame_set: self.shadow.sets[slot], draws: &self.shadow.casters, query: None, depth_test: true, cull: false };
+            self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
+            self.shadow.end(gpu, cb);
+        }
+        stamp(1);
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
         let prepass = self.prepass && !self.visibility.draws.is_empty();
         self.slot_prepass[slot] = prepass;
         // Reversed-Z: the far plane is depth 0.
         let depth_clear = vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } };
+        let frame_set = self.frame_sets[slot];
         if prepass {
             let depth_attachment = vk::RenderingAttachmentInfo::default()
                 .image_view(target.depth_view)
@@ -332,17 +424,21 @@ impl Renderer {
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .clear_value(depth_clear);
             let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
-            self.pass(gpu, cb, scene, slot, &rendering, query_a, true, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
+            let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_a), depth_test: true, cull: true };
+            self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
         }
-        stamp(1);
+        stamp(2);
+        // Alpha 0 marks the clear colour as "no surface" for the tone map, which leaves it as it
+        // is: it is display-referred, not radiance.
+        let [r, g, b, _] = CLEAR_COLOR;
         let color_attachment = [vk::RenderingAttachmentInfo::default()
-            .image_view(target.color_view)
+            .image_view(hdr_view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: CLEAR_COLOR } })];
+            .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: [r, g, b, 0.0] } })];
         let depth_attachment = vk::RenderingAttachmentInfo::default()
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
@@ -356,49 +452,61 @@ impl Renderer {
             _ => if prepass { p.shade_equal } else { p.shade },
         };
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
-        self.pass(gpu, cb, scene, slot, &rendering, query_b, prepass || self.depth_test, |_| shade);
-        stamp(2);
+        let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
+        self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        stamp(3);
+        self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
+        stamp(4);
+        Ok(())
     }
 
-    /// GPU milliseconds of the pre-pass (0 when it did not run) and the shading pass of the frame
-    /// last recorded in `slot`, once the GPU has finished it; None without timestamps.
-    pub fn pass_times_ms(&self, gpu: &Gpu, slot: usize) -> Option<(f64, f64)> {
+    /// GPU milliseconds per pass of the frame last recorded in `slot`, once the GPU has finished
+    /// it; None without timestamps.
+    pub fn pass_times_ms(&self, gpu: &Gpu, slot: usize) -> Option<PassTimes> {
         let pool = self.timestamps?;
-        let mut t = [0u64; 3];
-        unsafe { gpu.device.get_query_pool_results(pool, 3 * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
+        let mut t = [0u64; TIMESTAMPS_PER_FRAME as usize];
+        unsafe { gpu.device.get_query_pool_results(pool, TIMESTAMPS_PER_FRAME * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
         let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * gpu.caps.timestamp_period_ns as f64 * 1e-6;
-        Some((ms(t[0], t[1]), ms(t[1], t[2])))
+        Some(PassTimes { shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), tonemap_ms: ms(t[3], t[4]) })
     }
 
-    /// One rendering instance drawing every visible instance, each submesh with the pipeline
-    /// `pipeline_for(material)` gives, counted by pipeline-statistics query `query`.
-    #[allow(clippy::too_many_arguments)]
-    fn pass(
-        &self,
-        gpu: &Gpu,
-        cb: vk::CommandBuffer,
-        scene: &GpuScene,
-        slot: usize,
-        rendering: &vk::RenderingInfo,
-        query: u32,
-        depth_test: bool,
-        pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline,
-    ) {
+    /// Make the sun's shadow map `size` texels square (default `shadow::DEFAULT_SHADOW_MAP_SIZE`).
+    /// Waits for the device: frames in flight may be reading the old map.
+    pub fn set_shadow_map_size(&mut self, gpu: &Gpu, size: u32) -> Result<()> {
+        if size == self.shadow.size {
+            return Ok(());
+        }
+        let max = unsafe { gpu.instance.get_physical_device_properties(gpu.physical_device) }.limits.max_image_dimension2_d;
+        if size == 0 || size > max {
+            anyhow::bail!("shadow map size {size} is out of range (1..={max} on {})", gpu.caps.device_name);
+        }
+        gpu.wait_idle();
+        self.shadow.resize(gpu, size)?;
+        for &set in self.frame_sets.iter().chain(&self.shadow.sets) {
+            write_shadow_map_descriptor(gpu, set, &self.shadow);
+        }
+        Ok(())
+    }
+
+    /// One rendering instance drawing `setup.draws`, each submesh with the pipeline
+    /// `pipeline_for(material)` gives, counted by the pipeline-statistics query `setup.query`.
+    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &PassSetup, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) {
         let d = &gpu.device;
         let extent = rendering.render_area.extent;
+        let query = setup.query.and_then(|q| self.stats_pool.map(|pool| (pool, q)));
         unsafe {
-            if let Some(pool) = self.stats_pool {
-                d.cmd_begin_query(cb, pool, query, vk::QueryControlFlags::empty());
+            if let Some((pool, q)) = query {
+                d.cmd_begin_query(cb, pool, q, vk::QueryControlFlags::empty());
             }
             d.cmd_begin_rendering(cb, rendering);
             d.cmd_set_viewport(cb, 0, &[vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 }]);
             d.cmd_set_scissor(cb, 0, &[rendering.render_area]);
-            d.cmd_set_depth_test_enable(cb, depth_test);
-            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[self.frame_sets[slot]], &[]);
+            d.cmd_set_depth_test_enable(cb, setup.depth_test);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
             let mut bound = vk::Pipeline::null();
-            for draw in &self.visibility.draws {
+            for draw in setup.draws {
                 let inst = &scene.instances[draw.instance as usize];
                 let mesh = &scene.meshes[inst.mesh as usize];
                 let lod = &mesh.lods[draw.lod as usize];
@@ -422,14 +530,15 @@ impl Renderer {
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
                     d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
-                    d.cmd_set_cull_mode(cb, if mat.double_sided { vk::CullModeFlags::NONE } else { vk::CullModeFlags::BACK });
+                    let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
+                    d.cmd_set_cull_mode(cb, cull);
                     d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set, *page.unwrap_or(&scene.unlit_set)], &[]);
                     d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, lod.base_vertex, 0);
                 }
             }
             d.cmd_end_rendering(cb);
-            if let Some(pool) = self.stats_pool {
-                d.cmd_end_query(cb, pool, query);
+            if let Some((pool, q)) = query {
+                d.cmd_end_query(cb, pool, q);
             }
         }
     }
@@ -458,10 +567,12 @@ impl Renderer {
         for b in self.frame_ubos.iter_mut().chain(self.counters.iter_mut()) {
             b.destroy(gpu);
         }
+        self.tonemap.destroy(gpu);
+        self.shadow.destroy(gpu);
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);
             let p = &self.pipelines;
-            for pipeline in [p.shade, p.shade_equal, p.depth, p.depth_masked].into_iter().chain(p.shade_counting.into_iter().flat_map(|(a, b)| [a, b])) {
+            for pipeline in [p.shade, p.shade_equal, p.depth, p.depth_masked, p.shadow, p.shadow_masked].into_iter().chain(p.shade_counting.into_iter().flat_map(|(a, b)| [a, b])) {
                 d.destroy_pipeline(pipeline, None);
             }
             for pool in self.stats_pool.into_iter().chain(self.timestamps) {
@@ -475,6 +586,29 @@ impl Renderer {
     }
 }
 
+/// What one mesh pass draws and how: the set 0 it binds (the camera's or the sun's uniforms),
+/// the draw list, its statistics query, depth testing, and back-face culling (off for shadow
+/// casters: a single-sided occluder blocks the sun whichever side faces it).
+struct PassSetup<'a> {
+    frame_set: vk::DescriptorSet,
+    draws: &'a [Draw],
+    query: Option<u32>,
+    depth_test: bool,
+    cull: bool,
+}
+
+fn uniform_bytes(u: &FrameUniforms) -> &[u8] {
+    // SAFETY: FrameUniforms is repr(C) plain floats.
+    unsafe { std::slice::from_raw_parts(u as *const _ as *const u8, std::mem::size_of::<FrameUniforms>()) }
+}
+
+/// Point binding 2 of a frame set (set 0) at the sun's shadow map.
+fn write_shadow_map_descriptor(gpu: &Gpu, set: vk::DescriptorSet, shadow: &SunShadow) {
+    let info = [vk::DescriptorImageInfo { sampler: shadow.sampler, image_view: shadow.view(), image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+    let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(2).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&info);
+    unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
+}
+
 fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     match f {
         pack::AttributeFormat::F32x2 => vk::Format::R32G32_SFLOAT,
@@ -485,7 +619,8 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
 }
 
 /// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
-/// (None: no colour attachment) and `depth_format` with the given depth write and compare.
+/// (None: no colour attachment) and `depth_format` with the given depth write and compare, and
+/// a rasteriser depth bias (constant, slope factor) when given.
 #[allow(clippy::too_many_arguments)]
 fn create_mesh_pipeline(
     gpu: &Gpu,
@@ -496,6 +631,7 @@ fn create_mesh_pipeline(
     depth_write: bool,
     compare: vk::CompareOp,
     count_fragments: bool,
+    depth_bias: Option<(f32, f32)>,
 ) -> Result<vk::Pipeline> {
     let d = &gpu.device;
     let vert = shaders::module(d, shaders::MESH_VERT)?;
@@ -524,11 +660,14 @@ fn create_mesh_pipeline(
     let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
     // Cull mode and front face are dynamic (core 1.3): double-sided materials and mirrored
     // instances change them per draw without a second pipeline.
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
+    let mut raster = vk::PipelineRasterizationStateCreateInfo::default()
         .polygon_mode(vk::PolygonMode::FILL)
         .cull_mode(vk::CullModeFlags::BACK)
         .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
         .line_width(1.0);
+    if let Some((constant, slope)) = depth_bias {
+        raster = raster.depth_bias_enable(true).depth_bias_constant_factor(constant).depth_bias_slope_factor(slope);
+    }
     let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
     let depth = vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(depth_write).depth_compare_op(compare);
     let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];

@@ -27,6 +27,8 @@ pub struct WindowOptions {
     pub height: u32,
     /// Close after this many presented frames (for tests); run until closed when `None`.
     pub max_frames: Option<u64>,
+    /// Texels per side of the sun's shadow map.
+    pub shadow_map_size: u32,
     pub title: String,
 }
 
@@ -198,7 +200,7 @@ impl State {
         };
         let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
-        let scene = match GpuScene::upload(&gpu, pack, renderer.layouts()) {
+        let scene = match renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| GpuScene::upload(&gpu, pack, renderer.layouts())) {
             Ok(s) => s,
             Err(e) => {
                 renderer.destroy(&gpu);
@@ -276,7 +278,7 @@ impl State {
             d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
-        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target);
+        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
         barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
         let rendered = self.swapchain.rendered[i];
         unsafe {

@@ -400,8 +400,8 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
 fn baked_light_lightmaps_for_static_geometry_probes_for_dynamic() {
     // A static quad with a uniform lightmap page B = 200 nits and a dynamic cube inside a probe
     // grid whose probes all hold B(n) = 200 nits (DC term only) and see no sun. Both are white,
-    // so both show L = 200 exposed (auto exposure: 0.18 / (0.5 x 200)) and tone-mapped:
-    // Reinhard(0.36) = 0.2647, sRGB byte 141.
+    // so both show L = 200 exposed (auto exposure: 0.18 / (0.5 x 200)) and tone-mapped: grey
+    // keeps its channel ratios, so Reinhard on luminance gives 0.36 / 1.36 = 0.2647, sRGB byte 141.
     let gpu = gpu();
     let b_nits = 200.0f32;
     let mut pack = quads_like_lightmapped(b_nits);
@@ -622,6 +622,270 @@ fn a_grazing_floor_does_not_shimmer_when_the_camera_moves_one_texel() {
     assert!(mean0 > 4.0 * mean.max(0.25), "without mips the floor should shimmer (mean {mean0}): the test has teeth");
     assert_clean(&gpu);
 }
+
+// ---- HDR target, tone map, emission, sun shadow map ------------------------------------------
+
+/// A unit quad in the z = 0 plane facing +Z (counter-clockwise seen from +Z), uv1 over [0, 1].
+fn quad_vertices() -> (Vec<Vertex>, Vec<u32>) {
+    let v = [(-0.5f32, -0.5f32), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)]
+        .iter()
+        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [x + 0.5, 0.5 - y], color: [255; 4], ..Default::default() })
+        .collect();
+    (v, vec![0, 1, 2, 0, 2, 3])
+}
+
+/// A uniform 4x4 lightmap page of B = `b` nits as the pack's only page: the pack is then baked
+/// (physical lighting, tone-mapped) with auto exposure 0.18 / (1e-4 + 0.5 b).
+fn add_lightmap_page(bld: &mut PackBuilder, b: f32) {
+    let half = half_bits(b);
+    let texel: Vec<u8> = [half, half, half, half_bits(1.0)].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let page = bld.push_bytes(&texel.repeat(16));
+    let t = bld.manifest.textures.len() as u32;
+    bld.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![page] });
+    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![t] });
+}
+
+/// The exposure `add_lightmap_page(b)` gives (scene.rs: k / log-average, k = 0.18, albedo 0.5).
+fn auto_exposure(b: f32) -> f32 {
+    0.18 / (1e-4 + 0.5 * b)
+}
+
+/// The tone map's output bytes for linear radiance `l`, computed here from the formula of
+/// textures.md §5.7: exposure, Reinhard on luminance, colour restored with exponent `s`, then the
+/// sRGB encode.
+fn tone_mapped_bytes(l: [f32; 3], exposure: f32, s: f32) -> [u8; 3] {
+    let ls = l.map(|c| c * exposure);
+    let y = 0.2126 * ls[0] + 0.7152 * ls[1] + 0.0722 * ls[2];
+    let ld = y / (1.0 + y);
+    ls.map(|c| srgb_encode((c / y).powf(s) * ld))
+}
+
+/// A baked pack (one lightmap page of B = `lightmap_b`, on a static quad out of view) with one
+/// black quad per entry of `emission` (nits), side by side along x at z = 0, 1.1 m apart,
+/// centred on x = 0: each quad's pixels are its emission alone.
+fn emissive_quads_pack(lightmap_b: f32, emission: &[[f32; 3]]) -> Pack {
+    let mut b = PackBuilder::new("generated", "test");
+    let (verts, idx) = quad_vertices();
+    b.manifest.materials.push(Material::default());
+    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0), true);
+    add_lightmap_page(&mut b, lightmap_b);
+    b.manifest.nodes.push(Node { name: "lightmapped".into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, 50.0)).to_cols_array(), mesh: Some(lit) });
+    for (i, e) in emission.iter().enumerate() {
+        b.manifest.materials.push(Material { base_color: [0.0, 0.0, 0.0, 1.0], emissive: *e, ..Material::default() });
+        let mesh = push_mesh(&mut b, &format!("emitter{i}"), &verts, &idx, None, false);
+        b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = i as u32 + 1;
+        let x = (i as f32 - (emission.len() as f32 - 1.0) * 0.5) * 1.1;
+        b.manifest.nodes.push(Node { name: format!("emitter{i}"), parent: None, local: Mat4::from_translation(Vec3::new(x, 0.0, 0.0)).to_cols_array(), mesh: Some(mesh) });
+    }
+    b.finish()
+}
+
+/// Render `emissive_quads_pack` from z = 3 (96x64, 60 degree FOV) with tone-map saturation `s`
+/// and return the centre pixel of each quad.
+fn emitter_pixels(gpu: &Gpu, lightmap_b: f32, emission: &[[f32; 3]], s: f32) -> Vec<[u8; 4]> {
+    let (w, h) = (96u32, 64u32);
+    let pack = emissive_quads_pack(lightmap_b, emission);
+    let mut rig = Rig::new(gpu, &pack, w, h);
+    assert!(rig.scene.baked.is_some());
+    rig.renderer.tonemap.saturation = s;
+    let cam = looking_down_neg_z(3.0);
+    rig.target.render(gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let vp = cam.view_proj(w as f32 / h as f32);
+    let px = (0..emission.len())
+        .map(|i| {
+            let x = (i as f32 - (emission.len() as f32 - 1.0) * 0.5) * 1.1;
+            let c = vp * glam::Vec4::new(x, 0.0, 0.0, 1.0);
+            let (sx, sy) = ((c.x / c.w * 0.5 + 0.5) * w as f32, (c.y / c.w * 0.5 + 0.5) * h as f32);
+            pixel(rig.target.pixels(), w, sx as u32, sy as u32)
+        })
+        .collect();
+    rig.destroy(gpu);
+    px
+}
+
+fn assert_bytes_near(what: &str, got: [u8; 4], want: [u8; 3], tolerance: i32) {
+    for c in 0..3 {
+        assert!((got[c] as i32 - want[c] as i32).abs() <= tolerance, "{what}: got {got:?}, want {want:?} (+-{tolerance})");
+    }
+}
+
+#[test]
+fn tone_map_output_is_the_operators_byte_for_a_known_radiance() {
+    // Black emissive quads in a baked scene: each pixel's radiance is exactly its material's
+    // emission (so emission reaches the HDR target), exposed, tone-mapped and sRGB-encoded. The
+    // expected bytes come from the formula in this file; a grey and a coloured emitter (the
+    // coloured one pins the luminance operator and the colour restore: per-channel Reinhard
+    // would give different bytes), at two saturation settings.
+    let gpu = gpu();
+    let lightmap_b = 200.0;
+    let exposure = auto_exposure(lightmap_b);
+    let emission = [[300.0, 300.0, 300.0], [1200.0, 500.0, 100.0]];
+    for s in [0.8, 1.0] {
+        let px = emitter_pixels(&gpu, lightmap_b, &emission, s);
+        for (e, p) in emission.iter().zip(&px) {
+            let want = tone_mapped_bytes(*e, exposure, s);
+            eprintln!("emission {e:?}, s {s}: got {p:?}, formula {want:?}");
+            assert_bytes_near(&format!("emission {e:?} s {s}"), *p, want, 1);
+        }
+        // Not per-channel Reinhard (the inline operator this pass replaced).
+        let per_channel = emission[1].map(|c| srgb_encode(c * exposure / (1.0 + c * exposure)));
+        assert!((0..3).any(|c| (px[1][c] as i32 - per_channel[c] as i32).abs() > 3), "looks per-channel: {:?} vs {per_channel:?}", px[1]);
+    }
+    assert_clean(&gpu);
+}
+
+#[test]
+fn hdr_values_above_one_reach_the_tone_map_unclamped() {
+    // 3000 and 30000 nits are far above 1 in the HDR target. A float target keeps them, so the
+    // tone map gives two different bytes below 255 (the operator's asymptote); a clamping (UNORM)
+    // target would store 1.0 for both, which exposes to nearly black and the same byte twice.
+    let gpu = gpu();
+    let lightmap_b = 200.0;
+    let exposure = auto_exposure(lightmap_b);
+    let emission = [[3000.0; 3], [30000.0; 3]];
+    let px = emitter_pixels(&gpu, lightmap_b, &emission, 0.8);
+    let clamped = tone_mapped_bytes([1.0; 3], exposure, 0.8);
+    for (e, p) in emission.iter().zip(&px) {
+        let want = tone_mapped_bytes(*e, exposure, 0.8);
+        assert!(want[0] < 255, "the test needs bytes below saturation: {want:?}");
+        assert_bytes_near(&format!("emission {}", e[0]), *p, want, 1);
+        assert!(p[0] > clamped[0] + 100, "{p:?} looks clamped to 1 before the tone map ({clamped:?})");
+    }
+    assert!(px[0][0] < px[1][0], "brighter radiance must give a brighter byte: {px:?}");
+    assert_clean(&gpu);
+}
+
+/// A baked scene for the sun shadow: a white dynamic unit cube at `cube_x`, a static roof (a
+/// 6x6 m quad facing up at y = 1.5 over x, z in [-3, 3]; from below the camera sees its back
+/// face, culled), probes that all hold B = `probe_b` with sun visibility 1 (so the probes alone
+/// would light the cube), and a sun of `sun_lux` towards `towards_sun`.
+fn roof_pack(cube_x: f32, probe_b: f32, sun_lux: f32, towards_sun: Vec3) -> Pack {
+    let mut b = PackBuilder::new("generated", "test");
+    b.manifest.materials.push(Material::default());
+    let (cv, ci) = cube_vertices();
+    let cube = push_mesh(&mut b, "cube", &cv, &ci, None, false);
+    let roof_verts: Vec<Vertex> = [(-0.5f32, 0.5f32), (0.5, 0.5), (0.5, -0.5), (-0.5, -0.5)]
+        .iter()
+        .map(|&(x, z)| Vertex { position: [x, 0.0, z], normal: [0.0, 1.0, 0.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [x + 0.5, z + 0.5], color: [255; 4], ..Default::default() })
+        .collect();
+    let roof = push_mesh(&mut b, "roof", &roof_verts, &[0, 1, 2, 0, 2, 3], Some(0), true);
+    add_lightmap_page(&mut b, 100.0);
+    let roof_at = Mat4::from_translation(Vec3::new(0.0, 1.5, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
+    b.manifest.nodes.push(Node { name: "roof".into(), parent: None, local: roof_at.to_cols_array(), mesh: Some(roof) });
+    b.manifest.nodes.push(Node { name: "cube".into(), parent: None, local: Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0)).to_cols_array(), mesh: Some(cube) });
+    let mut sh = Vec::new();
+    for _ in 0..8 {
+        let mut probe = [0.0f32; 27];
+        probe[..3].copy_from_slice(&[probe_b / 0.282_094_8; 3]);
+        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    let sh = b.push_bytes(&sh);
+    let vis = b.push_bytes(&[1.0f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+    b.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
+    b.manifest.lights.push(pack::Light {
+        name: "sun".into(),
+        kind: pack::LightKind::Sun,
+        color: [1.0; 3],
+        intensity: sun_lux,
+        position: [0.0; 3],
+        direction: (-towards_sun.normalize()).to_array(),
+        range: None,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+        size: [0.0; 2],
+        angular_radius: 0.0,
+    });
+    b.finish()
+}
+
+#[test]
+fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
+    // The cube's +Z face (n.l = 0.447) seen head-on. Under the roof the sun is blocked: the pixel
+    // is the probe light alone, although the probes say the sun is visible (their grid is too
+    // coarse to know); moved 8 m out from under the roof, the same face adds the sun,
+    // E n.l / pi. Both bytes from the closed form; the roof and the cube are the map's casters.
+    let gpu = gpu();
+    let (probe_b, sun_lux) = (40.0f32, 2000.0f32);
+    let towards_sun = Vec3::new(0.0, 1.0, 0.5).normalize();
+    let exposure = auto_exposure(100.0);
+    let s = 0.8;
+    let shaded = tone_mapped_bytes([probe_b; 3], exposure, s);
+    let lit_l = probe_b + sun_lux * towards_sun.dot(Vec3::Z) / std::f32::consts::PI;
+    let lit = tone_mapped_bytes([lit_l; 3], exposure, s);
+    assert!(lit[0] > shaded[0] + 50, "the test needs the sun to matter: {shaded:?} vs {lit:?}");
+    let mut centre = |cube_x: f32, map_size: u32| {
+        let pack = roof_pack(cube_x, probe_b, sun_lux, towards_sun);
+        let mut rig = Rig::new(&gpu, &pack, 64, 64);
+        rig.renderer.tonemap.saturation = s;
+        rig.renderer.set_shadow_map_size(&gpu, map_size).unwrap();
+        let cam = Camera { position: Vec3::new(cube_x, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+        let p = pixel(rig.target.pixels(), 64, 32, 32);
+        let casters = rig.renderer.shadow_casters;
+        eprintln!("cube at x = {cube_x}, {map_size}^2 map: {:?}", rig.renderer.pass_times_ms(&gpu, 0));
+        // The face's corners are 0.5 m from its centre: a 3x3 block of pixels around the centre
+        // must agree (no acne speckles on a face that is fully lit or fully shadowed).
+        let block: Vec<[u8; 4]> = (28..=36).step_by(4).flat_map(|y| (28..=36).step_by(4).map(move |x| (x, y))).map(|(x, y)| pixel(rig.target.pixels(), 64, x, y)).collect();
+        rig.destroy(&gpu);
+        (p, casters, block)
+    };
+    let (under, casters_under, block_under) = centre(0.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
+    let (out, casters_out, block_out) = centre(8.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
+    eprintln!("under the roof {under:?} (probe only {shaded:?}); out {out:?} (with sun {lit:?})");
+    assert_eq!((casters_under, casters_out), (2, 2), "roof and cube cast");
+    assert_bytes_near("under the roof", under, shaded, 1);
+    assert_bytes_near("out in the sun", out, lit, 1);
+    for (what, block, want) in [("under", block_under, shaded), ("out", block_out, lit)] {
+        for p in block {
+            assert_bytes_near(what, p, want, 1);
+        }
+    }
+    // The map size is a setting: a small map still shadows the cube (and the frame set points at
+    // the new map).
+    let (small_under, ..) = centre(0.0, 256);
+    assert_bytes_near("under the roof, 256^2 map", small_under, shaded, 1);
+    assert_clean(&gpu);
+}
+
+#[test]
+fn the_shadow_pass_is_skipped_without_a_dynamic_object_in_view() {
+    // Static geometry has the sun in its lightmap: with only the (static) roof in view nothing
+    // reads the map, so it is not drawn; an unbaked pack (stand-in lighting) never draws it.
+    let gpu = gpu();
+    let pack = roof_pack(20.0, 40.0, 2000.0, Vec3::new(0.0, 1.0, 0.5));
+    let mut rig = Rig::new(&gpu, &pack, 32, 32);
+    let away = Camera { position: Vec3::new(0.0, 5.0, 0.0), yaw: 0.0, pitch: -1.5, fov_y: 30f32.to_radians(), near: 0.1 };
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &away, &Lighting::default(), true).unwrap();
+    assert!(rig.renderer.visibility.draws.len() == 1, "only the roof should be in view: {:?}", rig.renderer.visibility.draws);
+    assert_eq!(rig.renderer.shadow_casters, 0);
+    rig.reload(&gpu, &cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default()));
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(2.0), &Lighting::default(), true).unwrap();
+    assert_eq!(rig.renderer.shadow_casters, 0);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
+fn one_renderer_draws_targets_of_different_sizes() {
+    // The HDR target is the renderer's, sized per target: a second, differently sized target
+    // gets a new one (no validation error, same shading).
+    let gpu = gpu();
+    let pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
+    let mut rig = Rig::new(&gpu, &pack, 64, 64);
+    let cam = looking_down_neg_z(2.0);
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let big = pixel(rig.target.pixels(), 64, 32, 32);
+    let mut small = Offscreen::new(&gpu, 40, 24).unwrap();
+    small.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(pixel(small.pixels(), 40, 20, 12), big);
+    let times = rig.renderer.pass_times_ms(&gpu, 0).expect("lavapipe has timestamps");
+    assert!(times.shading_ms > 0.0 && times.tonemap_ms > 0.0, "{times:?}");
+    small.destroy(&gpu);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+// ---- 16-bit textures (cooked normal maps) -----------------------------------------------------
 
 #[test]
 fn sixteen_bit_unorm_textures_sample_like_their_eight_bit_originals() {

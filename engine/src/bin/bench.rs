@@ -117,12 +117,19 @@ fn run(args: &Args) -> anyhow::Result<usize> {
     // GPU: the four combinations, interleaved frame by frame.
     let combos = [(true, true), (true, false), (false, true), (false, false)];
     let mut gpu_ms: Vec<Vec<f64>> = vec![Vec::new(); combos.len()];
+    // Per pass, for the default combination (culling and pre-pass on).
+    let mut pass_ms: [Vec<f64>; 4] = Default::default();
     for _ in 0..args.frames {
         for (k, &(culling, prepass)) in combos.iter().enumerate() {
             renderer.visibility.culling = culling;
             renderer.prepass = prepass;
             let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, false)?;
             gpu_ms[k].push(t.gpu_ms.unwrap_or(t.frame_ms));
+            if let (0, Some(p)) = (k, renderer.pass_times_ms(&gpu, 0)) {
+                for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.tonemap_ms]) {
+                    v.push(ms);
+                }
+            }
         }
     }
     let med: Vec<f64> = gpu_ms.iter().map(|v| median(v).unwrap_or(0.0)).collect();
@@ -131,6 +138,9 @@ fn run(args: &Args) -> anyhow::Result<usize> {
     }
     println!("ratio gpu_ms culling off / on (pre-pass on): {:.2}x", med[2] / med[0]);
     println!("ratio gpu_ms pre-pass off / on (culling on): {:.2}x", med[1] / med[0]);
+    if let [Some(s), Some(a), Some(b), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
+        println!("pass gpu_ms (culling on, pre-pass on, median): sun shadow {s:.3}, depth pre-pass {a:.3}, shading {b:.3}, tone map {t:.3}");
+    }
     scene.destroy(&gpu);
     renderer.destroy(&gpu);
     target.destroy(&gpu);

@@ -15,6 +15,7 @@ use std::process::ExitCode;
 
 const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--device auto|cpu|gpu|NAME] [--validation]
+            [--shadow-map-size N]
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`)
   --headless           render offscreen even if a display is available
@@ -24,7 +25,8 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
-                       any validation error makes the exit status 3";
+                       any validation error makes the exit status 3
+  --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)";
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
@@ -38,6 +40,7 @@ struct Args {
     screenshot_every: Option<u64>,
     device: DevicePreference,
     validation: bool,
+    shadow_map_size: u32,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -51,6 +54,7 @@ fn parse_args() -> Result<Args, String> {
         screenshot_every: None,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
+        shadow_map_size: engine::shadow::DEFAULT_SHADOW_MAP_SIZE,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -71,6 +75,7 @@ fn parse_args() -> Result<Args, String> {
             "--screenshot" => a.screenshot = PathBuf::from(value("--screenshot")?),
             "--screenshot-every" => a.screenshot_every = Some(number("--screenshot-every", value("--screenshot-every")?)?),
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
+            "--shadow-map-size" => a.shadow_map_size = number("--shadow-map-size", value("--shadow-map-size")?)?,
             s if s.starts_with('-') => return Err(format!("unknown option '{s}'")),
             s if a.pack.is_none() => a.pack = Some(PathBuf::from(s)),
             s => return Err(format!("unexpected argument '{s}' (only one pack can be shown)")),
@@ -78,6 +83,9 @@ fn parse_args() -> Result<Args, String> {
     }
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         return Err(format!("image size {}x{} is out of range (1..16384)", a.width, a.height));
+    }
+    if !(16..=16384).contains(&a.shadow_map_size) {
+        return Err(format!("--shadow-map-size {} is out of range (16..16384)", a.shadow_map_size));
     }
     if a.frames == Some(0) || a.screenshot_every == Some(0) {
         return Err("--frames and --screenshot-every must be at least 1".into());
@@ -135,6 +143,7 @@ fn main() -> ExitCode {
             width: args.width,
             height: args.height,
             max_frames: args.frames,
+            shadow_map_size: args.shadow_map_size,
             title: format!("demo - {}", pack_path.display()),
         };
         match window::run(&pack, opts) {
@@ -170,6 +179,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
+    renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
@@ -177,16 +187,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
-    let (mut prepass_ms, mut shading_ms) = (Vec::new(), Vec::new());
+    let mut pass_ms: [Vec<f64>; 4] = Default::default();
     for f in 0..frames {
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
         let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, last || every)?;
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
-        if let Some((a, b)) = renderer.pass_times_ms(&gpu, 0) {
-            prepass_ms.push(a);
-            shading_ms.push(b);
+        if let Some(p) = renderer.pass_times_ms(&gpu, 0) {
+            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.tonemap_ms]) {
+                v.push(ms);
+            }
         }
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));
@@ -215,8 +226,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
     }
-    if let (Some(a), Some(b)) = (median(&prepass_ms), median(&shading_ms)) {
-        println!("pass gpu_ms (median): depth pre-pass {a:.3}, shading {b:.3}");
+    if let [Some(s), Some(a), Some(b), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
+        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, tone map {t:.3}", renderer.shadow_casters);
     }
     scene.destroy(&gpu);
     renderer.destroy(&gpu);

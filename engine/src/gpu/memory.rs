@@ -245,6 +245,55 @@ impl Transition {
         dst_stage: DEPTH_TESTS,
         dst_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ,
     };
+    /// Start of a frame for an attachment the previous frame sampled (the renderer's HDR colour
+    /// target): discard, after those reads (a write-after-read across frames in flight).
+    pub const SAMPLED_TO_COLOR_ATTACHMENT_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::from_raw(vk::PipelineStageFlags2::FRAGMENT_SHADER.as_raw() | vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT.as_raw()),
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        dst_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+    };
+    /// A rendered colour attachment becomes a texture for the next pass.
+    pub const COLOR_ATTACHMENT_TO_SAMPLED: Transition = Transition {
+        old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        dst_access: vk::AccessFlags2::SHADER_SAMPLED_READ,
+    };
+    /// A depth map the previous frame sampled (the sun's shadow map) is rendered again: discard,
+    /// after those reads.
+    pub const SAMPLED_TO_DEPTH_ATTACHMENT_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: DEPTH_TESTS,
+        dst_access: vk::AccessFlags2::from_raw(
+            vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
+        ),
+    };
+    /// A rendered depth map becomes a (comparison) texture for the shading pass.
+    pub const DEPTH_ATTACHMENT_TO_SAMPLED: Transition = Transition {
+        old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        src_stage: DEPTH_TESTS,
+        src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        dst_access: vk::AccessFlags2::SHADER_SAMPLED_READ,
+    };
+    /// A new image that is only ever sampled until first rendered (no contents yet).
+    pub const UNDEFINED_TO_SAMPLED: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::TOP_OF_PIPE,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        dst_access: vk::AccessFlags2::SHADER_SAMPLED_READ,
+    };
     pub const COLOR_ATTACHMENT_TO_TRANSFER_SRC: Transition = Transition {
         old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
         new: vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
