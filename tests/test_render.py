@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import asset_pipeline
 from conftest import DEMO, REPO, cook_ok, run_demo
 
 REFERENCE_DIR = REPO / "tests" / "reference"
@@ -88,6 +89,25 @@ def test_demo_cooks_and_renders_every_sample(gltf_samples, tmp_path):
         pack = tmp_path / (gltf.stem + ".pack")
         cook_ok(gltf, pack)
         render_headless(pack, tmp_path / (gltf.stem + ".png"), 160, 120)
+
+
+def test_cooked_demo_level_matches_its_reference_image(tmp_path):
+    # The whole chain on the project's own level: CSG -> lightmap UVs -> LODs -> bake (seeded,
+    # deterministic) -> denoise -> mips -> pack -> culling, pre-pass, lightmaps + probes + sun,
+    # HDR target and tone map. The bake is bit-identical between cooks on one machine, so the
+    # same tolerance as the glTF reference applies.
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
+    out = tmp_path / "temple.png"
+    result = render_headless(pack, out, 320, 180, frames=3)
+    summary = asset_pipeline.read_pack_summary(str(pack))
+    assert summary["lightmaps_baked"] and summary["probes"] > 0, f"the demo level should be baked: {summary}"
+    assert "6 drawn" in result.stdout, result.stdout
+    reference = REFERENCE_DIR / "temple_320x180.png"
+    if os.environ.get("UPDATE_REFERENCE") == "1":
+        reference.parent.mkdir(exist_ok=True)
+        reference.write_bytes(out.read_bytes())
+    compare_to_reference(out, reference)
 
 
 def test_project_demo_content_renders(tmp_path):
