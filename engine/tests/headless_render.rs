@@ -445,15 +445,7 @@ fn quads_like_lightmapped(b: f32) -> Pack {
     let t = bld.manifest.textures.len() as u32;
     bld.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![page] });
     bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![t] });
-    let mut sh = Vec::new();
-    for _ in 0..8 {
-        let mut probe = [0.0f32; 27];
-        probe[..3].copy_from_slice(&[b / 0.282_094_8; 3]);
-        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
-    }
-    let sh = bld.push_bytes(&sh);
-    let vis = bld.push_bytes(&[0u8; 32]);
-    bld.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
+    push_uniform_probes(&mut bld, b, 0.0);
     bld.finish()
 }
 
@@ -623,6 +615,20 @@ fn a_grazing_floor_does_not_shimmer_when_the_camera_moves_one_texel() {
     assert_clean(&gpu);
 }
 
+/// A 2x2x2 probe grid over [-2, 2]^3 whose every probe sees the constant `radiance` (SH band 0
+/// only: L0 = radiance / Y00) and the sun with visibility `sun_visibility`.
+fn push_uniform_probes(b: &mut PackBuilder, radiance: f32, sun_visibility: f32) {
+    let mut sh = Vec::new();
+    for _ in 0..8 {
+        let mut probe = [0.0f32; 27];
+        probe[..3].copy_from_slice(&[radiance / 0.282_094_8; 3]);
+        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    let sh = b.push_bytes(&sh);
+    let vis = b.push_bytes(&[sun_visibility; 8].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+    b.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
+}
+
 // ---- HDR target, tone map, emission, sun shadow map ------------------------------------------
 
 /// A unit quad in the z = 0 plane facing +Z (counter-clockwise seen from +Z), uv1 over [0, 1].
@@ -773,15 +779,7 @@ fn roof_pack(cube_x: f32, probe_b: f32, sun_lux: f32, towards_sun: Vec3) -> Pack
     let roof_at = Mat4::from_translation(Vec3::new(0.0, 1.5, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
     b.manifest.nodes.push(Node { name: "roof".into(), parent: None, local: roof_at.to_cols_array(), mesh: Some(roof) });
     b.manifest.nodes.push(Node { name: "cube".into(), parent: None, local: Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0)).to_cols_array(), mesh: Some(cube) });
-    let mut sh = Vec::new();
-    for _ in 0..8 {
-        let mut probe = [0.0f32; 27];
-        probe[..3].copy_from_slice(&[probe_b / 0.282_094_8; 3]);
-        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
-    }
-    let sh = b.push_bytes(&sh);
-    let vis = b.push_bytes(&[1.0f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
-    b.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
+    push_uniform_probes(&mut b, probe_b, 1.0);
     b.manifest.lights.push(pack::Light {
         name: "sun".into(),
         kind: pack::LightKind::Sun,
