@@ -8,26 +8,13 @@ replace it as the demo's main content once the CSG stage lands.
 usage: python make_scene.py OUT.gltf
 """
 
-import base64
-import json
-import struct
 import sys
-import zlib
 from pathlib import Path
 
 import numpy as np
 
-
-def png_bytes(rgba: np.ndarray) -> bytes:
-    """Encode an (h, w, 4) uint8 array as PNG with the standard library only."""
-    h, w, _ = rgba.shape
-    raw = b"".join(b"\x00" + rgba[y].tobytes() for y in range(h))
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-    header = struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from gltf_writer import GltfWriter  # noqa: E402
 
 
 def paving_texture(size: int = 128) -> np.ndarray:
@@ -74,88 +61,8 @@ def box_mesh(half: np.ndarray, uv_scale: float = 1.0):
     return np.concatenate(pos), np.concatenate(nrm), np.concatenate(uv).astype(np.float32), np.concatenate(idx)
 
 
-class GltfWriter:
-    """Collects meshes, materials and images into one self-contained .gltf (data: URIs)."""
-
-    def __init__(self):
-        self.blob = bytearray()
-        self.doc = {
-            "asset": {"version": "2.0", "generator": "content/demo/make_scene.py"},
-            "scene": 0,
-            "scenes": [{"nodes": []}],
-            "nodes": [],
-            "meshes": [],
-            "materials": [],
-            "textures": [],
-            "images": [],
-            "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
-            "accessors": [],
-            "bufferViews": [],
-            "buffers": [],
-        }
-
-    def _view(self, data: bytes, target=None) -> int:
-        while len(self.blob) % 4:
-            self.blob.append(0)
-        view = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)}
-        if target:
-            view["target"] = target
-        self.blob += data
-        self.doc["bufferViews"].append(view)
-        return len(self.doc["bufferViews"]) - 1
-
-    def _accessor(self, array: np.ndarray, kind: str, component: int, target: int, minmax=False) -> int:
-        acc = {"bufferView": self._view(np.ascontiguousarray(array).tobytes(), target), "componentType": component, "count": len(array), "type": kind}
-        if minmax:
-            acc["min"] = array.min(0).tolist()
-            acc["max"] = array.max(0).tolist()
-        self.doc["accessors"].append(acc)
-        return len(self.doc["accessors"]) - 1
-
-    def mesh(self, name, pos, nrm, uv, idx, material) -> int:
-        attrs = {
-            "POSITION": self._accessor(pos, "VEC3", 5126, 34962, minmax=True),
-            "NORMAL": self._accessor(nrm, "VEC3", 5126, 34962),
-            "TEXCOORD_0": self._accessor(uv, "VEC2", 5126, 34962),
-        }
-        prim = {"attributes": attrs, "indices": self._accessor(idx, "SCALAR", 5125, 34963), "material": material}
-        self.doc["meshes"].append({"name": name, "primitives": [prim]})
-        return len(self.doc["meshes"]) - 1
-
-    def texture(self, name, rgba) -> int:
-        self.doc["images"].append({"name": name, "uri": "data:image/png;base64," + base64.b64encode(png_bytes(rgba)).decode()})
-        self.doc["textures"].append({"source": len(self.doc["images"]) - 1, "sampler": 0})
-        return len(self.doc["textures"]) - 1
-
-    def material(self, name, color=(1, 1, 1, 1), texture=None, double_sided=False, roughness=0.9) -> int:
-        pbr = {"baseColorFactor": list(color), "metallicFactor": 0.0, "roughnessFactor": roughness}
-        if texture is not None:
-            pbr["baseColorTexture"] = {"index": texture}
-        self.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": double_sided})
-        return len(self.doc["materials"]) - 1
-
-    def node(self, name, mesh=None, translation=None, rotation=None, scale=None, children=None, root=True) -> int:
-        n = {"name": name}
-        for key, value in (("mesh", mesh), ("translation", translation), ("rotation", rotation), ("scale", scale), ("children", children)):
-            if value is not None:
-                n[key] = value
-        self.doc["nodes"].append(n)
-        index = len(self.doc["nodes"]) - 1
-        if root:
-            self.doc["scenes"][0]["nodes"].append(index)
-        return index
-
-    def write(self, path: Path):
-        self.doc["buffers"] = [{"byteLength": len(self.blob), "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(self.blob)).decode()}]
-        self.doc = {k: v for k, v in self.doc.items() if v != []}
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(json.dumps(self.doc, indent=1))
-        tmp.replace(path)
-
-
 def build_scene() -> GltfWriter:
-    g = GltfWriter()
+    g = GltfWriter("content/demo/make_scene.py")
     paving = g.material("paving", texture=g.texture("paving", paving_texture()))
     wood = g.material("crate", texture=g.texture("planks", plank_texture()))
     stone = g.material("sandstone", color=(0.78, 0.66, 0.48, 1.0))
