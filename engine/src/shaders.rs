@@ -7,6 +7,7 @@ pub const MESH_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.vert
 pub const MESH_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.frag.spv"));
 pub const MESH_EQUAL_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_equal.frag.spv"));
 pub const DEPTH_MASKED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/depth_masked.frag.spv"));
+pub const SKIN_COMP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/skin.comp.spv"));
 
 pub fn module(device: &ash::Device, spv: &[u8]) -> Result<vk::ShaderModule> {
     let words = ash::util::read_spv(&mut std::io::Cursor::new(spv))?;
