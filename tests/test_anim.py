@@ -44,7 +44,7 @@ class Gltf:
         a = np.ascontiguousarray(a)
         k = 1 if a.ndim == 1 else a.shape[1]
         acc = {"bufferView": self.view(a.tobytes()), "componentType": COMPONENT[a.dtype], "count": len(a), "type": TYPE[k]}
-        if a.dtype == np.float32 and k <= 4:
+        if a.dtype == np.float32 and k <= 4 and np.isfinite(a).all():  # JSON has no NaN
             flat = a.reshape(len(a), -1)
             acc["min"], acc["max"] = [float(x) for x in flat.min(0)], [float(x) for x in flat.max(0)]
         if sparse:
@@ -375,6 +375,10 @@ def numpy_pose(gltf_path: Path, t: float) -> list[np.ndarray]:
         times = read_accessor(doc, blobs, s["input"])[:, 0]
         out = read_accessor(doc, blobs, s["output"])
         path = ch["target"]["path"]
+        if path == "rotation":
+            # The spec requires unit rotation keys; SimpleSkin's are written to 3 digits
+            # (|q| = 0.99985), so normalise them as the cooker does.
+            out = out / np.linalg.norm(out, axis=1, keepdims=True)
         trs[ch["target"]["node"]][path] = spec_sample(times, out, s.get("interpolation", "LINEAR"), path == "rotation", t)
     parent = {c: i for i, n in enumerate(doc["nodes"]) for c in n.get("children", [])}
 
