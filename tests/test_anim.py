@@ -221,7 +221,7 @@ def test_interpolation_asset_matches_the_spec(interp_pack, t):
     pose = dump(pack, "interp", t)
     assert pose["duration"] == pytest.approx(2.5)
     meshes = {m["node"]: m for m in pose["meshes"]}
-    checked = 0
+    checked, wrong = 0, []
     for name, (path_name, interp, out) in sources.items():
         want = spec_sample(TIMES, out, interp, path_name == "rotation", t)
         node = nodes[name]
@@ -234,9 +234,11 @@ def test_interpolation_asset_matches_the_spec(interp_pack, t):
             got, want = world[:3, :3], quat_matrix(want)
         else:
             got = np.array(meshes[node]["morph_weights"])
-        np.testing.assert_allclose(got, want, atol=2e-5, err_msg=f"{name} at t={t}")
+        if not np.allclose(got, want, rtol=0, atol=2e-5):
+            wrong.append(f"{name}: got {np.round(got, 6).tolist()}, spec says {np.round(want, 6).tolist()}")
         checked += 1
     assert checked == 12
+    assert not wrong, f"at t={t}:\n" + "\n".join(wrong)
 
 
 def test_interpolation_asset_keys_are_distinct_so_the_checks_can_fail(interp_pack):
