@@ -159,3 +159,70 @@ fn sample_models_cook_with_their_skins_clips_and_morph_targets() {
     let boxes = cook(&dir, "BoxAnimated");
     assert_eq!(boxes.manifest.animation.clips.len(), 2, "BoxAnimated has two animations");
 }
+
+/// The benchmark shape, measured rather than asserted (run with `--ignored`): 64
+/// characters of 10k vertices and 64 joints, skinned in one command buffer, and the CPU time to
+/// sample 64 animators of a cooked rig.
+#[test]
+#[ignore]
+fn measure_skinning_64_characters_of_10k_vertices() {
+    let gpu = gpu();
+    let mut pipe = SkinPipeline::new(&gpu).unwrap();
+    let (n, joints_n) = (10_000usize, 64usize);
+    let vertices: Vec<Vertex> = (0..n)
+        .map(|i| Vertex {
+            position: [(i % 100) as f32 * 0.01, (i / 100) as f32 * 0.01, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            tangent: [1.0, 0.0, 0.0, 1.0],
+            ..Default::default()
+        })
+        .collect();
+    let data = DeformData {
+        vertices,
+        joints: Some((0..n).map(|i| std::array::from_fn(|k| ((i / 160 + k) % joints_n) as u16)).collect()),
+        weights: Some(vec![[0.4, 0.3, 0.2, 0.1]; n]),
+        targets: 0,
+        morph_positions: vec![],
+        morph_normals: vec![],
+    };
+    let mats: Vec<Mat4> = (0..joints_n).map(|j| Mat4::from_rotation_z(j as f32 * 0.01)).collect();
+    let mut meshes: Vec<SkinnedMesh> = (0..64).map(|_| SkinnedMesh::new(&gpu, &pipe, &data, joints_n).unwrap()).collect();
+    for m in &mut meshes {
+        m.update(&mats, &[]);
+    }
+    let mut times = Vec::new();
+    for _ in 0..5 {
+        let t = std::time::Instant::now();
+        gpu.one_shot(|cb| meshes.iter().for_each(|m| m.record(&gpu, &pipe, cb))).unwrap();
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    println!(
+        "skinning 64 x {n} vertices ({joints_n} joints) on {}: median {:.2} ms per frame (submit + wait)",
+        gpu.caps.device_name, times[2]
+    );
+    for m in &mut meshes {
+        m.destroy(&gpu);
+    }
+    pipe.destroy(&gpu);
+    if let Some(dir) = samples() {
+        let pack = cook(&dir, "RiggedSimple");
+        let rig = Rig::from_pack(&pack);
+        let mut animators: Vec<engine::anim::Animator> = (0..64)
+            .map(|i| {
+                let mut a = engine::anim::Animator::new(&rig, 0);
+                a.time = i as f32 * 0.05;
+                a
+            })
+            .collect();
+        let mut jm = vec![Mat4::IDENTITY; rig.skins[0].joints.len()];
+        let t = std::time::Instant::now();
+        for _ in 0..100 {
+            for a in &mut animators {
+                a.advance(&rig, 1.0 / 60.0);
+                rig.joint_matrices(0, &a.pose, &mut jm);
+            }
+        }
+        println!("CPU sampling of 64 RiggedSimple animators: {:.4} ms per frame", t.elapsed().as_secs_f64() * 1e3 / 100.0);
+    }
+}
