@@ -22,6 +22,7 @@ layout(push_constant) uniform Params {
     uint target_count;
     uint skinned;        // 0: every vertex follows joint matrix 0
     uint morph_normals;  // 1: morph_normals holds normal deltas
+    uint joint_count;    // joint indices are clamped below it, so bad data cannot read past the buffer
 } params;
 
 vec3 word3(uint at) {
@@ -36,7 +37,7 @@ void put3(uint at, vec3 v) {
 
 uint joint(uint v, uint k) {
     uint word = joints[v * 2 + k / 2];
-    return (k % 2 == 0) ? (word & 0xffffu) : (word >> 16);
+    return min((k % 2 == 0) ? (word & 0xffffu) : (word >> 16), params.joint_count - 1);
 }
 
 void main() {

@@ -62,9 +62,8 @@ fn gpu_skinning_equals_the_cpu_reference_on_the_sample_models() {
         rig.update_globals(&mut pose);
         let mut moved = 0.0f32;
         let mut deformed_meshes = 0;
-        for (node, n) in pack.manifest.nodes.iter().enumerate() {
-            let Some(mesh) = n.mesh else { continue };
-            let data = DeformData::from_pack(&pack, mesh as usize, 0);
+        for node in 0..pack.manifest.nodes.len() {
+            let Some(data) = DeformData::for_node(&pack, node, 0) else { continue };
             let mut joints = vec![Mat4::IDENTITY; joint_count(&pack, node)];
             node_joint_matrices(&pack, &rig, node, &pose, &mut joints);
             let weights = rig.node_weights(node, &pose).to_vec();

@@ -96,8 +96,7 @@ pub fn dump_pose(pack: &Pack, clip: &str, time: f32) -> Result<String, String> {
     out.push_str("],\"meshes\":[");
     let mut first = true;
     for (i, node) in pack.manifest.nodes.iter().enumerate() {
-        let Some(mesh) = node.mesh else { continue };
-        let data = DeformData::from_pack(pack, mesh as usize, 0);
+        let (Some(mesh), Some(data)) = (node.mesh, DeformData::for_node(pack, i, 0)) else { continue };
         let mut joints = vec![Mat4::IDENTITY; joint_count(pack, i)];
         node_joint_matrices(pack, &rig, i, &pose, &mut joints);
         let weights = rig.node_weights(i, &pose);

@@ -23,6 +23,18 @@ fn f32s(b: &[u8]) -> Vec<f32> {
 }
 
 impl DeformData {
+    /// The data of the mesh on node `node`, as that node deforms it: joints and weights only
+    /// when the node is bound to a skin (a mesh can also be placed unskinned elsewhere).
+    pub fn for_node(pack: &Pack, node: usize, lod: usize) -> Option<DeformData> {
+        let mesh = pack.manifest.nodes.get(node)?.mesh? as usize;
+        let mut d = DeformData::from_pack(pack, mesh, lod);
+        if pack.manifest.animation.binding(node as u32).and_then(|b| b.skin).is_none() {
+            d.joints = None;
+            d.weights = None;
+        }
+        Some(d)
+    }
+
     pub fn from_pack(pack: &Pack, mesh: usize, lod: usize) -> DeformData {
         let m = &pack.manifest.meshes[mesh].lods[lod];
         let bytes = pack.bytes(m.vertices);
@@ -50,7 +62,9 @@ impl DeformData {
 }
 
 /// Deform every vertex into `out` (same length as `data.vertices`; attributes other than
-/// position, normal and tangent are copied). `joint_matrices` are global x inverse bind.
+/// position, normal and tangent are copied). `joint_matrices` are global x inverse bind; a
+/// joint index past them is clamped to the last (the cooker rejects such data; this keeps a
+/// damaged pack from reading out of bounds, as the shader does).
 pub fn skin_cpu(data: &DeformData, morph_weights: &[f32], joint_matrices: &[Mat4], out: &mut [Vertex]) {
     let n = data.vertices.len();
     for (v, (src, dst)) in data.vertices.iter().zip(out.iter_mut()).enumerate() {
@@ -70,7 +84,7 @@ pub fn skin_cpu(data: &DeformData, morph_weights: &[f32], joint_matrices: &[Mat4
                 let mut m = Mat4::ZERO;
                 for k in 0..4 {
                     if w[v][k] != 0.0 {
-                        m += joint_matrices[j[v][k] as usize] * w[v][k];
+                        m += joint_matrices[(j[v][k] as usize).min(joint_matrices.len() - 1)] * w[v][k];
                     }
                 }
                 m

@@ -23,6 +23,7 @@ struct Params {
     target_count: u32,
     skinned: u32,
     morph_normals: u32,
+    joint_count: u32,
 }
 
 pub struct SkinPipeline {
@@ -157,6 +158,7 @@ impl SkinnedMesh {
             target_count: data.targets as u32,
             skinned: data.joints.is_some() as u32,
             morph_normals: !data.morph_normals.is_empty() as u32,
+            joint_count: joint_capacity as u32,
         };
         Ok(SkinnedMesh {
             params,
