@@ -308,6 +308,8 @@ def test_more_than_four_influences_keep_the_four_largest_with_a_warning(tmp_path
     r = subprocess.run([str(COOK), str(src), "-o", str(tmp_path / "six.pack"), "--quiet"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "warning" in r.stderr and "'Tentacle'" in r.stderr
+    report = (tmp_path / "six.report.md").read_text()
+    assert "## Warnings" in report and "'Tentacle'" in report and "1 skin(s): rig (6 joints)" in report
 
 
 # ---- bad animation data --------------------------------------------------------------------------

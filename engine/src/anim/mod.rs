@@ -12,6 +12,11 @@ use glam::Mat4;
 use pack::Pack;
 pub use pose::{Animator, Pose, Rig};
 
+/// Little-endian f32s of a pack range, copied out at load so rigs and meshes do not borrow the pack.
+pub(crate) fn f32s(pack: &Pack, r: pack::BufferRange) -> Vec<f32> {
+    pack.bytes(r).chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+}
+
 /// How many joint matrices the mesh on node `node` takes: its skin's joint count, or 1 (the
 /// node's own world matrix) when it is not skinned.
 pub fn joint_count(pack: &Pack, node: usize) -> usize {

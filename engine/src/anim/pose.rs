@@ -49,10 +49,6 @@ pub struct Pose {
     pub weights: Vec<f32>,
 }
 
-fn f32s(pack: &Pack, r: pack::BufferRange) -> Vec<f32> {
-    pack.bytes(r).chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
-}
-
 impl Rig {
     pub fn from_pack(pack: &Pack) -> Rig {
         let m = &pack.manifest;
@@ -79,7 +75,7 @@ impl Rig {
             .map(|s| SkinData {
                 name: s.name.clone(),
                 joints: s.joints.clone(),
-                inverse_bind: f32s(pack, s.inverse_bind).chunks_exact(16).map(Mat4::from_cols_slice).collect(),
+                inverse_bind: super::f32s(pack, s.inverse_bind).chunks_exact(16).map(Mat4::from_cols_slice).collect(),
             })
             .collect();
         let clips = anim
@@ -96,8 +92,8 @@ impl Rig {
                         path: ch.path,
                         interpolation: ch.interpolation,
                         components: ch.components as usize,
-                        times: f32s(pack, ch.times),
-                        values: f32s(pack, ch.values),
+                        times: super::f32s(pack, ch.times),
+                        values: super::f32s(pack, ch.values),
                     })
                     .collect(),
             })

@@ -18,10 +18,6 @@ pub struct DeformData {
     pub morph_normals: Vec<f32>,
 }
 
-fn f32s(b: &[u8]) -> Vec<f32> {
-    b.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
-}
-
 impl DeformData {
     /// The data of the mesh on node `node`, as that node deforms it: joints and weights only
     /// when the node is bound to a skin (a mesh can also be placed unskinned elsewhere).
@@ -53,10 +49,10 @@ impl DeformData {
                     .map(|b| std::array::from_fn(|k| u16::from_le_bytes([b[2 * k], b[2 * k + 1]])))
                     .collect()
             }),
-            weights: skin.map(|s| f32s(pack.bytes(s.weights)).chunks_exact(4).map(|w| [w[0], w[1], w[2], w[3]]).collect()),
+            weights: skin.map(|s| super::f32s(pack, s.weights).chunks_exact(4).map(|w| [w[0], w[1], w[2], w[3]]).collect()),
             targets: d.morph.map_or(0, |_| deform.map_or(0, |d| d.morph_weights.len())),
-            morph_positions: d.morph.map_or_else(Vec::new, |mt| f32s(pack.bytes(mt.positions))),
-            morph_normals: d.morph.and_then(|mt| mt.normals).map_or_else(Vec::new, |r| f32s(pack.bytes(r))),
+            morph_positions: d.morph.map_or_else(Vec::new, |mt| super::f32s(pack, mt.positions)),
+            morph_normals: d.morph.and_then(|mt| mt.normals).map_or_else(Vec::new, |r| super::f32s(pack, r)),
         }
     }
 }
