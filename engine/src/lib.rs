@@ -1,5 +1,6 @@
 //! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
 
+pub mod anim;
 pub mod camera;
 pub mod cull;
 pub mod gpu;

@@ -23,6 +23,12 @@ pub(crate) const VEC4_F32: Expect = Expect { dims: &[Dimensions::Vec4], types: &
 pub(crate) const TEXCOORD: Expect = Expect { dims: &[Dimensions::Vec2], types: &[F32, U8, U16] };
 pub(crate) const COLOR: Expect = Expect { dims: &[Dimensions::Vec3, Dimensions::Vec4], types: &[F32, U8, U16] };
 pub(crate) const INDICES: Expect = Expect { dims: &[Dimensions::Scalar], types: &[U8, U16, U32] };
+pub(crate) const JOINTS: Expect = Expect { dims: &[Dimensions::Vec4], types: &[U8, U16] };
+pub(crate) const WEIGHTS: Expect = Expect { dims: &[Dimensions::Vec4], types: &[F32, U8, U16] };
+pub(crate) const MAT4_F32: Expect = Expect { dims: &[Dimensions::Mat4], types: &[F32] };
+pub(crate) const KEY_TIMES: Expect = Expect { dims: &[Dimensions::Scalar], types: &[F32] };
+pub(crate) const ROTATIONS: Expect = Expect { dims: &[Dimensions::Vec4], types: &[F32, I8, U8, I16, U16] };
+pub(crate) const MORPH_WEIGHTS: Expect = Expect { dims: &[Dimensions::Scalar], types: &[F32, I8, U8, I16, U16] };
 
 /// An accessor whose data has been bounds- and type-checked.
 pub(crate) struct Checked<'a> {

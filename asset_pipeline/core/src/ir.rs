@@ -23,6 +23,10 @@ pub struct LodIr {
     pub lightmap_pages: Option<Vec<u32>>,
     /// Geometric error to LOD 0 in metres (object space).
     pub error: f32,
+    /// Morph target position deltas, [target][vertex]; empty when the mesh has none.
+    pub morph_positions: Vec<Vec<[f32; 3]>>,
+    /// Morph target normal deltas, [target][vertex]; empty when no target moves normals.
+    pub morph_normals: Vec<Vec<[f32; 3]>>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -30,6 +34,34 @@ pub struct MeshIr {
     pub name: String,
     pub is_static: bool,
     pub lods: Vec<LodIr>,
+    /// Default morph target weights (glTF `mesh.weights`, zeros when absent), one per target.
+    pub morph_weights: Vec<f32>,
+}
+
+/// A skeleton: joint node indices (into `SceneIr::nodes`) and inverse bind matrices (column-major).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkinIr {
+    pub name: String,
+    pub joints: Vec<u32>,
+    pub inverse_bind: Vec<[f32; 16]>,
+}
+
+/// One animated node property (see `pack::Channel`): `values` holds `times.len()` keys of
+/// `components` floats, three times that for cubic splines (in tangent, value, out tangent).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelIr {
+    pub node: u32,
+    pub path: pack::ChannelPath,
+    pub interpolation: pack::Interpolation,
+    pub components: u32,
+    pub times: Vec<f32>,
+    pub values: Vec<f32>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipIr {
+    pub name: String,
+    pub channels: Vec<ChannelIr>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -57,6 +89,12 @@ pub struct SceneIr {
     pub sky: Option<Sky>,
     pub lightmap: Option<LightmapLayout>,
     pub probes: Option<ProbesIr>,
+    pub skins: Vec<SkinIr>,
+    pub clips: Vec<ClipIr>,
+    /// Mesh nodes bound to a skin or carrying their own morph weights.
+    pub bindings: Vec<pack::NodeBinding>,
+    /// Problems the import fixed on its own (e.g. influences reduced to 4), one line each.
+    pub warnings: Vec<String>,
 }
 
 /// Baked irradiance probes on a grid (see `pack::ProbeGrid`): per probe 27 SH floats (9 x rgb)
@@ -99,8 +137,84 @@ impl LodIr {
         if let Some(p) = self.lightmap_pages.as_ref().filter(|p| p.len() != m) {
             return Err(format!("{what}: {} lightmap pages for {m} triangles", p.len()));
         }
+        for (t, d) in self.morph_positions.iter().chain(&self.morph_normals).enumerate() {
+            if d.len() != n {
+                return Err(format!("{what}: morph target {t} has {} deltas for {n} vertices", d.len()));
+            }
+        }
+        if !self.morph_normals.is_empty() && self.morph_normals.len() != self.morph_positions.len() {
+            return Err(format!("{what}: {} normal delta sets for {} morph targets", self.morph_normals.len(), self.morph_positions.len()));
+        }
+        if let Some(w) = &self.weights {
+            // The skinning pass blends with these as given: they must be a convex combination.
+            if let Some(v) = w.iter().position(|w| !w.iter().all(|x| x.is_finite() && *x >= 0.0) || (w.iter().sum::<f32>() - 1.0).abs() > 1e-4) {
+                return Err(format!("{what}: skin weights of vertex {v} ({:?}) are not non-negative with sum 1", w[v]));
+            }
+        }
         if !self.error.is_finite() || self.error < 0.0 {
             return Err(format!("{what}: error {} is not a finite distance", self.error));
+        }
+        Ok(())
+    }
+}
+
+impl SceneIr {
+    /// Skins, node bindings and clips refer to things that exist and agree with the meshes: a
+    /// skinned node's mesh has joints and weights and uses no joint past its skin's; every clip
+    /// channel passes `anim::validate_channel` and has the component count its path needs.
+    /// Messages name the clip and channel (or node, mesh and skin).
+    pub fn check_animation(&self) -> Result<(), String> {
+        let node_name = |i: u32| self.nodes.get(i as usize).map_or_else(|| format!("node {i}"), |n| format!("node {i} '{}'", n.name));
+        for (i, s) in self.skins.iter().enumerate() {
+            if s.joints.is_empty() || s.joints.len() != s.inverse_bind.len() {
+                return Err(format!("skin {i} '{}': {} joints and {} inverse bind matrices", s.name, s.joints.len(), s.inverse_bind.len()));
+            }
+            if let Some(j) = s.joints.iter().find(|&&j| j as usize >= self.nodes.len()) {
+                return Err(format!("skin {i} '{}': joint node {j} does not exist", s.name));
+            }
+        }
+        for b in &self.bindings {
+            let Some(node) = self.nodes.get(b.node as usize) else { return Err(format!("binding of node {}: no such node", b.node)) };
+            let Some(mesh) = node.mesh.and_then(|m| self.meshes.get(m as usize)) else {
+                return Err(format!("{}: has a skin or morph weights but no mesh", node_name(b.node)));
+            };
+            if let Some(w) = b.weights.as_ref().filter(|w| w.len() != mesh.morph_weights.len()) {
+                return Err(format!("{}: {} morph weights for mesh '{}' with {} morph targets", node_name(b.node), w.len(), mesh.name, mesh.morph_weights.len()));
+            }
+            let Some(s) = b.skin else { continue };
+            let skin = self.skins.get(s as usize).ok_or_else(|| format!("{}: skin {s} does not exist", node_name(b.node)))?;
+            for (l, lod) in mesh.lods.iter().enumerate() {
+                let (Some(j), Some(w)) = (&lod.joints, &lod.weights) else {
+                    return Err(format!("{}: skinned by skin {s} '{}' but mesh '{}' LOD {l} has no JOINTS_0/WEIGHTS_0", node_name(b.node), skin.name, mesh.name));
+                };
+                let n = skin.joints.len();
+                let used = j.iter().zip(w).enumerate().find_map(|(v, (j, w))| j.iter().zip(w).find(|(&j, &w)| w > 0.0 && j as usize >= n).map(|(&j, _)| (v, j)));
+                if let Some((v, j)) = used {
+                    return Err(format!(
+                        "{}: mesh '{}' LOD {l} vertex {} uses joint {j}, but skin {s} '{}' has only {} joints (joint index out of range)",
+                        node_name(b.node),
+                        mesh.name,
+                        v,
+                        skin.name,
+                        n
+                    ));
+                }
+            }
+        }
+        for (c, clip) in self.clips.iter().enumerate() {
+            for (k, ch) in clip.channels.iter().enumerate() {
+                let what = format!("clip {c} '{}' channel {k} ({:?} of {})", clip.name, ch.path, node_name(ch.node));
+                let node = self.nodes.get(ch.node as usize).ok_or_else(|| format!("{what}: no such node"))?;
+                let want = match ch.path {
+                    pack::ChannelPath::Translation | pack::ChannelPath::Scale => 3,
+                    pack::ChannelPath::Rotation => 4,
+                    pack::ChannelPath::Weights => node.mesh.and_then(|m| self.meshes.get(m as usize)).map_or(0, |m| m.morph_weights.len() as u32),
+                };
+                if want == 0 || ch.components != want {
+                    return Err(format!("{what}: {} components per key, the target needs {want}", ch.components));
+                }
+                crate::anim::validate_channel(ch.clone()).map_err(|e| format!("{what}: {e}"))?;
+            }
         }
         Ok(())
     }

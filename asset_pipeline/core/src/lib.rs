@@ -5,6 +5,7 @@
 //! object and the problem. Nothing here panics on file content.
 
 mod accessor;
+pub mod anim;
 mod error;
 pub mod bake;
 pub mod ir;
@@ -68,7 +69,7 @@ pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result
         })
         .flatten()
         .collect();
-    let total = (images.len() + doc.meshes().len() + 1) as f32;
+    let total = (images.len() + doc.meshes().len() + 2) as f32;
     let mut done = 0usize;
     let mut step = |what: &str| {
         progress(what, done as f32 / total);
@@ -84,14 +85,28 @@ pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result
     let default_material = scene.materials.len() as u32;
     for m in doc.meshes() {
         step(&label("mesh", m.index(), m.name()));
-        scene.meshes.push(mesh::cook_mesh(&m, &src.buffers, default_material).map_err(invalid)?);
+        scene.meshes.push(mesh::cook_mesh(&m, &src.buffers, default_material, &mut scene.warnings).map_err(invalid)?);
     }
     let uses_default = scene.meshes.iter().flat_map(|m| &m.lods[0].materials).any(|&m| m == default_material);
     if uses_default {
         scene.materials.push(pack::Material::default());
     }
     step("nodes");
-    scene.nodes = scene::flatten(doc).map_err(invalid)?;
+    let node_map;
+    (scene.nodes, node_map) = scene::flatten(doc).map_err(invalid)?;
+    step("animation");
+    scene.skins = anim::cook_skins(doc, &src.buffers, &node_map).map_err(invalid)?;
+    for n in doc.nodes() {
+        let (Some(flat), true) = (node_map[n.index()], n.mesh().is_some()) else { continue };
+        let weights = n.weights().map(<[f32]>::to_vec);
+        let skin = n.skin().map(|s| s.index() as u32);
+        if skin.is_some() || weights.is_some() {
+            scene.bindings.push(pack::NodeBinding { node: flat, skin, weights });
+        }
+    }
+    let targets_of = |node: u32| scene.nodes[node as usize].mesh.map_or(0, |m| scene.meshes[m as usize].morph_weights.len());
+    scene.clips = anim::cook_clips(doc, &src.buffers, &node_map, &targets_of, &mut scene.warnings).map_err(invalid)?;
+    scene.check_animation().map_err(invalid)?;
     progress("done", 1.0);
     Ok(scene)
 }

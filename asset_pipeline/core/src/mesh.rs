@@ -7,15 +7,41 @@ use crate::label;
 use gltf::mesh::{Mode, Semantic};
 use pack::Vertex;
 
-/// Import one glTF mesh. Primitives without a material use `default_material`.
-pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32) -> Result<MeshIr, String> {
+/// Per-vertex data beyond `Vertex` that deformation needs, parallel to a primitive's vertices.
+#[derive(Default)]
+struct Deform {
+    /// JOINTS_0/JOINTS_1 and WEIGHTS_0/WEIGHTS_1 side by side (zeros where a set is absent).
+    influences: Option<(Vec<[u16; 8]>, Vec<[f32; 8]>)>,
+    morph_positions: Vec<Vec<[f32; 3]>>,
+    morph_normals: Vec<Vec<[f32; 3]>>,
+}
+
+/// Import one glTF mesh. Primitives without a material use `default_material`. Fixes the import
+/// made on its own (influences reduced to four) are pushed to `warnings`.
+pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32, warnings: &mut Vec<String>) -> Result<MeshIr, String> {
     let what = label("mesh", mesh.index(), mesh.name());
     let mut vertices: Vec<Vertex> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     let mut materials: Vec<u32> = Vec::new();
     let mut has_uv1 = false;
+    let mut deform: Option<Deform> = None;
     for p in mesh.primitives() {
-        let (v, i) = primitive(&p, buffers).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
+        let (v, i, d) = primitive(&p, buffers).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
+        let all = deform.get_or_insert_with(|| Deform {
+            influences: d.influences.as_ref().map(|_| (Vec::new(), Vec::new())),
+            morph_positions: vec![Vec::new(); d.morph_positions.len()],
+            morph_normals: vec![Vec::new(); d.morph_normals.len()],
+        });
+        if all.influences.is_some() != d.influences.is_some() || all.morph_positions.len() != d.morph_positions.len() || all.morph_normals.len() != d.morph_normals.len() {
+            return Err(format!("{what} primitive {}: its skinning attributes or morph targets differ from the mesh's first primitive", p.index()));
+        }
+        if let (Some((aj, aw)), Some((j, w))) = (&mut all.influences, d.influences) {
+            aj.extend(j);
+            aw.extend(w);
+        }
+        for (a, m) in all.morph_positions.iter_mut().zip(d.morph_positions).chain(all.morph_normals.iter_mut().zip(d.morph_normals)) {
+            a.extend(m);
+        }
         has_uv1 |= p.get(&Semantic::TexCoords(1)).is_some();
         let base = u32::try_from(vertices.len())
             .ok()
@@ -28,6 +54,23 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
             materials.push(material);
         }
     }
+    let deform = deform.unwrap_or_default();
+    let (joints, weights) = match deform.influences {
+        None => (None, None),
+        Some((j, w)) => {
+            let (j, w, reduced) = crate::anim::reduce_influences(&j, &w).map_err(|e| format!("{what}: {e}"))?;
+            if reduced > 0 {
+                warnings.push(format!("{what}: {reduced} vertices had more than 4 joint influences; kept the 4 largest and renormalised"));
+            }
+            (Some(j), Some(w))
+        }
+    };
+    let targets = deform.morph_positions.len();
+    let morph_weights = match mesh.weights() {
+        Some(w) if w.len() == targets => w.to_vec(),
+        Some(w) => return Err(format!("{what}: {} default morph weights for {targets} morph targets", w.len())),
+        None => vec![0.0; targets],
+    };
     let lod = LodIr {
         positions: vertices.iter().map(|v| v.position).collect(),
         normals: Some(vertices.iter().map(|v| v.normal).collect()),
@@ -35,15 +78,19 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
         uv0: Some(vertices.iter().map(|v| v.uv0).collect()),
         uv1: has_uv1.then(|| vertices.iter().map(|v| v.uv1).collect()),
         colors: Some(vertices.iter().map(|v| v.color).collect()),
+        joints,
+        weights,
         triangles,
         materials,
+        morph_positions: deform.morph_positions,
+        morph_normals: deform.morph_normals,
         ..Default::default()
     };
-    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), is_static: false, lods: vec![lod] })
+    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), is_static: false, lods: vec![lod], morph_weights })
 }
 
 /// One primitive as vertices and a triangle list indexing them.
-fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, Vec<u32>), String> {
+fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, Vec<u32>, Deform), String> {
     let mode = p.mode();
     if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
         return Err(format!("mode {mode:?} is not supported (only triangles, triangle strips and fans)"));
@@ -65,6 +112,29 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, V
     let uv0 = attribute(Semantic::TexCoords(0), "TEXCOORD_0", &accessor::TEXCOORD)?;
     let uv1 = attribute(Semantic::TexCoords(1), "TEXCOORD_1", &accessor::TEXCOORD)?;
     let colors = attribute(Semantic::Colors(0), "COLOR_0", &accessor::COLOR)?;
+    let joints = [attribute(Semantic::Joints(0), "JOINTS_0", &accessor::JOINTS)?, attribute(Semantic::Joints(1), "JOINTS_1", &accessor::JOINTS)?];
+    let weights = [attribute(Semantic::Weights(0), "WEIGHTS_0", &accessor::WEIGHTS)?, attribute(Semantic::Weights(1), "WEIGHTS_1", &accessor::WEIGHTS)?];
+    for set in 0..2 {
+        if joints[set].is_some() != weights[set].is_some() {
+            return Err(format!("has only one of JOINTS_{set} and WEIGHTS_{set}"));
+        }
+    }
+    let mut morph_checked = Vec::new();
+    for (t, target) in p.morph_targets().enumerate() {
+        let get = |acc: Option<gltf::Accessor>, role: &str| -> Result<Option<Vec<[f32; 3]>>, String> {
+            let Some(acc) = acc else { return Ok(None) };
+            let c = check(&acc, buffers, &format!("morph target {t} {role}"), &accessor::VEC3_F32)?;
+            if c.count != n {
+                return Err(format!("morph target {t}: accessor {} ({role}) has {} elements but POSITION has {n}", acc.index(), c.count));
+            }
+            let d = c.vecs::<3>(0.0);
+            if let Some(i) = d.iter().position(|d| !d.iter().all(|x| x.is_finite())) {
+                return Err(format!("morph target {t}: {role} delta {i} is not a finite number"));
+            }
+            Ok(Some(d))
+        };
+        morph_checked.push((get(target.positions(), "POSITION")?, get(target.normals(), "NORMAL")?));
+    }
     let index_acc = p.indices();
     let checked_indices = match &index_acc {
         Some(acc) => Some(check(acc, buffers, "indices", &accessor::INDICES)?),
@@ -105,15 +175,46 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, V
             _pad: 0,
         })
         .collect();
+    let influences = joints[0].as_ref().map(|_| {
+        let sets: Vec<(Vec<[f32; 4]>, Vec<[f32; 4]>)> =
+            joints.iter().zip(&weights).filter_map(|(j, w)| Some((j.as_ref()?.vecs::<4>(0.0), w.as_ref()?.vecs::<4>(0.0)))).collect();
+        let mut jj = vec![[0u16; 8]; n];
+        let mut ww = vec![[0f32; 8]; n];
+        for (s, (j, w)) in sets.iter().enumerate() {
+            for v in 0..n {
+                for c in 0..4 {
+                    jj[v][s * 4 + c] = j[v][c] as u16;
+                    ww[v][s * 4 + c] = w[v][c];
+                }
+            }
+        }
+        (jj, ww)
+    });
+    // Without base normals there is nothing for normal deltas to move (normals are made flat).
+    let any_normals = normals.is_some() && morph_checked.iter().any(|(_, nrm)| nrm.is_some());
+    let mut deform = Deform {
+        influences,
+        morph_positions: morph_checked.iter().map(|(pos, _)| pos.clone().unwrap_or_else(|| vec![[0.0; 3]; n])).collect(),
+        morph_normals: if any_normals { morph_checked.into_iter().map(|(_, nrm)| nrm.unwrap_or_else(|| vec![[0.0; 3]; n])).collect() } else { Vec::new() },
+    };
     if normals.is_none() {
-        (vertices, idx) = flat_normals(&vertices, &idx);
+        let remap;
+        (vertices, idx, remap) = flat_normals(&vertices, &idx);
+        // Unwelding copies vertices; their deformation data follows them.
+        if let Some((j, w)) = &mut deform.influences {
+            *j = remap.iter().map(|&i| j[i as usize]).collect();
+            *w = remap.iter().map(|&i| w[i as usize]).collect();
+        }
+        for d in &mut deform.morph_positions {
+            *d = remap.iter().map(|&i| d[i as usize]).collect();
+        }
     }
     if tangents.is_none() {
         for v in &mut vertices {
             v.tangent = default_tangent(v.normal);
         }
     }
-    Ok((vertices, idx))
+    Ok((vertices, idx, deform))
 }
 
 /// Strips and fans as the equivalent list, with the winding glTF specifies.
@@ -131,15 +232,17 @@ fn triangle_list(mode: Mode, idx: Vec<u32>) -> Result<Vec<u32>, String> {
 
 /// glTF: "When normals are not specified, client implementations MUST calculate flat normals."
 /// Flat shading needs a vertex per triangle corner, so the primitive is unwelded.
-fn flat_normals(vertices: &[Vertex], idx: &[u32]) -> (Vec<Vertex>, Vec<u32>) {
+/// Also returns, per output vertex, the input vertex it copies.
+fn flat_normals(vertices: &[Vertex], idx: &[u32]) -> (Vec<Vertex>, Vec<u32>, Vec<u32>) {
     let mut out = Vec::with_capacity(idx.len());
     for t in idx.chunks_exact(3) {
         let [a, b, c] = [0, 1, 2].map(|k| vertices[t[k] as usize].position);
         let n = normalize(cross(sub(b, a), sub(c, a))).unwrap_or([0.0, 0.0, 1.0]);
         out.extend(t.iter().map(|&i| Vertex { normal: n, ..vertices[i as usize] }));
     }
+    let remap = idx[..out.len()].to_vec();
     let idx = (0..out.len() as u32).collect();
-    (out, idx)
+    (out, idx, remap)
 }
 
 /// Stand-in until MikkTSpace: a unit tangent perpendicular to the normal, so the TBN basis the

@@ -22,7 +22,10 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
             lods.push(write_lod(lod, &mut b).map_err(|e| format!("{what}: {e}"))?);
         }
         b.manifest.meshes.push(Mesh { name: mesh.name.clone(), lods, bounds_min, bounds_max, is_static: mesh.is_static });
+        write_deform(i as u32, mesh, &mut b);
     }
+    scene.check_animation()?;
+    write_animation(scene, &mut b);
     b.manifest.materials = scene.materials.clone();
     b.manifest.nodes = scene.nodes.clone();
     b.manifest.lights = scene.lights.clone();
@@ -39,6 +42,63 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
     // The pack crate's own consistency check, so a cooker bug is caught here and not at load.
     pack.manifest.validate(pack.data.len() as u64).map_err(|e| e.to_string())?;
     Ok(pack)
+}
+
+fn f32_bytes<'a>(v: impl IntoIterator<Item = &'a f32>) -> Vec<u8> {
+    v.into_iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Joints/weights and morph deltas of a mesh that deforms, in the layouts `pack::DeformLod` names.
+fn write_deform(index: u32, mesh: &crate::ir::MeshIr, b: &mut PackBuilder) {
+    let deforms = mesh.lods.iter().any(|l| l.joints.is_some() || !l.morph_positions.is_empty());
+    if !deforms {
+        return;
+    }
+    let lods = mesh
+        .lods
+        .iter()
+        .map(|lod| {
+            let skin = match (&lod.joints, &lod.weights) {
+                (Some(j), Some(w)) => {
+                    let jb: Vec<u8> = j.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+                    Some(pack::SkinWeights { joints: b.push_bytes(&jb), weights: b.push_bytes(&f32_bytes(w.iter().flatten())) })
+                }
+                _ => None,
+            };
+            let morph = (!lod.morph_positions.is_empty()).then(|| pack::MorphTargets {
+                positions: b.push_bytes(&f32_bytes(lod.morph_positions.iter().flatten().flatten())),
+                normals: (!lod.morph_normals.is_empty()).then(|| b.push_bytes(&f32_bytes(lod.morph_normals.iter().flatten().flatten()))),
+            });
+            pack::DeformLod { skin, morph }
+        })
+        .collect();
+    b.manifest.animation.meshes.push(pack::DeformMesh { mesh: index, morph_weights: mesh.morph_weights.clone(), lods });
+}
+
+/// Skins, node bindings and clips (already checked by `SceneIr::check_animation`).
+fn write_animation(scene: &SceneIr, b: &mut PackBuilder) {
+    for s in &scene.skins {
+        let inverse_bind = b.push_bytes(&f32_bytes(s.inverse_bind.iter().flatten()));
+        b.manifest.animation.skins.push(pack::Skin { name: s.name.clone(), joints: s.joints.clone(), inverse_bind });
+    }
+    b.manifest.animation.nodes = scene.bindings.clone();
+    for clip in &scene.clips {
+        let channels: Vec<pack::Channel> = clip
+            .channels
+            .iter()
+            .map(|c| pack::Channel {
+                node: c.node,
+                path: c.path,
+                interpolation: c.interpolation,
+                key_count: c.times.len() as u32,
+                components: c.components,
+                times: b.push_bytes(&f32_bytes(&c.times)),
+                values: b.push_bytes(&f32_bytes(&c.values)),
+            })
+            .collect();
+        let duration = clip.channels.iter().filter_map(|c| c.times.last().copied()).fold(0.0f32, f32::max);
+        b.manifest.animation.clips.push(pack::Clip { name: clip.name.clone(), duration, channels });
+    }
 }
 
 fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {

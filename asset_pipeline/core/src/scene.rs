@@ -3,7 +3,8 @@
 use crate::label;
 use pack::Node;
 
-pub(crate) fn flatten(doc: &gltf::Document) -> Result<Vec<Node>, String> {
+/// Also returns, per glTF node index, its index in the flattened list (`None`: not in the scene).
+pub(crate) fn flatten(doc: &gltf::Document) -> Result<(Vec<Node>, Vec<Option<u32>>), String> {
     // No default scene: the first scene; no scenes at all: every node that is nobody's child.
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
@@ -17,6 +18,7 @@ pub(crate) fn flatten(doc: &gltf::Document) -> Result<Vec<Node>, String> {
     };
     let mut seen = vec![false; doc.nodes().len()];
     let mut out = Vec::new();
+    let mut map = vec![None; doc.nodes().len()];
     // Depth-first with an explicit stack: a deep or cyclic file cannot overflow ours.
     let mut stack: Vec<(gltf::Node, Option<u32>)> = roots.into_iter().rev().map(|n| (n, None)).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -27,6 +29,7 @@ pub(crate) fn flatten(doc: &gltf::Document) -> Result<Vec<Node>, String> {
             ));
         }
         let me = out.len() as u32;
+        map[node.index()] = Some(me);
         let m = node.transform().matrix(); // columns, as glTF and the pack
         out.push(Node {
             name: node.name().map_or_else(|| format!("node{}", node.index()), str::to_string),
@@ -36,5 +39,5 @@ pub(crate) fn flatten(doc: &gltf::Document) -> Result<Vec<Node>, String> {
         });
         stack.extend(node.children().collect::<Vec<_>>().into_iter().rev().map(|c| (c, Some(me))));
     }
-    Ok(out)
+    Ok((out, map))
 }

@@ -2,7 +2,7 @@
 //! in which every array is replaced by an index into a list of raw arrays (numpy dtype string,
 //! shape, little-endian bytes). See `to_wire` / `from_wire` in ir.py for the other side.
 
-use crate::ir::{LodIr, MeshIr, ProbesIr, SceneIr, TextureIr};
+use crate::ir::{ChannelIr, ClipIr, LodIr, MeshIr, ProbesIr, SceneIr, SkinIr, TextureIr};
 use crate::mips::Usage;
 use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
 use serde::{Deserialize, Serialize};
@@ -23,7 +23,7 @@ struct WireScene {
     meshes: Vec<WireMesh>,
     materials: Vec<Material>,
     textures: Vec<WireTexture>,
-    nodes: Vec<Node>,
+    nodes: Vec<WireNode>,
     #[serde(default)]
     lights: Vec<pack::Light>,
     #[serde(default)]
@@ -34,6 +34,50 @@ struct WireScene {
     lightmap: Option<LightmapLayout>,
     #[serde(default)]
     probes: Option<WireProbes>,
+    #[serde(default)]
+    skins: Vec<WireSkin>,
+    #[serde(default)]
+    clips: Vec<WireClip>,
+    #[serde(default)]
+    warnings: Vec<String>,
+}
+
+/// A node with its animation binding (`pack::NodeBinding`) inline, as Python's `ir.Node`.
+#[derive(Serialize, Deserialize)]
+struct WireNode {
+    name: String,
+    parent: Option<u32>,
+    local: [f32; 16],
+    mesh: Option<u32>,
+    #[serde(default)]
+    skin: Option<u32>,
+    #[serde(default)]
+    weights: Option<Vec<f32>>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireSkin {
+    name: String,
+    joints: Vec<u32>,
+    /// float32 (n, 16), column-major matrices.
+    inverse_bind: usize,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireChannel {
+    node: u32,
+    path: pack::ChannelPath,
+    interpolation: pack::Interpolation,
+    /// float32 (k,).
+    times: usize,
+    /// float32 (k, c), or (3k, c) for cubic splines: in tangent, value, out tangent per key.
+    values: usize,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireClip {
+    name: String,
+    channels: Vec<WireChannel>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -53,6 +97,8 @@ struct WireMesh {
     #[serde(rename = "static", default)]
     is_static: bool,
     lods: Vec<WireLod>,
+    #[serde(default)]
+    morph_weights: Vec<f32>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -64,6 +110,11 @@ struct WireLod {
     lightmap_pages: Option<usize>,
     #[serde(default)]
     error: f32,
+    /// float32 (targets, n, 3).
+    #[serde(default)]
+    morph_positions: Option<usize>,
+    #[serde(default)]
+    morph_normals: Option<usize>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -132,6 +183,17 @@ impl Reader<'_> {
             .collect())
     }
 
+    /// A float32 (targets, n, 3) array of morph deltas as one list per target.
+    fn morphs(&self, index: usize, n: usize, what: &str) -> Result<Vec<Vec<[f32; 3]>>, String> {
+        let a = self.get(index, what)?;
+        if a.dtype != "<f4" || a.shape.len() != 3 || a.shape[1] != n || a.shape[2] != 3 || a.bytes.len() != a.shape[0] * n * 12 {
+            return Err(format!("{what}: expected a <f4(targets, {n}, 3) array, got {}{:?}", a.dtype, a.shape));
+        }
+        let flat = RawArray { dtype: a.dtype.clone(), shape: vec![a.shape[0] * n, 3], bytes: a.bytes.clone() };
+        let rows = Reader { arrays: std::slice::from_ref(&flat) }.rows::<f32, 3>(0, what)?;
+        Ok(if n == 0 { vec![Vec::new(); a.shape[0]] } else { rows.chunks(n).map(<[_]>::to_vec).collect() })
+    }
+
     fn scalars<T: Elem>(&self, index: usize, what: &str) -> Result<Vec<T>, String> {
         let a = self.get(index, what)?;
         if a.dtype != T::DTYPE || a.shape.len() != 1 || a.bytes.len() != a.shape[0] * T::SIZE {
@@ -173,11 +235,22 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
                 materials: r.scalars::<u32>(wl.materials, &format!("{what} materials"))?,
                 lightmap_pages: wl.lightmap_pages.map(|i| r.scalars::<u32>(i, &format!("{what} lightmap_pages"))).transpose()?,
                 error: wl.error,
+                morph_positions: Vec::new(),
+                morph_normals: Vec::new(),
+            };
+            let n = lod.positions.len();
+            let lod = LodIr {
+                morph_positions: wl.morph_positions.map(|i| r.morphs(i, n, &format!("{what} morph_positions"))).transpose()?.unwrap_or_default(),
+                morph_normals: wl.morph_normals.map(|i| r.morphs(i, n, &format!("{what} morph_normals"))).transpose()?.unwrap_or_default(),
+                ..lod
             };
             lod.validate(&what)?;
+            if !lod.morph_positions.is_empty() && lod.morph_positions.len() != m.morph_weights.len() {
+                return Err(format!("{what}: {} morph targets but {} default morph weights", lod.morph_positions.len(), m.morph_weights.len()));
+            }
             lods.push(lod);
         }
-        meshes.push(MeshIr { name: m.name.clone(), is_static: m.is_static, lods });
+        meshes.push(MeshIr { name: m.name.clone(), is_static: m.is_static, lods, morph_weights: m.morph_weights.clone() });
     }
     let mut textures = Vec::with_capacity(w.textures.len());
     for (i, t) in w.textures.iter().enumerate() {
@@ -205,19 +278,55 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             Some(ProbesIr { origin: p.origin, spacing: p.spacing, counts: p.counts, sh, sun_visibility })
         }
     };
-    Ok(SceneIr {
+    let mut skins = Vec::with_capacity(w.skins.len());
+    for (i, s) in w.skins.iter().enumerate() {
+        let inverse_bind = r.rows::<f32, 16>(s.inverse_bind, &format!("skin {i} '{}' inverse_bind", s.name))?;
+        skins.push(SkinIr { name: s.name.clone(), joints: s.joints.clone(), inverse_bind });
+    }
+    let mut clips = Vec::with_capacity(w.clips.len());
+    for (c, clip) in w.clips.iter().enumerate() {
+        let mut channels = Vec::with_capacity(clip.channels.len());
+        for (k, ch) in clip.channels.iter().enumerate() {
+            let what = format!("clip {c} '{}' channel {k} ({:?})", clip.name, ch.path);
+            let times = r.scalars::<f32>(ch.times, &format!("{what} times"))?;
+            let v = r.get(ch.values, &format!("{what} values"))?;
+            if v.dtype != "<f4" || v.shape.len() != 2 || v.bytes.len() != v.shape[0] * v.shape[1] * 4 {
+                return Err(format!("{what} values: expected a <f4(keys, components) array, got {}{:?}", v.dtype, v.shape));
+            }
+            let values = v.bytes.chunks_exact(4).map(f32::read).collect();
+            let channel = ChannelIr { node: ch.node, path: ch.path, interpolation: ch.interpolation, components: v.shape[1] as u32, times, values };
+            // Rotation keys are normalised here as on import, so both routes write the same pack.
+            channels.push(crate::anim::validate_channel(channel).map_err(|e| format!("{what}: {e}"))?);
+        }
+        clips.push(ClipIr { name: clip.name.clone(), channels });
+    }
+    let bindings = w
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.skin.is_some() || n.weights.is_some())
+        .map(|(i, n)| pack::NodeBinding { node: i as u32, skin: n.skin, weights: n.weights.clone() })
+        .collect();
+    let nodes = w.nodes.into_iter().map(|n| Node { name: n.name, parent: n.parent, local: n.local, mesh: n.mesh }).collect();
+    let scene = SceneIr {
         name: w.name,
         source: w.source,
         meshes,
         materials: w.materials,
         textures,
-        nodes: w.nodes,
+        nodes,
         lights: w.lights,
         spawns: w.spawns,
         sky: w.sky,
         lightmap: w.lightmap,
         probes,
-    })
+        skins,
+        clips,
+        bindings,
+        warnings: w.warnings,
+    };
+    scene.check_animation()?;
+    Ok(scene)
 }
 
 struct Writer {
@@ -229,6 +338,11 @@ impl Writer {
         let mut bytes = Vec::with_capacity(rows.len() * K * T::SIZE);
         rows.iter().flatten().for_each(|v| v.write(&mut bytes));
         self.push(T::DTYPE, vec![rows.len(), K], bytes)
+    }
+    fn morphs(&mut self, m: &[Vec<[f32; 3]>]) -> usize {
+        let n = m.first().map_or(0, Vec::len);
+        let bytes = m.iter().flatten().flatten().flat_map(|x| x.to_le_bytes()).collect();
+        self.push("<f4", vec![m.len(), n, 3], bytes)
     }
     fn scalars<T: Elem>(&mut self, v: &[T]) -> usize {
         let mut bytes = Vec::with_capacity(v.len() * T::SIZE);
@@ -284,9 +398,12 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                         materials: w.scalars(&l.materials),
                         lightmap_pages: l.lightmap_pages.as_ref().map(|p| w.scalars(p)),
                         error: l.error,
+                        morph_positions: (!l.morph_positions.is_empty()).then(|| w.morphs(&l.morph_positions)),
+                        morph_normals: (!l.morph_normals.is_empty()).then(|| w.morphs(&l.morph_normals)),
                     }
                 })
                 .collect(),
+            morph_weights: m.morph_weights.clone(),
         })
         .collect();
     let textures = scene
@@ -321,12 +438,39 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         meshes,
         materials: scene.materials.clone(),
         textures,
-        nodes: scene.nodes.clone(),
+        nodes: scene
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                let b = scene.bindings.iter().find(|b| b.node as usize == i);
+                WireNode { name: n.name.clone(), parent: n.parent, local: n.local, mesh: n.mesh, skin: b.and_then(|b| b.skin), weights: b.and_then(|b| b.weights.clone()) }
+            })
+            .collect(),
         lights: scene.lights.clone(),
         spawns: scene.spawns.clone(),
         sky: scene.sky,
         lightmap: scene.lightmap.clone(),
         probes,
+        skins: scene.skins.iter().map(|s| WireSkin { name: s.name.clone(), joints: s.joints.clone(), inverse_bind: w.rows(&s.inverse_bind) }).collect(),
+        clips: scene
+            .clips
+            .iter()
+            .map(|c| WireClip {
+                name: c.name.clone(),
+                channels: c
+                    .channels
+                    .iter()
+                    .map(|ch| {
+                        let k = ch.components.max(1) as usize;
+                        let rows = ch.values.len() / k;
+                        let bytes = ch.values.iter().flat_map(|x| x.to_le_bytes()).collect();
+                        WireChannel { node: ch.node, path: ch.path, interpolation: ch.interpolation, times: w.scalars(&ch.times), values: w.push("<f4", vec![rows, k], bytes) }
+                    })
+                    .collect(),
+            })
+            .collect(),
+        warnings: scene.warnings.clone(),
     };
     (serde_json::to_string(&doc).expect("the IR always serialises"), w.arrays)
 }

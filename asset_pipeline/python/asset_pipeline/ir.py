@@ -49,6 +49,10 @@ class Lod:
     materials: np.ndarray  # (m,) uint32 material index per triangle
     lightmap_pages: np.ndarray | None = None  # (m,) uint32 atlas page per triangle, after uv2
     error: float = 0.0  # geometric error to LOD 0 in metres, object space (0 for LOD 0)
+    # Morph target deltas added to position/normal before skinning: (targets, n, 3) float32.
+    # Only LOD 0 carries them (the lod stage leaves meshes with morph targets at one level).
+    morph_positions: np.ndarray | None = None
+    morph_normals: np.ndarray | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -73,6 +77,9 @@ class Lod:
             raise IrError(f"{what}: triangles are {self.triangles.dtype}{self.triangles.shape}, expected uint32(m, 3)")
         if m and int(self.triangles.max()) >= n:
             raise IrError(f"{what}: a triangle index is >= the vertex count {n}")
+        for name, d in (("morph_positions", self.morph_positions), ("morph_normals", self.morph_normals)):
+            if d is not None and (d.dtype != np.float32 or d.ndim != 3 or d.shape[1:] != (n, 3)):
+                raise IrError(f"{what}: {name} is {d.dtype}{d.shape}, expected float32(targets, {n}, 3)")
         for name, arr in (("materials", self.materials), ("lightmap_pages", self.lightmap_pages)):
             if arr is not None and (arr.dtype != np.uint32 or arr.shape != (m,)):
                 raise IrError(f"{what}: {name} is {arr.dtype}{arr.shape}, expected uint32({m},)")
@@ -84,6 +91,7 @@ class Mesh:
     lods: list[Lod]  # lods[0] is the full-detail mesh; the lod stage appends the rest
     static: bool = True  # static level geometry: gets lightmap UVs and is baked
     texels_per_metre: float | None = None  # per-object override of the level's lightmap density
+    morph_weights: list[float] = field(default_factory=list)  # default weight per morph target
 
     @property
     def base(self) -> Lod:
@@ -141,6 +149,35 @@ class Node:
     parent: int | None = None  # parents precede children
     local: tuple[float, ...] = (1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1)
     mesh: int | None = None
+    skin: int | None = None  # the skin deforming this node's mesh
+    weights: tuple[float, ...] | None = None  # this instance's morph weights (overrides the mesh's)
+
+
+@dataclass
+class Skin:
+    name: str
+    joints: list[int]  # node indices; a vertex's joint j means joints[j]
+    inverse_bind: np.ndarray  # (len(joints), 16) float32, column-major
+
+
+@dataclass
+class Channel:
+    """One animated node property (pack::Channel). `path`: translation | rotation | scale |
+    weights; `interpolation`: step | linear | cubicspline. `times` (k,) float32 seconds, strictly
+    increasing; `values` (k, c) float32, or (3k, c) for cubicspline (in tangent, value, out
+    tangent per key)."""
+
+    node: int
+    path: str
+    interpolation: str
+    times: np.ndarray
+    values: np.ndarray
+
+
+@dataclass
+class Clip:
+    name: str
+    channels: list[Channel] = field(default_factory=list)
 
 
 @dataclass
@@ -211,6 +248,9 @@ class Scene:
     sky: Sky | None = None
     lightmap: LightmapLayout | None = None
     probes: ProbeGrid | None = None
+    skins: list[Skin] = field(default_factory=list)
+    clips: list[Clip] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # fixes the import made (one line each)
 
     def validate(self) -> None:
         for i, m in enumerate(self.meshes):
@@ -240,6 +280,8 @@ def _lod_doc(l: Lod, put) -> dict:
         "materials": put(l.materials),
         "lightmap_pages": None if l.lightmap_pages is None else put(l.lightmap_pages),
         "error": float(l.error),
+        "morph_positions": None if l.morph_positions is None else put(l.morph_positions),
+        "morph_normals": None if l.morph_normals is None else put(l.morph_normals),
     }
 
 
@@ -251,6 +293,8 @@ def _lod_from_doc(d: dict, arrays: list[np.ndarray]) -> Lod:
         materials=arrays[d["materials"]],
         lightmap_pages=None if pages is None else arrays[pages],
         error=d.get("error", 0.0),
+        morph_positions=None if d.get("morph_positions") is None else arrays[d["morph_positions"]],
+        morph_normals=None if d.get("morph_normals") is None else arrays[d["morph_normals"]],
     )
 
 
@@ -283,7 +327,8 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
     doc = {
         "name": scene.name,
         "source": scene.source,
-        "meshes": [{"name": m.name, "static": m.static, "texels_per_metre": m.texels_per_metre, "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
+        "meshes": [{"name": m.name, "static": m.static, "texels_per_metre": m.texels_per_metre, "morph_weights": [float(w) for w in m.morph_weights],
+                    "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
         "materials": [dataclasses.asdict(m) for m in scene.materials],
         "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "usage": t.usage, "mips": [put(m) for m in t.mips]} for t in scene.textures],
         "nodes": [dataclasses.asdict(n) for n in scene.nodes],
@@ -296,6 +341,12 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
             "sh": put(np.asarray(scene.probes.sh, np.float32).reshape(-1, 27)),
             "sun_visibility": put(np.asarray(scene.probes.sun_visibility, np.float32).reshape(-1)),
         },
+        "skins": [{"name": s.name, "joints": [int(j) for j in s.joints], "inverse_bind": put(np.asarray(s.inverse_bind, np.float32).reshape(-1, 16))} for s in scene.skins],
+        "clips": [{"name": c.name, "channels": [{"node": int(ch.node), "path": ch.path, "interpolation": ch.interpolation,
+                                                  "times": put(np.asarray(ch.times, np.float32).reshape(-1)),
+                                                  "values": put(np.asarray(ch.values, np.float32).reshape(len(ch.values), -1))}
+                                                 for ch in c.channels]} for c in scene.clips],
+        "warnings": list(scene.warnings),
     }
     return json.dumps(doc), arrays
 
@@ -313,13 +364,18 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     scene = Scene(
         name=doc["name"],
         source=doc["source"],
-        meshes=[Mesh(name=m["name"], static=m.get("static", True), texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]]) for m in doc["meshes"]],
+        meshes=[Mesh(name=m["name"], static=m.get("static", True), texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]],
+                     morph_weights=list(m.get("morph_weights", []))) for m in doc["meshes"]],
         materials=[tup(m, Material) for m in doc["materials"]],
         textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]], t.get("usage")) for t in doc["textures"]],
         nodes=[tup(n, Node) for n in doc["nodes"]],
         lights=[tup(l, Light) for l in doc.get("lights", [])],
         spawns=[tup(s, Spawn) for s in doc.get("spawns", [])],
         sky=None if doc.get("sky") is None else tup(doc["sky"], Sky),
+        skins=[Skin(s["name"], list(s["joints"]), arrays[s["inverse_bind"]]) for s in doc.get("skins", [])],
+        clips=[Clip(c["name"], [Channel(ch["node"], ch["path"], ch["interpolation"], arrays[ch["times"]], arrays[ch["values"]]) for ch in c["channels"]])
+               for c in doc.get("clips", [])],
+        warnings=list(doc.get("warnings", [])),
     )
     if doc.get("lightmap"):
         lm = doc["lightmap"]

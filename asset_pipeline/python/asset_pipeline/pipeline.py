@@ -171,6 +171,8 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
         bar.advance()
     rec.items, rec.seconds = 1, time.perf_counter() - t0
     stages.append(rec)
+    for w in scene.warnings:
+        progress.warning(w)
 
     uv2_stats: dict = {}
     if settings.lightmap_uvs and any(m.static for m in scene.meshes):
@@ -290,6 +292,12 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
     with progress.stage("lod", len(scene.meshes)) as bar:
         for m in scene.meshes:
             base = m.base
+            if base.morph_positions is not None:
+                # Morph deltas are per vertex and simplification merges vertices; until the lod
+                # stage carries them, a morphing mesh keeps its full detail only.
+                meshes.append(dataclasses.replace(m, lods=[base]))
+                bar.advance()
+                continue
             key = Hasher("lod").settings(doc)
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])

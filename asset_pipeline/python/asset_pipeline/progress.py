@@ -45,6 +45,12 @@ class Progress:
         if self.enabled:
             print(f"cook: {message}", file=self.stream, flush=True)
 
+    def warning(self, message: str) -> None:
+        """A problem the cook fixed on its own: shown even when progress is off (not with a
+        callback, whose caller reads `scene.warnings` itself)."""
+        if self.callback is None:
+            print(f"cook: warning: {message}", file=self.stream, flush=True)
+
     @contextmanager
     def stage(self, name: str, total: int):
         start = time.perf_counter()

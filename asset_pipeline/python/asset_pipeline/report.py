@@ -32,6 +32,12 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
     for m in scene.meshes:
         for i, lod in enumerate(m.lods):
             lines.append(_row(m.name if i == 0 else "", "yes" if m.static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
+    if scene.skins or scene.clips:
+        lines += ["", "## Animation", "", f"{len(scene.skins)} skin(s): " + ", ".join(f"{s.name} ({len(s.joints)} joints)" for s in scene.skins), ""]
+        lines += [_row("clip", "channels", "seconds"), _row("---", "---:", "---:")]
+        lines += [_row(c.name, len(c.channels), f"{max((float(ch.times[-1]) for ch in c.channels), default=0.0):.3f}") for c in scene.clips]
+    if scene.warnings:
+        lines += ["", "## Warnings", "", *(f"- {w}" for w in scene.warnings)]
     if scene.lightmap is not None:
         lm = scene.lightmap
         lines += ["", "## Lightmap atlas", "", f"Requested density {lm.texels_per_metre:g} texels/m, padding {lm.padding} texels, {len(lm.pages)} page(s).", ""]

@@ -18,15 +18,19 @@
 //! data_off   data
 //! ```
 //!
+//! Version 3 added the `animation` section (skins, clips, joints/weights, morph targets).
+//!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
 //! already in the layout the GPU consumes, so the runtime uploads them with one copy and no
 //! per-vertex parsing.
 
+mod anim;
 mod error;
 mod manifest;
 mod write;
 
+pub use anim::*;
 pub use error::PackError;
 pub use manifest::*;
 pub use write::{write_pack_atomic, PackBuilder};

@@ -80,6 +80,9 @@ pub struct Manifest {
     /// Baked irradiance probes; `None` when the level was not baked.
     #[serde(default)]
     pub probes: Option<ProbeGrid>,
+    /// Skins, clips and deforming meshes (see `anim.rs`); empty for static content.
+    #[serde(default)]
+    pub animation: crate::Animation,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -407,6 +410,7 @@ impl Manifest {
             in_data("probes sh", g.sh, n * 27 * 4)?;
             in_data("probes sun_visibility", g.sun_visibility, n * 4)?;
         }
+        self.animation.validate(self, &in_data)?;
         for (i, n) in self.nodes.iter().enumerate() {
             // Parents come before children, which also rules out cycles.
             if let Some(p) = n.parent {

@@ -248,3 +248,61 @@ fn concurrent_writes_to_one_path_never_leave_a_broken_file() {
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "temporary files left behind");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn push(p: &mut Pack, bytes: &[u8]) -> BufferRange {
+    let offset = align_up(p.data.len(), DATA_ALIGN);
+    p.data.resize(offset, 0);
+    p.data.extend_from_slice(bytes);
+    BufferRange { offset: offset as u64, len: bytes.len() as u64 }
+}
+
+/// `sample()` with a skinned, morphing quad: a joint node, a skin, joints/weights and one morph
+/// target on both LODs' 4 vertices, and a clip with a rotation and a weights channel.
+fn animated() -> Pack {
+    let mut p = sample();
+    p.manifest.nodes.push(Node { name: "bone".into(), parent: Some(0), local: IDENTITY, mesh: None });
+    let ibm = push(&mut p, &[0u8; 64]);
+    p.manifest.animation.skins.push(Skin { name: "rig".into(), joints: vec![1], inverse_bind: ibm });
+    let joints = push(&mut p, &[0u8; 4 * 8]);
+    let weights = push(&mut p, &[0u8; 4 * 16]);
+    let deltas = push(&mut p, &[0u8; 4 * 12]);
+    let lod = DeformLod { skin: Some(SkinWeights { joints, weights }), morph: Some(MorphTargets { positions: deltas, normals: None }) };
+    p.manifest.animation.meshes.push(DeformMesh { mesh: 0, morph_weights: vec![0.5], lods: vec![lod, lod] });
+    p.manifest.animation.nodes.push(NodeBinding { node: 0, skin: Some(0), weights: Some(vec![1.0]) });
+    let times = push(&mut p, &[0u8; 8]);
+    let rotations = push(&mut p, &[0u8; 2 * 16]);
+    let w = push(&mut p, &[0u8; 2 * 3 * 4]);
+    p.manifest.animation.clips.push(Clip {
+        name: "wave".into(),
+        duration: 1.0,
+        channels: vec![
+            Channel { node: 1, path: ChannelPath::Rotation, interpolation: Interpolation::Linear, key_count: 2, components: 4, times, values: rotations },
+            Channel { node: 0, path: ChannelPath::Weights, interpolation: Interpolation::Cubicspline, key_count: 2, components: 1, times, values: w },
+        ],
+    });
+    p
+}
+
+#[test]
+fn animation_section_round_trips_and_bad_references_are_rejected() {
+    let p = animated();
+    let q = Pack::from_bytes(&p.to_bytes().unwrap()).unwrap();
+    assert_eq!(p, q);
+
+    let bad = |edit: &dyn Fn(&mut Pack), want: &str| {
+        let mut p = animated();
+        edit(&mut p);
+        let e = p.to_bytes().unwrap_err().to_string();
+        assert!(e.contains(want), "expected '{want}' in: {e}");
+    };
+    bad(&|p| p.manifest.animation.clips[0].channels[0].key_count = 3, "clip 0 'wave' channel 0 (Rotation) times: 8 bytes stored but 12 expected");
+    bad(&|p| p.manifest.animation.clips[0].channels[1].values.len = 8, "clip 0 'wave' channel 1 (Weights) values");
+    bad(&|p| p.manifest.animation.clips[0].channels[0].node = 9, "clip 0 'wave' channel 0 (Rotation): node 9 does not exist");
+    bad(&|p| p.manifest.animation.clips[0].channels[1].components = 2, "channel 1 (Weights): 2 components, node 0 needs 1");
+    bad(&|p| p.manifest.animation.clips[0].channels[0].interpolation = Interpolation::Cubicspline, "channel 0 (Rotation) values");
+    bad(&|p| p.manifest.animation.skins[0].joints = vec![7], "skin 0 'rig': joint node 7 does not exist");
+    bad(&|p| p.manifest.animation.meshes[0].lods.pop().map(|_| ()).unwrap(), "deformation data for 1 LODs, the mesh has 2");
+    bad(&|p| p.manifest.animation.nodes[0].weights = Some(vec![1.0, 2.0]), "node 0 'root': 2 morph weights for 1 morph targets");
+    bad(&|p| p.manifest.animation.meshes[0].lods[1].skin = None, "node 0 'root': skin 0 does not exist or the node's mesh has no joints and weights");
+    bad(&|p| p.manifest.animation.meshes[0].lods[0].skin.as_mut().unwrap().weights.len = 48, "mesh 0 'quad' LOD 0 weights");
+}

@@ -16,6 +16,7 @@ use std::process::ExitCode;
 const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--device auto|cpu|gpu|NAME] [--validation]
             [--shadow-map-size N]
+       demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`)
   --headless           render offscreen even if a display is available
@@ -26,7 +27,9 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
-  --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)";
+  --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)
+  --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
+                       world matrices, joint matrices, morph weights, skinned LOD 0 vertices";
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
@@ -41,6 +44,8 @@ struct Args {
     device: DevicePreference,
     validation: bool,
     shadow_map_size: u32,
+    /// `--dump-pose PACK --clip NAME --time T`.
+    dump_pose: Option<(PathBuf, Option<String>, Option<f32>)>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -55,6 +60,7 @@ fn parse_args() -> Result<Args, String> {
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
         shadow_map_size: engine::shadow::DEFAULT_SHADOW_MAP_SIZE,
+        dump_pose: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -76,9 +82,17 @@ fn parse_args() -> Result<Args, String> {
             "--screenshot-every" => a.screenshot_every = Some(number("--screenshot-every", value("--screenshot-every")?)?),
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
             "--shadow-map-size" => a.shadow_map_size = number("--shadow-map-size", value("--shadow-map-size")?)?,
+            "--dump-pose" => a.dump_pose = Some((PathBuf::from(value("--dump-pose")?), None, None)),
+            "--clip" => a.dump_pose.as_mut().ok_or("--clip goes with --dump-pose")?.1 = Some(value("--clip")?),
+            "--time" => a.dump_pose.as_mut().ok_or("--time goes with --dump-pose")?.2 = Some(number("--time", value("--time")?)?),
             s if s.starts_with('-') => return Err(format!("unknown option '{s}'")),
             s if a.pack.is_none() => a.pack = Some(PathBuf::from(s)),
             s => return Err(format!("unexpected argument '{s}' (only one pack can be shown)")),
+        }
+    }
+    if let Some((_, clip, time)) = &a.dump_pose {
+        if clip.is_none() || !time.is_some_and(f32::is_finite) {
+            return Err("--dump-pose needs --clip NAME and a finite --time T".into());
         }
     }
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
@@ -122,6 +136,9 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if let Some((model, Some(clip), Some(time))) = &args.dump_pose {
+        return engine::anim::dump::run(model, clip, *time);
+    }
     let pack_path = resolve_pack(args.pack.clone());
     let pack = match pack::Pack::read_file(&pack_path) {
         Ok(p) => p,

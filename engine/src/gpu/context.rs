@@ -178,7 +178,9 @@ impl Gpu {
             .pipeline_statistics_query(caps.pipeline_statistics)
             .fragment_stores_and_atomics(caps.fragment_atomics)
             .sampler_anisotropy(caps.sampler_anisotropy.is_some());
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true).synchronization2(true);
+        // maintenance4 (required of every 1.3 device): glslc's Vulkan 1.3 compute shaders declare
+        // their workgroup size with LocalSizeId, which needs it.
+        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true).synchronization2(true).maintenance4(true);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default().host_query_reset(true);
         let dev_exts: Vec<*const c_char> =
             if want_swapchain { vec![ash::khr::swapchain::NAME.as_ptr()] } else { vec![] };

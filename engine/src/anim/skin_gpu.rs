@@ -1,0 +1,233 @@
+//! The skinning compute pass (`shaders/skin.comp`): bind-pose vertices, joints/weights, morph
+//! deltas and weights, and joint matrices in storage buffers; skinned vertices out, in the pack's
+//! vertex layout, in a buffer later passes bind as their vertex buffer. Per frame the caller
+//! writes joint matrices and morph weights into mapped memory (`update`, no allocation) and
+//! records one dispatch (`record`).
+
+use super::skin_cpu::DeformData;
+use crate::gpu::{Buffer, Gpu};
+use crate::shaders;
+use anyhow::{bail, Result};
+use ash::vk;
+use glam::Mat4;
+use gpu_allocator::MemoryLocation;
+use pack::Vertex;
+
+const BINDINGS: u32 = 8;
+const GROUP: u32 = 64;
+
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct Params {
+    vertex_count: u32,
+    target_count: u32,
+    skinned: u32,
+    morph_normals: u32,
+    joint_count: u32,
+}
+
+pub struct SkinPipeline {
+    pub set_layout: vk::DescriptorSetLayout,
+    pub layout: vk::PipelineLayout,
+    pub pipeline: vk::Pipeline,
+}
+
+impl SkinPipeline {
+    pub fn new(gpu: &Gpu) -> Result<SkinPipeline> {
+        let d = &gpu.device;
+        let bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..BINDINGS)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        unsafe {
+            let set_layout = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)?;
+            let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(std::mem::size_of::<Params>() as u32)];
+            let set_layouts = [set_layout];
+            let layout = d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?;
+            let module = shaders::module(d, shaders::SKIN_COMP)?;
+            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(module).name(c"main");
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+            let pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            d.destroy_shader_module(module, None);
+            let pipeline = pipeline.map_err(|(_, e)| e)?[0];
+            Ok(SkinPipeline { set_layout, layout, pipeline })
+        }
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        unsafe {
+            gpu.device.destroy_pipeline(self.pipeline, None);
+            gpu.device.destroy_pipeline_layout(self.layout, None);
+            gpu.device.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+/// One deforming mesh instance on the GPU: its inputs, its per-frame parameters and its output.
+pub struct SkinnedMesh {
+    params: Params,
+    joint_capacity: usize,
+    inputs: Vec<Buffer>,
+    morph_weights: Buffer,
+    joint_matrices: Buffer,
+    /// Skinned vertices (pack `Vertex` layout): bind as a vertex buffer after `record`.
+    pub output: Buffer,
+    pool: vk::DescriptorPool,
+    set: vk::DescriptorSet,
+}
+
+fn bytes_of<T: Copy>(v: &[T]) -> &[u8] {
+    // SAFETY: only used with plain-old-data element types (f32 arrays, u16 arrays, Vertex).
+    unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) }
+}
+
+/// A device-local storage buffer with `bytes`; an empty input gets 16 zero bytes, since unused
+/// bindings still need a buffer and copies of zero bytes are invalid.
+fn input(gpu: &Gpu, name: &str, bytes: &[u8]) -> Result<Buffer> {
+    let pad = [0u8; 16];
+    Buffer::with_data(gpu, name, if bytes.is_empty() { &pad } else { bytes }, vk::BufferUsageFlags::STORAGE_BUFFER)
+}
+
+impl SkinnedMesh {
+    /// Upload `data`; `joint_count` joint matrices per frame (1 for a mesh that is not skinned).
+    pub fn new(gpu: &Gpu, pipe: &SkinPipeline, data: &DeformData, joint_count: usize) -> Result<SkinnedMesh> {
+        let n = data.vertices.len();
+        if n == 0 {
+            bail!("a deforming mesh needs at least one vertex");
+        }
+        let joint_capacity = joint_count.max(1);
+        let joints: Vec<u16> = data.joints.iter().flatten().flatten().copied().collect();
+        let weights: Vec<f32> = data.weights.iter().flatten().flatten().copied().collect();
+        let inputs = vec![
+            input(gpu, "skin bind vertices", pack::Vertex::slice_as_bytes(&data.vertices))?,
+            input(gpu, "skin joints", bytes_of(&joints))?,
+            input(gpu, "skin weights", bytes_of(&weights))?,
+            input(gpu, "morph positions", bytes_of(&data.morph_positions))?,
+            input(gpu, "morph normals", bytes_of(&data.morph_normals))?,
+        ];
+        let host = |name: &str, size: usize| Buffer::new(gpu, name, size.max(16) as u64, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::CpuToGpu);
+        let mut morph_weights = host("morph weights", data.targets * 4)?;
+        morph_weights.mapped().fill(0);
+        let mut joint_matrices = host("joint matrices", joint_capacity * 64)?;
+        joint_matrices.mapped().copy_from_slice(bytes_of(&vec![Mat4::IDENTITY; joint_capacity]));
+        let output = Buffer::new(
+            gpu,
+            "skinned vertices",
+            (n * pack::VERTEX_STRIDE) as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::GpuOnly,
+        )?;
+        let d = &gpu.device;
+        let sizes = [vk::DescriptorPoolSize {
+            ty: vk::DescriptorType::STORAGE_BUFFER,
+            descriptor_count: BINDINGS,
+        }];
+        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)? };
+        let layouts = [pipe.set_layout];
+        let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
+        let all: Vec<vk::Buffer> = inputs.iter().map(|b| b.buffer).chain([morph_weights.buffer, joint_matrices.buffer, output.buffer]).collect();
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = all
+            .iter()
+            .map(|&b| {
+                [vk::DescriptorBufferInfo {
+                    buffer: b,
+                    offset: 0,
+                    range: vk::WHOLE_SIZE,
+                }]
+            })
+            .collect();
+        let writes: Vec<vk::WriteDescriptorSet> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(i as u32)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        unsafe { d.update_descriptor_sets(&writes, &[]) };
+        let params = Params {
+            vertex_count: n as u32,
+            target_count: data.targets as u32,
+            skinned: data.joints.is_some() as u32,
+            morph_normals: !data.morph_normals.is_empty() as u32,
+            joint_count: joint_capacity as u32,
+        };
+        Ok(SkinnedMesh {
+            params,
+            joint_capacity,
+            inputs,
+            morph_weights,
+            joint_matrices,
+            output,
+            pool,
+            set,
+        })
+    }
+
+    /// This frame's joint matrices (global x inverse bind; for an unskinned mesh, its node's
+    /// world matrix) and morph weights, written straight into mapped memory.
+    pub fn update(&mut self, joint_matrices: &[Mat4], morph_weights: &[f32]) {
+        let j = joint_matrices.len().min(self.joint_capacity);
+        self.joint_matrices.mapped()[..j * 64].copy_from_slice(bytes_of(&joint_matrices[..j]));
+        let w = morph_weights.len().min(self.params.target_count as usize);
+        self.morph_weights.mapped()[..w * 4].copy_from_slice(bytes_of(&morph_weights[..w]));
+    }
+
+    /// Record the dispatch and a barrier that makes the output readable as vertices, by
+    /// compute shaders and by copies.
+    pub fn record(&self, gpu: &Gpu, pipe: &SkinPipeline, cb: vk::CommandBuffer) {
+        let d = &gpu.device;
+        unsafe {
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, pipe.pipeline);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.set], &[]);
+            d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytes_of(std::slice::from_ref(&self.params)));
+            d.cmd_dispatch(cb, self.params.vertex_count.div_ceil(GROUP), 1, 1);
+            let barrier = [vk::MemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
+                .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+                .dst_stage_mask(vk::PipelineStageFlags2::VERTEX_ATTRIBUTE_INPUT | vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::COPY)
+                .dst_access_mask(vk::AccessFlags2::VERTEX_ATTRIBUTE_READ | vk::AccessFlags2::SHADER_STORAGE_READ | vk::AccessFlags2::TRANSFER_READ)];
+            d.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&barrier));
+        }
+    }
+
+    /// Run the pass once and copy the output back (tests and tools; waits for the GPU).
+    pub fn run_and_read_back(&self, gpu: &Gpu, pipe: &SkinPipeline) -> Result<Vec<Vertex>> {
+        let size = self.output.size;
+        let mut readback = Buffer::new(gpu, "skin readback", size, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
+        let run = gpu.one_shot(|cb| unsafe {
+            self.record(gpu, pipe, cb);
+            gpu.device.cmd_copy_buffer(cb, self.output.buffer, readback.buffer, &[vk::BufferCopy::default().size(size)]);
+            let to_host = [vk::MemoryBarrier2::default()
+                .src_stage_mask(vk::PipelineStageFlags2::COPY)
+                .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+                .dst_stage_mask(vk::PipelineStageFlags2::HOST)
+                .dst_access_mask(vk::AccessFlags2::HOST_READ)];
+            gpu.device.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&to_host));
+        });
+        let out = run.map(|_| {
+            let bytes = readback.mapped_ref();
+            (0..self.params.vertex_count as usize)
+                // SAFETY: the buffer holds vertex_count 64-byte vertices written by the shader.
+                .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * 64..].as_ptr() as *const Vertex) })
+                .collect()
+        });
+        readback.destroy(gpu);
+        out
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
+        for b in self.inputs.iter_mut().chain([&mut self.morph_weights, &mut self.joint_matrices, &mut self.output]) {
+            b.destroy(gpu);
+        }
+    }
+}
