@@ -8,6 +8,7 @@ pub mod lod_select;
 pub mod renderer;
 pub mod scene;
 pub mod shaders;
+pub mod sim;
 pub mod stats;
 pub mod visibility;
 pub mod window;
