@@ -13,9 +13,10 @@
 //!   |Δv| ≤ accel_max·h with no speed_min. At speed_min a boid turns rather than slows.
 //! - State is double-buffered: every boid reads the previous step and writes the next, so the
 //!   result does not depend on the order boids are updated in. Each boid's neighbour list is
-//!   sorted by index before use (and capped to the lowest `max_neighbours`), so the sums run in
-//!   the same order however the neighbours were found: the grid and the brute-force scan give
-//!   the same bits, for any number of threads.
+//!   sorted by (distance, index) before use and capped to the nearest `max_neighbours`, so the
+//!   sums run in the same order however the neighbours were found: the grid and the brute-force
+//!   scan give the same bits, for any number of threads. Nearest first, because in a dense
+//!   cluster the neighbour that matters for separation is the closest one.
 //! - Banking: a boid rolls into a turn by atan(a_lateral / g) (a coordinated turn), smoothed with
 //!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
 
@@ -47,7 +48,7 @@ pub struct BoidParams {
     pub neighbour_radius: f32,
     /// Separation acts on neighbours closer than this (at most `neighbour_radius`).
     pub separation_radius: f32,
-    /// 0: every neighbour; otherwise the lowest-index ones, bounding the cost in dense flocks.
+    /// 0: every neighbour; otherwise the nearest ones, bounding the cost in dense flocks.
     pub max_neighbours: u32,
     pub separation_weight: f32,
     pub alignment_weight: f32,
@@ -366,7 +367,7 @@ impl Flock {
             .into_par_iter()
             .enumerate()
             .map_init(
-                || Vec::with_capacity(64),
+                || (Vec::with_capacity(64), Vec::with_capacity(64)),
                 |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
                     let mut counts = StepCounters::default();
                     for k in 0..px.len() {
@@ -402,28 +403,32 @@ struct StepContext<'a> {
 
 impl StepContext<'_> {
     /// The next position, velocity and roll of boid `i`.
-    fn boid(&self, i: usize, scratch: &mut Vec<u32>, counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
+    fn boid(&self, i: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
         let (p, s) = (self.p, self.cur);
         let (pos, vel) = (s.position(i), s.velocity(i));
 
-        scratch.clear();
+        let (found, keys) = scratch;
+        found.clear();
         match self.search {
-            NeighbourSearch::Grid => counts.examined += self.grid.neighbours(pos, self.radius, Some(i as u32), scratch) as u64,
+            NeighbourSearch::Grid => counts.examined += self.grid.neighbours(pos, self.radius, Some(i as u32), found) as u64,
             NeighbourSearch::BruteForce => {
-                brute_force_neighbours(&s.px, &s.py, &s.pz, pos, self.radius, Some(i as u32), scratch);
+                brute_force_neighbours(&s.px, &s.py, &s.pz, pos, self.radius, Some(i as u32), found);
                 counts.examined += s.len() as u64;
             }
         }
-        scratch.sort_unstable();
+        // Key: squared distance (non-negative, so its bits order as the numbers) above the index.
+        keys.clear();
+        keys.extend(found.iter().map(|&j| ((pos - s.position(j as usize)).length_squared().to_bits() as u64) << 32 | j as u64));
+        keys.sort_unstable();
         if p.max_neighbours > 0 {
-            scratch.truncate(p.max_neighbours as usize);
+            keys.truncate(p.max_neighbours as usize);
         }
-        counts.neighbours += scratch.len() as u64;
+        counts.neighbours += keys.len() as u64;
 
         let (r2, sep2) = (p.neighbour_radius * p.neighbour_radius, p.separation_radius * p.separation_radius);
         let (mut sep, mut sum_v, mut sum_p, mut count) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0u32);
-        for &j in scratch.iter() {
-            let j = j as usize;
+        for &key in keys.iter() {
+            let j = key as u32 as usize;
             let d = pos - s.position(j);
             let d2 = d.length_squared();
             if d2 < sep2 && d2 > 0.0 {
