@@ -4,7 +4,7 @@
 use engine::sim::boids::{allocate, boid_rotation, limit_speed, Aabb, BoidParams, Flock, FlockState, NeighbourSearch, Pillar};
 use engine::sim::clock::{ClockParams, FixedClock};
 use engine::sim::grid::{brute_force_neighbours, Grid};
-use engine::sim::particles::{Attractor, Billboard, Blend, EmitterParams, ParticleSystem, Preset};
+use engine::sim::particles::{Attractor, Billboard, BillboardScratch, Blend, EmitterParams, ParticleSystem, Preset};
 use engine::sim::rng::Rng;
 use glam::Vec3;
 
@@ -261,8 +261,8 @@ fn billboards_come_back_to_front_for_alpha_and_in_storage_order_for_additive() {
     let n = s.particles.len();
     assert!(n > 5000);
     let (camera, forward) = (Vec3::new(3.0, 1.0, 4.0), Vec3::new(-0.6, 0.0, -0.8));
-    let (mut out, mut keys) = (Vec::new(), Vec::new());
-    s.fill_billboards(camera, forward, 0.0, &mut out, &mut keys);
+    let (mut out, mut scratch) = (Vec::new(), BillboardScratch::default());
+    s.fill_billboards(camera, forward, 0.0, &mut out, &mut scratch);
     assert_eq!(out.len(), n);
     let depth = |b: &Billboard| (Vec3::from(b.position) - camera).dot(forward);
     assert!(out.windows(2).all(|w| depth(&w[0]) >= depth(&w[1])), "not back to front");
@@ -274,7 +274,7 @@ fn billboards_come_back_to_front_for_alpha_and_in_storage_order_for_additive() {
     assert_eq!(xs, want);
 
     s.params.blend = Blend::Additive;
-    s.fill_billboards(camera, forward, 0.0, &mut out, &mut keys);
+    s.fill_billboards(camera, forward, 0.0, &mut out, &mut scratch);
     for i in [0, n / 2, n - 1] {
         let t = s.particles.age[i] / s.particles.life[i];
         assert_eq!(out[i].position, s.particles.position(i).to_array());
@@ -282,7 +282,7 @@ fn billboards_come_back_to_front_for_alpha_and_in_storage_order_for_additive() {
         assert_eq!(out[i].color, s.params.color.eval(t));
     }
     // Extrapolation moves a billboard along its velocity.
-    s.fill_billboards(camera, forward, 0.5, &mut out, &mut keys);
+    s.fill_billboards(camera, forward, 0.5, &mut out, &mut scratch);
     let moved = s.particles.position(0) + s.particles.velocity(0) * 0.5;
     assert!((Vec3::from(out[0].position) - moved).length() < 1e-5);
 }

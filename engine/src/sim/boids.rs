@@ -21,7 +21,7 @@
 //!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
 
 use super::grid::{brute_force_neighbours, Grid};
-use super::rng::{hash, unit_f32};
+use super::rng::hash;
 use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -187,6 +187,8 @@ pub struct Flock {
     pub params: BoidParams,
     cur: FlockState,
     next: FlockState,
+    /// The next state in the grid's cell order, before it is gathered into `next`.
+    sorted: FlockState,
     grid: Grid,
     pub steps: u64,
     pub last: StepCounters,
@@ -313,6 +315,7 @@ impl Flock {
         Flock {
             params,
             next: FlockState::default(),
+            sorted: FlockState::default(),
             cur: state,
             grid: Grid::new(),
             steps: 0,
@@ -344,7 +347,13 @@ impl Flock {
             self.grid.build(&self.cur.px, &self.cur.py, &self.cur.pz, radius);
         }
         self.next.resize_like(&self.cur);
+        self.sorted.resize_like(&self.cur);
         let t = self.steps as f32 * h;
+        let max_bank = p.bank_max_deg.to_radians();
+        let bank_follow = if p.bank_response_s > 0.0 { 1.0 - (-h / p.bank_response_s).exp() } else { 1.0 };
+        // With the grid, boids are updated in cell order (neighbouring boids share cells, so
+        // their queries hit the same cache lines) into `sorted`, then gathered back.
+        let order = (search == NeighbourSearch::Grid).then(|| self.grid.order());
         let ctx = StepContext {
             p,
             cur: &self.cur,
@@ -353,8 +362,10 @@ impl Flock {
             radius,
             h,
             t,
+            max_bank,
+            bank_follow,
         };
-        let n = &mut self.next;
+        let n = if order.is_some() { &mut self.sorted } else { &mut self.next };
         let counters = (
             n.px.par_chunks_mut(CHUNK),
             n.py.par_chunks_mut(CHUNK),
@@ -371,7 +382,8 @@ impl Flock {
                 |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
                     let mut counts = StepCounters::default();
                     for k in 0..px.len() {
-                        let (pos, vel, r) = ctx.boid(c * CHUNK + k, scratch, &mut counts);
+                        let i = order.map_or(c * CHUNK + k, |o| o[c * CHUNK + k] as usize);
+                        let (pos, vel, r) = ctx.boid(i, scratch, &mut counts);
                         (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
                         (vx[k], vy[k], vz[k]) = (vel.x, vel.y, vel.z);
                         roll[k] = r;
@@ -384,6 +396,21 @@ impl Flock {
                 neighbours: a.neighbours + b.neighbours,
             });
         self.last = counters;
+        if order.is_some() {
+            let rank = self.grid.rank();
+            let (src, dst) = (&self.sorted, &mut self.next);
+            for (d, s) in [
+                (&mut dst.px, &src.px),
+                (&mut dst.py, &src.py),
+                (&mut dst.pz, &src.pz),
+                (&mut dst.vx, &src.vx),
+                (&mut dst.vy, &src.vy),
+                (&mut dst.vz, &src.vz),
+                (&mut dst.roll, &src.roll),
+            ] {
+                d.par_iter_mut().zip(rank.par_iter()).with_min_len(4096).for_each(|(d, &r)| *d = s[r as usize]);
+            }
+        }
         std::mem::swap(&mut self.cur, &mut self.next);
         self.steps += 1;
     }
@@ -399,6 +426,9 @@ struct StepContext<'a> {
     h: f32,
     /// Simulated time at the start of the step.
     t: f32,
+    max_bank: f32,
+    /// Fraction of the way the roll moves to its target in one step.
+    bank_follow: f32,
 }
 
 impl StepContext<'_> {
@@ -462,10 +492,8 @@ impl StepContext<'_> {
         // Bank into the turn: the lateral part of the acceleration actually applied.
         let applied = (v - vel) / self.h;
         let right = v.cross(Vec3::Y).try_normalize();
-        let max = p.bank_max_deg.to_radians();
-        let target = right.map_or(0.0, |r| (applied.dot(r) / GRAVITY).atan().clamp(-max, max));
-        let follow = if p.bank_response_s > 0.0 { 1.0 - (-self.h / p.bank_response_s).exp() } else { 1.0 };
-        let roll = s.roll[i] + (target - s.roll[i]) * follow;
+        let target = right.map_or(0.0, |r| (applied.dot(r) / GRAVITY).atan().clamp(-self.max_bank, self.max_bank));
+        let roll = s.roll[i] + (target - s.roll[i]) * self.bank_follow;
         (next_pos, v, roll)
     }
 
@@ -494,7 +522,9 @@ impl StepContext<'_> {
     }
 
     /// Seek the goal, or wander: steer toward speed_max along a heading that blends between
-    /// random directions drawn from (seed, boid, period), so no generator state is shared.
+    /// random directions drawn from (seed, boid, period), so no generator state is shared. The
+    /// directions are normalised points of a cube, not uniform on the sphere (a little more
+    /// often diagonal): no trigonometry per boid, and a wander needs no better.
     fn goal(&self, i: usize, pos: Vec3, vel: Vec3) -> Vec3 {
         let p = self.p;
         if let Some(g) = p.goal {
@@ -508,11 +538,10 @@ impl StepContext<'_> {
         let k = phase.floor();
         let w = phase - k;
         let heading = |period: u64| {
-            let base = hash(p.seed ^ hash((i as u64) << 32 ^ period));
-            let z = unit_f32(base) * 2.0 - 1.0;
-            let phi = unit_f32(hash(base)) * std::f32::consts::TAU;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            Vec3::new(r * phi.cos(), z, r * phi.sin())
+            let bits = hash(p.seed ^ hash((i as u64) << 32 ^ period));
+            // Three 21-bit coordinates in [-1, 1).
+            let c = |shift: u32| ((bits >> shift) & 0x1F_FFFF) as f32 * (2.0 / (1u32 << 21) as f32) - 1.0;
+            Vec3::new(c(0), c(21), c(42))
         };
         let smooth = w * w * (3.0 - 2.0 * w);
         let dir = heading(k as u64).lerp(heading(k as u64 + 1), smooth).try_normalize().unwrap_or(Vec3::X);

@@ -27,6 +27,8 @@ pub struct Grid {
     /// Points of cell c are `order[cell_start[c]..cell_start[c + 1]]`.
     cell_start: Vec<u32>,
     order: Vec<u32>,
+    /// Inverse of `order`: where point i sits in it.
+    rank: Vec<u32>,
     /// Positions in `order`'s order.
     sx: Vec<f32>,
     sy: Vec<f32>,
@@ -39,8 +41,12 @@ pub struct Grid {
 const CELLS_PER_POINT: usize = 8;
 const MIN_CELLS: usize = 4096;
 
+/// floor(v / cell). Truncation, one down for negatives with a fraction: `f32::floor` is a libm
+/// call without SSE4.1, and this runs for every point and query.
 fn cell_coord(v: f32, cell: f32) -> i32 {
-    (v / cell).floor() as i32
+    let t = v / cell;
+    let i = t as i32;
+    i - ((i as f32) > t) as i32
 }
 
 impl Grid {
@@ -51,6 +57,16 @@ impl Grid {
     /// The cell edge actually used (at least the build radius).
     pub fn cell_size(&self) -> f32 {
         self.cell
+    }
+
+    /// Point indices in cell order (ascending within a cell).
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// Position of each point in `order`.
+    pub fn rank(&self) -> &[u32] {
+        &self.rank
     }
 
     pub fn cell_count(&self) -> usize {
@@ -111,6 +127,10 @@ impl Grid {
         cursor[cells] = n as u32;
         self.cell_start = cursor;
 
+        self.rank.resize(n, 0);
+        for (k, &i) in self.order.iter().enumerate() {
+            self.rank[i as usize] = k as u32;
+        }
         for (dst, src) in [(&mut self.sx, px), (&mut self.sy, py), (&mut self.sz, pz)] {
             dst.resize(n, 0.0);
             let order = &self.order;

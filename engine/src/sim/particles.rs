@@ -16,10 +16,11 @@
 //!   its normal velocity reflected and scaled by the restitution e and its tangential velocity
 //!   scaled by (1 − friction). A bounce apex is therefore about e² of the previous one.
 //! - Particles are independent, so the parallel update gives the same bits for any thread count;
-//!   the only random draws are at spawn, on one seeded generator per emitter.
+//!   the only random draws are at spawn, from a generator per particle seeded by the emitter's
+//!   seed and the particle's spawn number.
 
 use super::curve::{Curve, Gradient};
-use super::rng::Rng;
+use super::rng::{hash, Rng};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -301,7 +302,8 @@ pub struct ParticleSystem {
     pub params: EmitterParams,
     pub particles: Particles,
     pub counters: ParticleCounters,
-    rng: Rng,
+    /// Spawns so far, dropped ones included: the next particle's generator seed.
+    spawn_index: u64,
     /// Fractional spawns carried to the next step.
     spawn_carry: f64,
 }
@@ -314,7 +316,7 @@ impl ParticleSystem {
     pub fn new(params: EmitterParams) -> ParticleSystem {
         let particles = Particles::with_capacity(params.capacity as usize);
         ParticleSystem {
-            rng: Rng::new(params.seed),
+            spawn_index: 0,
             params,
             particles,
             counters: ParticleCounters::default(),
@@ -336,11 +338,18 @@ impl ParticleSystem {
         // Exact drag: the velocity decays by c1 and the constant forces act through c2 (h when
         // there is no drag, its limit).
         let c1 = (-k * h).exp();
-        let c2 = if k * h > 1e-6 { (1.0 - c1) / k } else { h };
-        let g = Vec3::from(p.gravity) + k * Vec3::from(p.wind);
-        let (ks, centre) = p.attractor.map_or((0.0, Vec3::ZERO), |a| (a.stiffness_per_s2, Vec3::from(a.position)));
-        let ground = p.ground_y;
-        let (e, keep_tangent) = (p.restitution, 1.0 - p.friction.clamp(0.0, 1.0));
+        let step = Motion {
+            h,
+            c1,
+            c2: if k * h > 1e-6 { (1.0 - c1) / k } else { h },
+            g: Vec3::from(p.gravity) + k * Vec3::from(p.wind),
+            spring: p.attractor.map_or(0.0, |a| a.stiffness_per_s2),
+            centre: p.attractor.map_or(Vec3::ZERO, |a| Vec3::from(a.position)),
+            // No ground is a ground at −∞: the loop has no branch on it.
+            ground: p.ground_y.unwrap_or(f32::NEG_INFINITY),
+            restitution: p.restitution,
+            keep_tangent: 1.0 - p.friction.clamp(0.0, 1.0),
+        };
         let n = self.particles.len;
         let s = &mut self.particles;
         (
@@ -353,30 +362,7 @@ impl ParticleSystem {
             s.age[..n].par_chunks_mut(CHUNK),
         )
             .into_par_iter()
-            .for_each(|(px, py, pz, vx, vy, vz, age)| {
-                for i in 0..px.len() {
-                    age[i] += h;
-                    let ax = g.x - ks * (px[i] - centre.x);
-                    let ay = g.y - ks * (py[i] - centre.y);
-                    let az = g.z - ks * (pz[i] - centre.z);
-                    vx[i] = c1 * vx[i] + c2 * ax;
-                    vy[i] = c1 * vy[i] + c2 * ay;
-                    vz[i] = c1 * vz[i] + c2 * az;
-                    px[i] += h * vx[i];
-                    py[i] += h * vy[i];
-                    pz[i] += h * vz[i];
-                    if let Some(y0) = ground {
-                        if py[i] < y0 {
-                            py[i] = y0;
-                            if vy[i] < 0.0 {
-                                vy[i] *= -e;
-                            }
-                            vx[i] *= keep_tangent;
-                            vz[i] *= keep_tangent;
-                        }
-                    }
-                }
-            });
+            .for_each(|(px, py, pz, vx, vy, vz, age)| step.run(px, py, pz, vx, vy, vz, age));
     }
 
     /// Swap-removes every particle that reached its lifetime: after a step, age < life for all.
@@ -397,71 +383,153 @@ impl ParticleSystem {
     fn spawn(&mut self, h: f32) {
         let p = &self.params;
         self.spawn_carry += p.rate_per_s.max(0.0) as f64 * h as f64;
-        let n = (self.spawn_carry + SPAWN_TOLERANCE).floor();
-        self.spawn_carry -= n;
+        let n = (self.spawn_carry + SPAWN_TOLERANCE).floor() as u64;
+        self.spawn_carry -= n as f64;
+        let s = &mut self.particles;
+        let (start, room) = (s.len, s.capacity() - s.len);
+        let take = (n as usize).min(room);
+        let first = self.spawn_index;
+        // Dropped spawns use up their numbers too, so the particles after a full spell are the
+        // same whether or not it happened.
+        self.spawn_index += n;
+        self.counters.spawned += take as u64;
+        self.counters.dropped += n - take as u64;
         let axis = Vec3::from(p.direction).try_normalize().unwrap_or(Vec3::Y);
         let half = p.cone_half_angle_deg.to_radians();
-        for _ in 0..n as u64 {
-            // Draw every value even when full, so the stream (and the particles after the
-            // emitter drains) does not depend on how many were dropped.
-            let offset = if p.spawn_radius > 0.0 {
-                self.rng.unit_vector() * (p.spawn_radius * self.rng.f32().cbrt())
-            } else {
-                Vec3::ZERO
-            };
-            let v = self.rng.cone(axis, half) * self.rng.range(p.speed_min, p.speed_max);
-            let life = self.rng.range(p.life_min_s, p.life_max_s);
-            if self.particles.push(Vec3::from(p.position) + offset, v, life) {
-                self.counters.spawned += 1;
-            } else {
-                self.counters.dropped += 1;
-            }
-        }
+        let origin = Vec3::from(p.position);
+        let seed = hash(p.seed);
+        let end = start + take;
+        // Each new particle draws from its own generator, seeded by its spawn number: the draws
+        // run in parallel and come out the same for any thread count.
+        (
+            s.px[start..end].par_chunks_mut(CHUNK),
+            s.py[start..end].par_chunks_mut(CHUNK),
+            s.pz[start..end].par_chunks_mut(CHUNK),
+            s.vx[start..end].par_chunks_mut(CHUNK),
+            s.vy[start..end].par_chunks_mut(CHUNK),
+            s.vz[start..end].par_chunks_mut(CHUNK),
+            s.age[start..end].par_chunks_mut(CHUNK),
+            s.life[start..end].par_chunks_mut(CHUNK),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(c, (px, py, pz, vx, vy, vz, age, life))| {
+                for k in 0..px.len() {
+                    let mut rng = Rng::new(hash(seed ^ (first + (c * CHUNK + k) as u64)));
+                    let offset = if p.spawn_radius > 0.0 {
+                        rng.unit_vector() * (p.spawn_radius * rng.f32().cbrt())
+                    } else {
+                        Vec3::ZERO
+                    };
+                    let pos = origin + offset;
+                    let v = rng.cone(axis, half) * rng.range(p.speed_min, p.speed_max);
+                    (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
+                    (vx[k], vy[k], vz[k]) = (v.x, v.y, v.z);
+                    (age[k], life[k]) = (0.0, rng.range(p.life_min_s, p.life_max_s));
+                }
+            });
+        s.len = end;
     }
 
     /// Fills `out` with one billboard per live particle: size and colour from the curves at the
     /// particle's normalised age, position moved on by `extrapolate_s` of its velocity (the
     /// clock's alpha times the step, so motion is smooth between steps). Alpha-blended emitters
-    /// come out back to front along `view_forward` from `camera` (ties broken by index, so the
-    /// order is deterministic); additive ones in storage order. `keys` is scratch for the sort;
-    /// both vectors keep their allocation between frames.
-    pub fn fill_billboards(&self, camera: Vec3, view_forward: Vec3, extrapolate_s: f32, out: &mut Vec<Billboard>, keys: &mut Vec<u64>) {
+    /// come out back to front along `view_forward` from `camera` (ties broken by storage index,
+    /// so the order is deterministic); additive ones in storage order. `out` and `scratch` keep
+    /// their allocations between frames.
+    pub fn fill_billboards(&self, camera: Vec3, view_forward: Vec3, extrapolate_s: f32, out: &mut Vec<Billboard>, scratch: &mut BillboardScratch) {
         let s = &self.particles;
-        let n = s.len;
         let p = &self.params;
-        let at = |i: usize| s.position(i) + s.velocity(i) * extrapolate_s;
-        let make = |i: usize| {
-            let t = s.age[i] / s.life[i];
-            Billboard {
-                position: at(i).to_array(),
-                size: p.size.eval(t),
-                color: p.color.eval(t),
-            }
-        };
-        out.clear();
-        out.resize(n, Billboard::default());
-        match p.blend {
-            Blend::Additive => out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
+        let fill = |dst: &mut Vec<Billboard>| {
+            dst.clear();
+            dst.resize(s.len, Billboard::default());
+            dst.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
                 for (j, b) in chunk.iter_mut().enumerate() {
-                    *b = make(c * CHUNK + j);
+                    let i = c * CHUNK + j;
+                    let t = s.age[i] / s.life[i];
+                    let at = s.position(i) + s.velocity(i) * extrapolate_s;
+                    *b = Billboard {
+                        position: at.to_array(),
+                        size: p.size.eval(t),
+                        color: p.color.eval(t),
+                    };
                 }
-            }),
+            });
+        };
+        match p.blend {
+            Blend::Additive => fill(out),
             Blend::Alpha => {
+                // Build in storage order (streaming through the particle arrays), sort 8-byte
+                // keys, then move each 32-byte billboard once: gathering straight from the eight
+                // particle arrays in sorted order would miss the cache eight times per particle.
+                let src = &mut scratch.unsorted;
+                fill(src);
                 // Key: depth descending in the high half (farthest first), index in the low.
+                let keys = &mut scratch.keys;
                 keys.clear();
-                keys.par_extend((0..n).into_par_iter().with_min_len(CHUNK).map(|i| {
-                    let depth = (at(i) - camera).dot(view_forward);
+                keys.par_extend(src.par_iter().enumerate().with_min_len(CHUNK).map(|(i, b)| {
+                    let depth = (Vec3::from(b.position) - camera).dot(view_forward);
                     ((!ordered_bits(depth) as u64) << 32) | i as u64
                 }));
                 keys.par_sort_unstable();
-                out.par_chunks_mut(CHUNK).zip(keys.par_chunks(CHUNK)).for_each(|(chunk, ks)| {
-                    for (b, &key) in chunk.iter_mut().zip(ks) {
-                        *b = make(key as u32 as usize);
-                    }
-                });
+                out.clear();
+                out.par_extend(keys.par_iter().with_min_len(CHUNK).map(|&k| src[k as u32 as usize]));
             }
         }
     }
+}
+
+/// One step of motion for a chunk of particles, the constants of `integrate` folded in.
+struct Motion {
+    h: f32,
+    c1: f32,
+    c2: f32,
+    g: Vec3,
+    spring: f32,
+    centre: Vec3,
+    ground: f32,
+    restitution: f32,
+    keep_tangent: f32,
+}
+
+impl Motion {
+    /// A function of its own so the slices arrive as distinct `&mut` arguments: the compiler
+    /// then knows they do not alias and vectorises the loop (inlined into the closure, it did
+    /// not). The lengths are stated once, so the loop has no bounds checks.
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn run(&self, px: &mut [f32], py: &mut [f32], pz: &mut [f32], vx: &mut [f32], vy: &mut [f32], vz: &mut [f32], age: &mut [f32]) {
+        let m = px.len();
+        let (py, pz, vx, vy, vz, age) = (&mut py[..m], &mut pz[..m], &mut vx[..m], &mut vy[..m], &mut vz[..m], &mut age[..m]);
+        let (h, c1, c2, g, ks, c) = (self.h, self.c1, self.c2, self.g, self.spring, self.centre);
+        for i in 0..m {
+            age[i] += h;
+            let mut v = [
+                c1 * vx[i] + c2 * (g.x - ks * (px[i] - c.x)),
+                c1 * vy[i] + c2 * (g.y - ks * (py[i] - c.y)),
+                c1 * vz[i] + c2 * (g.z - ks * (pz[i] - c.z)),
+            ];
+            let mut y = py[i] + h * v[1];
+            // Selects rather than branches (`&`, not `&&`), for the same reason.
+            let hit = y < self.ground;
+            let keep = if hit { self.keep_tangent } else { 1.0 };
+            v[1] = if hit & (v[1] < 0.0) { -self.restitution * v[1] } else { v[1] };
+            y = if hit { self.ground } else { y };
+            px[i] += h * v[0];
+            pz[i] += h * v[2];
+            py[i] = y;
+            vx[i] = v[0] * keep;
+            vy[i] = v[1];
+            vz[i] = v[2] * keep;
+        }
+    }
+}
+
+/// Reusable buffers for `fill_billboards`'s sort.
+#[derive(Debug, Clone, Default)]
+pub struct BillboardScratch {
+    keys: Vec<u64>,
+    unsorted: Vec<Billboard>,
 }
 
 /// An f32's bits mapped so unsigned order is numeric order (negatives flipped whole, positives
