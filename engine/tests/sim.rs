@@ -427,6 +427,40 @@ fn alignment_converges_at_the_analytic_rate() {
 }
 
 #[test]
+fn cohesion_conserves_the_centroid_and_stays_bounded() {
+    // Notes §8 test 3: on a complete graph the cohesion urges sum to zero, so the centroid does
+    // not move (the flock starts at rest); cohesion acts as a spring toward the centroid, and
+    // under semi-implicit Euler the radius of gyration stays bounded (no energy growth).
+    let (n, h) = (12usize, 1.0 / 120.0);
+    let params = BoidParams {
+        cohesion_weight: 4.0,
+        neighbour_radius: 100.0,
+        separation_radius: 1.0,
+        ..bare()
+    };
+    let mut state = FlockState::random(n, Vec3::new(-5.0, -3.0, -4.0), Vec3::new(6.0, 2.0, 5.0), 0.0, 21);
+    for i in 0..n {
+        (state.vx[i], state.vy[i], state.vz[i]) = (0.0, 0.0, 0.0);
+    }
+    let mut flock = Flock::new(params, state);
+    let centroid = |s: &FlockState| (0..n).map(|i| s.position(i)).sum::<Vec3>() / n as f32;
+    let gyration = |s: &FlockState| {
+        let c = centroid(s);
+        ((0..n).map(|i| (s.position(i) - c).length_squared()).sum::<f32>() / n as f32).sqrt()
+    };
+    let (c0, r0) = (centroid(flock.state()), gyration(flock.state()));
+    let mut r_max = r0;
+    for _ in 0..(20 * 120) {
+        flock.step(h, NeighbourSearch::Grid);
+        assert!((centroid(flock.state()) - c0).length() < 1e-3, "the centroid moved to {}", centroid(flock.state()));
+        r_max = r_max.max(gyration(flock.state()));
+    }
+    // Each boid oscillates about the centroid with amplitude its start offset: the radius of
+    // gyration never grows past where it began (plus the integrator's ωh/2 band).
+    assert!(r_max <= r0 * 1.05, "radius of gyration grew from {r0} to {r_max}");
+}
+
+#[test]
 fn separation_pushes_a_close_pair_apart_monotonically() {
     // Notes §8 test 4: a pair at rest 0.1·R_sep apart never gets closer until beyond R_sep.
     let params = BoidParams {

@@ -164,10 +164,12 @@ impl Grid {
                 let row = d[0] * (y + d[1] * z);
                 let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
                 examined += e - s;
-                for k in s..e {
-                    let (dx, dy, dz) = (self.sx[k] - p.x, self.sy[k] - p.y, self.sz[k] - p.z);
-                    if dx * dx + dy * dy + dz * dz < r2 && Some(self.order[k]) != exclude {
-                        out.push(self.order[k]);
+                // Zipped slices: one bounds check per run, not four per point.
+                let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
+                for (((&x, &y), &z), &j) in run {
+                    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+                    if dx * dx + dy * dy + dz * dz < r2 && Some(j) != exclude {
+                        out.push(j);
                     }
                 }
             }
