@@ -659,6 +659,42 @@ fn same_seed_same_flock_for_one_and_two_threads() {
 }
 
 #[test]
+fn shuffled_storage_gives_the_same_flock() {
+    // Notes §8 test 8: double buffering plus neighbour lists sorted by (distance, index) make a
+    // boid's next state independent of where it and its neighbours sit in storage. (Wander is
+    // off: its random headings are keyed by storage index.)
+    let n = 2000;
+    let params = BoidParams {
+        wander_weight: 0.0,
+        goal: Some([10.0, 12.0, -5.0]),
+        goal_weight: 0.2,
+        ..busy_params(3)
+    };
+    let start = FlockState::random(n, Vec3::new(-20.0, 2.0, -20.0), Vec3::new(20.0, 20.0, 20.0), 6.0, 13);
+    // A fixed pseudo-random permutation: shuffled[k] = start[perm[k]].
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut rng = Rng::new(77);
+    for k in (1..n).rev() {
+        perm.swap(k, (rng.next_u64() % (k as u64 + 1)) as usize);
+    }
+    let mut shuffled = FlockState::default();
+    for &i in &perm {
+        shuffled.push(start.position(i), start.velocity(i));
+    }
+    let (mut a, mut b) = (Flock::new(params.clone(), start), Flock::new(params, shuffled));
+    for _ in 0..60 {
+        a.step(1.0 / 120.0, NeighbourSearch::Grid);
+        b.step(1.0 / 120.0, NeighbourSearch::Grid);
+    }
+    assert!(a.last.neighbours > n as u64, "a sparse flock tests nothing");
+    for (k, &i) in perm.iter().enumerate() {
+        let (sa, sb) = (a.state(), b.state());
+        let same = sa.position(i) == sb.position(k) && sa.velocity(i) == sb.velocity(k) && sa.roll[i] == sb.roll[k];
+        assert!(same, "boid {i} (stored at {k} when shuffled) differs: {} vs {}", sa.position(i), sb.position(k));
+    }
+}
+
+#[test]
 fn grid_and_brute_force_steps_give_identical_flocks() {
     let start = FlockState::random(1500, Vec3::new(-20.0, 2.0, -20.0), Vec3::new(20.0, 20.0, 20.0), 6.0, 8);
     let run = |search| {
