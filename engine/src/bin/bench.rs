@@ -42,7 +42,9 @@ fn parse() -> Result<Args, String> {
             "--width" => a.width = number("--width", value("--width")?)?.max(1) as u32,
             "--height" => a.height = number("--height", value("--height")?)?.max(1) as u32,
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
-            "-h" | "--help" => return Err("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]".into()),
+            "-h" | "--help" => {
+                return Err("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]\n       bench sim --help (particle and boid timings, CPU only)".into())
+            }
             other => return Err(format!("unknown argument '{other}' (try --help)")),
         }
     }
