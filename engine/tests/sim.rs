@@ -6,6 +6,7 @@ use engine::sim::clock::{ClockParams, FixedClock};
 use engine::sim::grid::{brute_force_neighbours, Grid};
 use engine::sim::particles::{Attractor, Billboard, BillboardScratch, Blend, EmitterParams, ParticleSystem, Preset};
 use engine::sim::rng::Rng;
+use engine::sim::World;
 use glam::Vec3;
 
 const G: f32 = 9.81;
@@ -130,6 +131,44 @@ fn fixed_step_gives_the_same_particles_at_30_and_144_fps() {
     assert!(a.particles.len() > 1000, "the fountain should be running: {}", a.particles.len());
     assert_eq!(a.counters, b.counters);
     assert!(live_state(&a) == live_state(&b), "30 and 144 fps differ");
+}
+
+#[test]
+fn world_state_is_the_same_at_30_and_144_fps() {
+    // The world's one clock drives emitters and flocks alike: 2 s at either frame rate, same bits.
+    let run = |fps: u32| {
+        let mut w = World::new(FixedClock::new(ClockParams::default()));
+        w.emitters.push(ParticleSystem::new(EmitterParams::preset(Preset::Sparks)));
+        w.emitters.push(ParticleSystem::new(EmitterParams::preset(Preset::Smoke)));
+        w.flocks
+            .push(Flock::new(busy_params(2), FlockState::random(500, Vec3::new(-30.0, 2.0, -30.0), Vec3::new(30.0, 25.0, 30.0), 5.0, 2)));
+        let steps: u32 = (0..2 * fps).map(|_| w.update(1.0 / fps as f64)).sum();
+        assert_eq!(steps, 240, "{fps} fps");
+        (w.emitters.iter().map(live_state).collect::<Vec<_>>(), flock_bits(&w.flocks[0]))
+    };
+    assert!(run(30) == run(144), "30 and 144 fps worlds differ");
+}
+
+#[test]
+fn set_params_resizes_storage_and_keeps_live_particles() {
+    let mut s = ParticleSystem::new(EmitterParams {
+        rate_per_s: 1000.0,
+        capacity: 100,
+        life_min_s: 10.0,
+        life_max_s: 10.0,
+        ..ballistic(0)
+    });
+    for _ in 0..12 {
+        s.step(1.0 / 120.0);
+    }
+    assert_eq!(s.particles.len(), 100);
+    let kept = live_state(&s)[..40].to_vec();
+    s.set_params(EmitterParams { capacity: 40, ..s.params.clone() });
+    assert_eq!((s.particles.len(), s.particles.capacity()), (40, 40));
+    assert!(live_state(&s) == kept);
+    s.set_params(EmitterParams { capacity: 200, ..s.params.clone() });
+    s.step(1.0 / 120.0);
+    assert_eq!(s.particles.len(), 48);
 }
 
 #[test]

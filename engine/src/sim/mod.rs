@@ -19,3 +19,41 @@ pub mod grid;
 pub mod integrate;
 pub mod particles;
 pub mod rng;
+
+use boids::{Flock, NeighbourSearch};
+use clock::FixedClock;
+use particles::ParticleSystem;
+
+/// Everything the simulation steps, behind one fixed clock: what a level's runtime owns and
+/// advances once per frame, before culling.
+#[derive(Debug, Clone)]
+pub struct World {
+    pub clock: FixedClock,
+    pub emitters: Vec<ParticleSystem>,
+    pub flocks: Vec<Flock>,
+}
+
+impl World {
+    pub fn new(clock: FixedClock) -> World {
+        World {
+            clock,
+            emitters: Vec::new(),
+            flocks: Vec::new(),
+        }
+    }
+
+    /// Advances by a frame's duration; returns the fixed steps taken.
+    pub fn update(&mut self, frame_s: f64) -> u32 {
+        let steps = self.clock.advance(frame_s);
+        let h = self.clock.dt();
+        for _ in 0..steps {
+            for e in &mut self.emitters {
+                e.step(h);
+            }
+            for f in &mut self.flocks {
+                f.step(h, NeighbourSearch::Grid);
+            }
+        }
+        steps
+    }
+}

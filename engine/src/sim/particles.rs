@@ -265,6 +265,15 @@ impl Particles {
         Vec3::new(self.vx[i], self.vy[i], self.vz[i])
     }
 
+    /// Changes the capacity, dropping the particles past it.
+    pub fn resize(&mut self, capacity: usize) {
+        for a in [&mut self.px, &mut self.py, &mut self.pz, &mut self.vx, &mut self.vy, &mut self.vz, &mut self.age, &mut self.life] {
+            a.resize(capacity, 0.0);
+            a.shrink_to_fit();
+        }
+        self.len = self.len.min(capacity);
+    }
+
     /// Moves the last live particle into slot `i` (order is not kept; the arrays stay dense).
     fn swap_remove(&mut self, i: usize) {
         let last = self.len - 1;
@@ -322,6 +331,15 @@ impl ParticleSystem {
             counters: ParticleCounters::default(),
             spawn_carry: 0.0,
         }
+    }
+
+    /// Replaces the parameters (the overlay editing an emitter live). The live particles carry
+    /// on; a new capacity reallocates the storage once, keeping the first particles that fit.
+    pub fn set_params(&mut self, params: EmitterParams) {
+        if params.capacity != self.params.capacity {
+            self.particles.resize(params.capacity as usize);
+        }
+        self.params = params;
     }
 
     /// One fixed step of `h` seconds: move, kill, spawn.
