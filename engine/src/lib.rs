@@ -10,6 +10,7 @@ pub mod renderer;
 pub mod scene;
 pub mod shaders;
 pub mod shadow;
+pub mod sim;
 pub mod stats;
 pub mod tonemap;
 pub mod visibility;

@@ -2,10 +2,14 @@
 //! same run, interleaved, and prints medians and ratios; counters are exact.
 //!
 //!     bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]
+//!     bench sim [--boids N,N,..] [--brute-max N] [--particles N,N,..] [--steps S]
 //!
 //! Scenario "instances": N cubes (default 100 000) on a square grid, a camera looking across
 //! it. Reports CPU culling + LOD time per frame (median), and GPU time per frame with culling
 //! and the depth pre-pass each on and off.
+//!
+//! Subcommand "sim" (CPU only, no device): boid step time for each flock size, grid against
+//! brute force up to --brute-max in the same run, and particle update time.
 
 use engine::camera::Camera;
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
@@ -38,7 +42,9 @@ fn parse() -> Result<Args, String> {
             "--width" => a.width = number("--width", value("--width")?)?.max(1) as u32,
             "--height" => a.height = number("--height", value("--height")?)?.max(1) as u32,
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
-            "-h" | "--help" => return Err("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]".into()),
+            "-h" | "--help" => {
+                return Err("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]\n       bench sim --help (particle and boid timings, CPU only)".into())
+            }
             other => return Err(format!("unknown argument '{other}' (try --help)")),
         }
     }
@@ -152,6 +158,9 @@ fn on(b: bool) -> &'static str {
 }
 
 fn main() -> ExitCode {
+    if std::env::args().nth(1).as_deref() == Some("sim") {
+        return sim_bench::main(std::env::args().skip(2).collect());
+    }
     let args = match parse() {
         Ok(a) => a,
         Err(e) => {
@@ -169,5 +178,185 @@ fn main() -> ExitCode {
             eprintln!("bench: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// `bench sim`: the simulation core on the CPU (issue 8).
+mod sim_bench {
+    use engine::sim::boids::{BoidParams, Flock, FlockState, NeighbourSearch};
+    use engine::sim::particles::{Billboard, BillboardScratch, Blend, EmitterParams, ParticleSystem, Preset};
+    use engine::stats::median;
+    use glam::Vec3;
+    use std::process::ExitCode;
+    use std::time::Instant;
+
+    struct Args {
+        boids: Vec<usize>,
+        brute_max: usize,
+        particles: Vec<usize>,
+        steps: usize,
+    }
+
+    const USAGE: &str = "usage: bench sim [--boids N,N,..] [--brute-max N] [--particles N,N,..] [--steps S]";
+
+    fn parse(args: Vec<String>) -> Result<Args, String> {
+        let mut a = Args { boids: vec![1_000, 10_000, 100_000], brute_max: 10_000, particles: vec![100_000, 1_000_000], steps: 30 };
+        let list = |name: &str, v: &str| -> Result<Vec<usize>, String> {
+            v.split(',').filter(|s| !s.is_empty()).map(|s| s.trim().parse::<usize>().map_err(|_| format!("{name}: '{s}' is not a whole number"))).collect()
+        };
+        let mut it = args.into_iter();
+        while let Some(flag) = it.next() {
+            let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
+            match flag.as_str() {
+                "--boids" => a.boids = list("--boids", &value("--boids")?)?,
+                "--particles" => a.particles = list("--particles", &value("--particles")?)?,
+                "--brute-max" => a.brute_max = list("--brute-max", &value("--brute-max")?)?.first().copied().unwrap_or(0),
+                "--steps" => a.steps = list("--steps", &value("--steps")?)?.first().copied().unwrap_or(1).max(1),
+                "-h" | "--help" => return Err(USAGE.into()),
+                other => return Err(format!("unknown argument '{other}' (try --help)")),
+            }
+        }
+        Ok(a)
+    }
+
+    pub fn main(args: Vec<String>) -> ExitCode {
+        let args = match parse(args) {
+            Ok(a) => a,
+            Err(e) => {
+                eprintln!("bench: {e}");
+                return ExitCode::from(2);
+            }
+        };
+        println!("sim: {} rayon threads; {} steps per measurement; h = 1/120 s", rayon::current_num_threads(), args.steps);
+        for &n in &args.boids {
+            boids(n, args.steps, n <= args.brute_max);
+        }
+        for &n in &args.particles {
+            particles(n, args.steps);
+        }
+        ExitCode::SUCCESS
+    }
+
+    fn ms_since(t: Instant) -> f64 {
+        t.elapsed().as_secs_f64() * 1e3
+    }
+
+    /// CPU time of all this process's threads so far, in ms (Linux: the first field of each
+    /// thread's schedstat, in ns). Other processes loading the machine stretch wall time but
+    /// not this, so cpu_ms / threads estimates the time on an idle machine. None elsewhere.
+    fn cpu_ms() -> Option<f64> {
+        let mut ns = 0u64;
+        for task in std::fs::read_dir("/proc/self/task").ok()? {
+            let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
+            ns += stat.split_whitespace().next()?.parse::<u64>().ok()?;
+        }
+        Some(ns as f64 * 1e-6)
+    }
+
+    /// Wall ms per step (median and minimum) and CPU ms per step (mean over the run).
+    struct Timing {
+        wall_ms: Vec<f64>,
+        cpu_ms: Option<f64>,
+    }
+
+    impl Timing {
+        fn new() -> Timing {
+            Timing { wall_ms: Vec::new(), cpu_ms: Some(0.0) }
+        }
+
+        fn time(&mut self, f: impl FnOnce()) {
+            let (t, c) = (Instant::now(), cpu_ms());
+            f();
+            self.wall_ms.push(ms_since(t));
+            self.cpu_ms = match (self.cpu_ms, c, cpu_ms()) {
+                (Some(sum), Some(a), Some(b)) => Some(sum + (b - a)),
+                _ => None,
+            };
+        }
+
+        fn median(&self) -> f64 {
+            median(&self.wall_ms).unwrap_or(0.0)
+        }
+
+        fn describe(&self) -> String {
+            let min = self.wall_ms.iter().copied().fold(f64::INFINITY, f64::min);
+            let cpu = self.cpu_ms.map_or("n/a".to_string(), |c| format!("{:.3}", c / self.wall_ms.len().max(1) as f64));
+            format!("median {:9.3} min {:9.3} (of {}), cpu_ms {cpu}", self.median(), min, self.wall_ms.len())
+        }
+    }
+
+    /// The CIS 565 scene (anchors §6): a ±100 m cube, rule distances 5 / 3 / 5, wandering.
+    /// Grid and brute force step two copies of the same flock, interleaved step by step.
+    fn boids(n: usize, steps: usize, brute: bool) {
+        let h = 1.0 / 120.0;
+        let start = FlockState::random(n, Vec3::splat(-100.0), Vec3::splat(100.0), 5.0, 1);
+        let mut methods = vec![(NeighbourSearch::Grid, Flock::new(BoidParams::default(), start.clone()), Timing::new())];
+        if brute {
+            methods.push((NeighbourSearch::BruteForce, Flock::new(BoidParams::default(), start), Timing::new()));
+        }
+        for k in 0..steps + 2 {
+            for (search, flock, timing) in methods.iter_mut() {
+                if k < 2 {
+                    flock.step(h, *search);
+                } else {
+                    timing.time(|| flock.step(h, *search));
+                }
+            }
+        }
+        let mut grid_ms = 0.0;
+        for (search, flock, timing) in &methods {
+            let m = timing.median();
+            let c = flock.last;
+            println!(
+                "boids {n:>7} {:<11} step_ms {}; examined per boid {:7.1}, neighbours per boid {:5.2}",
+                format!("{search:?}"),
+                timing.describe(),
+                c.examined as f64 / n as f64,
+                c.neighbours as f64 / n as f64
+            );
+            if *search == NeighbourSearch::Grid {
+                grid_ms = m;
+            } else {
+                println!("boids {n:>7} ratio brute force / grid: {:.1}x", m / grid_ms);
+            }
+        }
+        if methods.len() == 2 {
+            println!("boids {n:>7} grid and brute force flocks identical: {}", methods[0].1.state() == methods[1].1.state());
+        }
+    }
+
+    /// A fountain in steady state with about `n` particles live (rate·life = n), then the
+    /// update (move, kill, spawn) and the billboard fill, sorted and unsorted.
+    fn particles(n: usize, steps: usize) {
+        let h = 1.0 / 120.0;
+        let params = EmitterParams { rate_per_s: n as f32 / 2.0, life_min_s: 1.5, life_max_s: 2.5, capacity: (n + n / 4) as u32, ..EmitterParams::preset(Preset::Fountain) };
+        let mut s = ParticleSystem::new(params);
+        let t = Instant::now();
+        for _ in 0..(2.5 / h) as usize {
+            s.step(h);
+        }
+        let warm_s = t.elapsed().as_secs_f64();
+        let mut update = Timing::new();
+        for _ in 0..steps {
+            update.time(|| s.step(h));
+        }
+        let live = s.particles.len();
+        let (mut out, mut scratch): (Vec<Billboard>, BillboardScratch) = (Vec::new(), BillboardScratch::default());
+        let (camera, forward) = (Vec3::new(0.0, 2.0, 12.0), Vec3::new(0.0, -0.1, -1.0).normalize());
+        let mut fill = [Timing::new(), Timing::new()];
+        for k in 0..steps.min(10) + 1 {
+            for (b, blend) in [Blend::Alpha, Blend::Additive].into_iter().enumerate() {
+                s.params.blend = blend;
+                if k == 0 {
+                    s.fill_billboards(camera, forward, 0.0, &mut out, &mut scratch);
+                } else {
+                    fill[b].time(|| s.fill_billboards(camera, forward, 0.0, &mut out, &mut scratch));
+                }
+            }
+        }
+        let m = update.median();
+        println!("particles {n:>8} live {live:>8}: update_ms {} ({:.0} M particles/s at the median); warm-up {warm_s:.1} s", update.describe(), live as f64 / m / 1e3);
+        println!("particles {n:>8} billboards_ms sorted (alpha): {}", fill[0].describe());
+        println!("particles {n:>8} billboards_ms unsorted (additive): {}", fill[1].describe());
     }
 }

@@ -1,0 +1,550 @@
+//! Flocking (Reynolds 1987; the book's 16.7 and notes §8).
+//!
+//! - Each boid sees its neighbours within `neighbour_radius` and forms five urges, as
+//!   accelerations: obstacle avoidance (limited-range repulsion fields around the level's boxes,
+//!   pillars and bounds), separation Σ (p_i − p_j)/d² within `separation_radius`, alignment
+//!   mean(v_j) − v_i, cohesion mean(p_j) − p_i, and a goal (seek a point) or wander urge.
+//! - The urges are not averaged (equal and opposite urges would cancel and leave the boid going
+//!   nowhere, the book's failure mode): `allocate` hands a fixed acceleration budget out in
+//!   priority order, obstacles first, and once it is spent the later urges wait for a later step.
+//! - Then v += a·h with |v| held in [speed_min, speed_max] (`limit_speed`), and x += v·h
+//!   (semi-implicit Euler, as the particles). The budget bounds |a|, and the clamp to the
+//!   speed_max ball cannot add to the change (projection onto a convex set is non-expansive), so
+//!   |Δv| ≤ accel_max·h with no speed_min. At speed_min a boid turns rather than slows.
+//! - State is double-buffered: every boid reads the previous step and writes the next, so the
+//!   result does not depend on the order boids are updated in. Each boid's neighbour list is
+//!   sorted by (distance, index) before use and capped to the nearest `max_neighbours`, so the
+//!   sums run in the same order however the neighbours were found: the grid and the brute-force
+//!   scan give the same bits, for any number of threads. Nearest first, because in a dense
+//!   cluster the neighbour that matters for separation is the closest one.
+//! - Banking: a boid rolls into a turn by atan(a_lateral / g) (a coordinated turn), smoothed with
+//!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
+
+use super::grid::{brute_force_neighbours, Grid};
+use super::rng::hash;
+use glam::{Mat3, Quat, Vec3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+/// A vertical cylinder: axis at (x, z) = `centre`, from `y_min` to `y_max`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pillar {
+    pub centre: [f32; 2],
+    pub radius: f32,
+    pub y_min: f32,
+    pub y_max: f32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct BoidParams {
+    /// Alignment and cohesion see neighbours closer than this (metres).
+    pub neighbour_radius: f32,
+    /// Separation acts on neighbours closer than this (at most `neighbour_radius`).
+    pub separation_radius: f32,
+    /// 0: every neighbour; otherwise the nearest ones, bounding the cost in dense flocks.
+    pub max_neighbours: u32,
+    pub separation_weight: f32,
+    pub alignment_weight: f32,
+    pub cohesion_weight: f32,
+    /// Repulsion at contact with an obstacle, as a multiple of `accel_max`.
+    pub obstacle_weight: f32,
+    /// Range of the obstacle repulsion fields (metres).
+    pub avoid_distance: f32,
+    pub goal: Option<[f32; 3]>,
+    pub goal_weight: f32,
+    /// Strength of a slowly turning random heading when there is no goal.
+    pub wander_weight: f32,
+    /// Time between the random headings wander blends between.
+    pub wander_period_s: f32,
+    pub speed_min: f32,
+    pub speed_max: f32,
+    /// The acceleration budget the urges share (m/s²).
+    pub accel_max: f32,
+    /// Space the flock stays inside (`None`: unbounded).
+    pub bounds: Option<Aabb>,
+    pub boxes: Vec<Aabb>,
+    pub pillars: Vec<Pillar>,
+    pub bank_max_deg: f32,
+    /// Time constant of the roll following its target.
+    pub bank_response_s: f32,
+    pub seed: u64,
+}
+
+impl Default for BoidParams {
+    fn default() -> Self {
+        // Rule distances as CIS 565's (5 / 3 / 5, anchors §6), speeds of a bird, and an
+        // avoidance range longer than the braking distance v²/(2a) = 2.5 m.
+        BoidParams {
+            neighbour_radius: 5.0,
+            separation_radius: 3.0,
+            max_neighbours: 32,
+            separation_weight: 20.0,
+            alignment_weight: 2.0,
+            cohesion_weight: 0.5,
+            obstacle_weight: 4.0,
+            avoid_distance: 5.0,
+            goal: None,
+            goal_weight: 1.0,
+            wander_weight: 2.0,
+            wander_period_s: 4.0,
+            speed_min: 2.0,
+            speed_max: 10.0,
+            accel_max: 20.0,
+            bounds: Some(Aabb { min: [-100.0; 3], max: [100.0; 3] }),
+            boxes: Vec::new(),
+            pillars: Vec::new(),
+            bank_max_deg: 60.0,
+            bank_response_s: 0.2,
+            seed: 1,
+        }
+    }
+}
+
+/// Boid state, one array per component.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FlockState {
+    pub px: Vec<f32>,
+    pub py: Vec<f32>,
+    pub pz: Vec<f32>,
+    pub vx: Vec<f32>,
+    pub vy: Vec<f32>,
+    pub vz: Vec<f32>,
+    /// Bank angle (radians, positive rolls toward the boid's right).
+    pub roll: Vec<f32>,
+}
+
+impl FlockState {
+    pub fn len(&self) -> usize {
+        self.px.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.px.is_empty()
+    }
+
+    pub fn push(&mut self, p: Vec3, v: Vec3) {
+        self.px.push(p.x);
+        self.py.push(p.y);
+        self.pz.push(p.z);
+        self.vx.push(v.x);
+        self.vy.push(v.y);
+        self.vz.push(v.z);
+        self.roll.push(0.0);
+    }
+
+    pub fn position(&self, i: usize) -> Vec3 {
+        Vec3::new(self.px[i], self.py[i], self.pz[i])
+    }
+
+    pub fn velocity(&self, i: usize) -> Vec3 {
+        Vec3::new(self.vx[i], self.vy[i], self.vz[i])
+    }
+
+    /// `n` boids uniformly in the box, headed in random directions at `speed`.
+    pub fn random(n: usize, min: Vec3, max: Vec3, speed: f32, seed: u64) -> FlockState {
+        let mut rng = super::rng::Rng::new(seed);
+        let mut s = FlockState::default();
+        for _ in 0..n {
+            let p = Vec3::new(rng.range(min.x, max.x), rng.range(min.y, max.y), rng.range(min.z, max.z));
+            s.push(p, rng.unit_vector() * speed);
+        }
+        s
+    }
+
+    fn resize_like(&mut self, other: &FlockState) {
+        let n = other.len();
+        for a in [&mut self.px, &mut self.py, &mut self.pz, &mut self.vx, &mut self.vy, &mut self.vz, &mut self.roll] {
+            a.resize(n, 0.0);
+        }
+    }
+}
+
+/// How a step finds neighbours: the grid, or the O(N²) scan (tests and the bench).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NeighbourSearch {
+    Grid,
+    BruteForce,
+}
+
+/// Exact totals of the last step.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StepCounters {
+    /// Points the neighbour search looked at (the grid's cost; N per boid for brute force).
+    pub examined: u64,
+    /// Neighbours used after the cap.
+    pub neighbours: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct Flock {
+    pub params: BoidParams,
+    cur: FlockState,
+    next: FlockState,
+    /// The next state in the grid's cell order, before it is gathered into `next`.
+    sorted: FlockState,
+    grid: Grid,
+    pub steps: u64,
+    pub last: StepCounters,
+}
+
+/// Boids per parallel work item.
+const CHUNK: usize = 256;
+
+/// Hands `budget` out to `urges` in order: each gets min(|u|, remaining) along its own direction.
+/// Returns the summed acceleration and the magnitude each urge received.
+pub fn allocate<const N: usize>(urges: [Vec3; N], budget: f32) -> (Vec3, [f32; N]) {
+    let mut remaining = budget.max(0.0);
+    let mut sum = Vec3::ZERO;
+    let mut granted = [0.0; N];
+    for (k, u) in urges.into_iter().enumerate() {
+        let m = u.length();
+        if m <= 0.0 || remaining <= 0.0 {
+            continue;
+        }
+        let take = m.min(remaining);
+        sum += u * (take / m);
+        granted[k] = take;
+        remaining -= take;
+    }
+    (sum, granted)
+}
+
+/// Repulsion from a surface at signed distance `d` (negative inside) with outward normal `n`:
+/// zero beyond `range`, rising linearly to `strength` at contact, `strength` inside.
+fn repel(d: f32, n: Vec3, range: f32, strength: f32) -> Vec3 {
+    if d >= range {
+        return Vec3::ZERO;
+    }
+    n * (strength * ((range - d) / range).min(1.0))
+}
+
+/// Signed distance from `p` to a box and the outward normal there.
+fn box_distance(p: Vec3, b: &Aabb) -> (f32, Vec3) {
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let q = p.clamp(lo, hi);
+    let out = p - q;
+    let d = out.length();
+    if d > 0.0 {
+        return (d, out / d);
+    }
+    // Inside: the nearest face.
+    let mut best = (f32::INFINITY, Vec3::ZERO);
+    for a in 0..3 {
+        let mut n = Vec3::ZERO;
+        for (depth, sign) in [(p[a] - lo[a], -1.0), (hi[a] - p[a], 1.0)] {
+            if depth < best.0 {
+                n[a] = sign;
+                best = (depth, n);
+                n[a] = 0.0;
+            }
+        }
+    }
+    (-best.0, best.1)
+}
+
+/// Signed distance from `p` to a capped vertical cylinder and the outward normal there.
+fn pillar_distance(p: Vec3, c: &Pillar) -> (f32, Vec3) {
+    let radial = glam::Vec2::new(p.x - c.centre[0], p.z - c.centre[1]);
+    let r = radial.length();
+    let dir = if r > 0.0 { radial / r } else { glam::Vec2::X };
+    let side = (r - c.radius, Vec3::new(dir.x, 0.0, dir.y));
+    let (below, above) = (c.y_min - p.y, p.y - c.y_max);
+    let cap = if above > below { (above, Vec3::Y) } else { (below, Vec3::NEG_Y) };
+    if side.0 > 0.0 && cap.0 > 0.0 {
+        // Past the rim: distance to the circular edge.
+        let off = side.1 * side.0 + cap.1 * cap.0;
+        let d = off.length();
+        return (d, off / d);
+    }
+    if side.0 > cap.0 {
+        side
+    } else {
+        cap
+    }
+}
+
+/// Rotation of a boid model (facing +Z, up +Y, as glTF) flying along `v`, rolled by `roll`
+/// about its heading.
+pub fn boid_rotation(v: Vec3, roll: f32) -> Quat {
+    let f = v.try_normalize().unwrap_or(Vec3::Z);
+    // Straight up or down: any horizontal side will do.
+    let x = Vec3::Y.cross(f).try_normalize().unwrap_or(Vec3::X);
+    let y = f.cross(x);
+    Quat::from_axis_angle(f, roll) * Quat::from_mat3(&Mat3::from_cols(x, y, f))
+}
+
+const GRAVITY: f32 = 9.81;
+
+/// v + a·h with the speed held in [min, max]. Above the maximum the velocity is scaled back.
+/// Below the minimum (a bird cannot hover) the boid turns instead of slowing: its heading rotates
+/// toward `a` at the rate |a|/min that the acceleration allows at that speed, so |Δv| stays
+/// within |a|·h; an acceleration straight against the heading turns it to the right. Scaling
+/// up instead would keep a boid braking head-on into a wall flying into it at the minimum
+/// speed forever. A boid that starts below the minimum is brought up to it along its heading.
+pub fn limit_speed(vel: Vec3, a: Vec3, h: f32, min: f32, max: f32) -> Vec3 {
+    let v = vel + a * h;
+    let speed = v.length();
+    if speed > max {
+        return v * (max / speed);
+    }
+    if speed >= min {
+        return v;
+    }
+    let speed0 = vel.length();
+    let (Some(f), Some(target)) = (vel.try_normalize(), a.try_normalize()) else {
+        return v.try_normalize().or(vel.try_normalize()).unwrap_or(Vec3::Z) * min;
+    };
+    if speed0 < min {
+        return v.try_normalize().unwrap_or(f) * min;
+    }
+    let cos = f.dot(target).clamp(-1.0, 1.0);
+    let axis = f.cross(target).try_normalize().or(f.cross(Vec3::Y).try_normalize()).unwrap_or(f.any_orthonormal_vector());
+    let theta = (a.length() * h / min).min(cos.acos());
+    Quat::from_axis_angle(axis, theta) * f * min
+}
+
+impl Flock {
+    pub fn new(params: BoidParams, state: FlockState) -> Flock {
+        Flock {
+            params,
+            next: FlockState::default(),
+            sorted: FlockState::default(),
+            cur: state,
+            grid: Grid::new(),
+            steps: 0,
+            last: StepCounters::default(),
+        }
+    }
+
+    pub fn state(&self) -> &FlockState {
+        &self.cur
+    }
+
+    pub fn len(&self) -> usize {
+        self.cur.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.cur.is_empty()
+    }
+
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// One fixed step of `h` seconds.
+    pub fn step(&mut self, h: f32, search: NeighbourSearch) {
+        let p = &self.params;
+        let radius = p.neighbour_radius.max(p.separation_radius);
+        if search == NeighbourSearch::Grid && !self.cur.is_empty() {
+            self.grid.build(&self.cur.px, &self.cur.py, &self.cur.pz, radius);
+        }
+        self.next.resize_like(&self.cur);
+        self.sorted.resize_like(&self.cur);
+        let t = self.steps as f32 * h;
+        let max_bank = p.bank_max_deg.to_radians();
+        let bank_follow = if p.bank_response_s > 0.0 { 1.0 - (-h / p.bank_response_s).exp() } else { 1.0 };
+        // With the grid, boids are updated in cell order (neighbouring boids share cells, so
+        // their queries hit the same cache lines) into `sorted`, then gathered back.
+        let order = (search == NeighbourSearch::Grid).then(|| self.grid.order());
+        let ctx = StepContext {
+            p,
+            cur: &self.cur,
+            grid: &self.grid,
+            search,
+            radius,
+            h,
+            t,
+            max_bank,
+            bank_follow,
+        };
+        let n = if order.is_some() { &mut self.sorted } else { &mut self.next };
+        let counters = (
+            n.px.par_chunks_mut(CHUNK),
+            n.py.par_chunks_mut(CHUNK),
+            n.pz.par_chunks_mut(CHUNK),
+            n.vx.par_chunks_mut(CHUNK),
+            n.vy.par_chunks_mut(CHUNK),
+            n.vz.par_chunks_mut(CHUNK),
+            n.roll.par_chunks_mut(CHUNK),
+        )
+            .into_par_iter()
+            .enumerate()
+            .map_init(
+                || (Vec::with_capacity(64), Vec::with_capacity(64)),
+                |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
+                    let mut counts = StepCounters::default();
+                    for k in 0..px.len() {
+                        let i = order.map_or(c * CHUNK + k, |o| o[c * CHUNK + k] as usize);
+                        let (pos, vel, r) = ctx.boid(i, scratch, &mut counts);
+                        (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
+                        (vx[k], vy[k], vz[k]) = (vel.x, vel.y, vel.z);
+                        roll[k] = r;
+                    }
+                    counts
+                },
+            )
+            .reduce(StepCounters::default, |a, b| StepCounters {
+                examined: a.examined + b.examined,
+                neighbours: a.neighbours + b.neighbours,
+            });
+        self.last = counters;
+        if order.is_some() {
+            let rank = self.grid.rank();
+            let (src, dst) = (&self.sorted, &mut self.next);
+            for (d, s) in [
+                (&mut dst.px, &src.px),
+                (&mut dst.py, &src.py),
+                (&mut dst.pz, &src.pz),
+                (&mut dst.vx, &src.vx),
+                (&mut dst.vy, &src.vy),
+                (&mut dst.vz, &src.vz),
+                (&mut dst.roll, &src.roll),
+            ] {
+                d.par_iter_mut().zip(rank.par_iter()).with_min_len(4096).for_each(|(d, &r)| *d = s[r as usize]);
+            }
+        }
+        std::mem::swap(&mut self.cur, &mut self.next);
+        self.steps += 1;
+    }
+}
+
+/// What one step reads: the previous state only.
+struct StepContext<'a> {
+    p: &'a BoidParams,
+    cur: &'a FlockState,
+    grid: &'a Grid,
+    search: NeighbourSearch,
+    radius: f32,
+    h: f32,
+    /// Simulated time at the start of the step.
+    t: f32,
+    max_bank: f32,
+    /// Fraction of the way the roll moves to its target in one step.
+    bank_follow: f32,
+}
+
+impl StepContext<'_> {
+    /// The next position, velocity and roll of boid `i`.
+    fn boid(&self, i: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
+        let (p, s) = (self.p, self.cur);
+        let (pos, vel) = (s.position(i), s.velocity(i));
+
+        let (found, keys) = scratch;
+        found.clear();
+        match self.search {
+            NeighbourSearch::Grid => counts.examined += self.grid.neighbours(pos, self.radius, Some(i as u32), found) as u64,
+            NeighbourSearch::BruteForce => {
+                brute_force_neighbours(&s.px, &s.py, &s.pz, pos, self.radius, Some(i as u32), found);
+                counts.examined += s.len() as u64;
+            }
+        }
+        // Key: squared distance (non-negative, so its bits order as the numbers) above the index.
+        keys.clear();
+        keys.extend(found.iter().map(|&j| ((pos - s.position(j as usize)).length_squared().to_bits() as u64) << 32 | j as u64));
+        keys.sort_unstable();
+        if p.max_neighbours > 0 {
+            keys.truncate(p.max_neighbours as usize);
+        }
+        counts.neighbours += keys.len() as u64;
+
+        let (r2, sep2) = (p.neighbour_radius * p.neighbour_radius, p.separation_radius * p.separation_radius);
+        let (mut sep, mut sum_v, mut sum_p, mut count) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0u32);
+        for &key in keys.iter() {
+            let j = key as u32 as usize;
+            let d = pos - s.position(j);
+            let d2 = d.length_squared();
+            if d2 < sep2 && d2 > 0.0 {
+                sep += d / d2;
+            }
+            if d2 < r2 {
+                sum_v += s.velocity(j);
+                sum_p += s.position(j);
+                count += 1;
+            }
+        }
+        let (alignment, cohesion) = if count > 0 {
+            let inv = 1.0 / count as f32;
+            (sum_v * inv - vel, sum_p * inv - pos)
+        } else {
+            (Vec3::ZERO, Vec3::ZERO)
+        };
+
+        let urges = [
+            self.obstacles(pos),
+            sep * p.separation_weight,
+            alignment * p.alignment_weight,
+            cohesion * p.cohesion_weight,
+            self.goal(i, pos, vel),
+        ];
+        let (a, _) = allocate(urges, p.accel_max);
+
+        let v = limit_speed(vel, a, self.h, p.speed_min, p.speed_max);
+        let next_pos = pos + v * self.h;
+
+        // Bank into the turn: the lateral part of the acceleration actually applied.
+        let applied = (v - vel) / self.h;
+        let right = v.cross(Vec3::Y).try_normalize();
+        let target = right.map_or(0.0, |r| (applied.dot(r) / GRAVITY).atan().clamp(-self.max_bank, self.max_bank));
+        let roll = s.roll[i] + (target - s.roll[i]) * self.bank_follow;
+        (next_pos, v, roll)
+    }
+
+    fn obstacles(&self, pos: Vec3) -> Vec3 {
+        let p = self.p;
+        let (range, strength) = (p.avoid_distance.max(1e-3), p.obstacle_weight * p.accel_max);
+        let mut u = Vec3::ZERO;
+        if let Some(b) = &p.bounds {
+            // Inside the bounds is free space: each wall pushes inward.
+            for a in 0..3 {
+                let mut n = Vec3::ZERO;
+                n[a] = 1.0;
+                u += repel(pos[a] - b.min[a], n, range, strength);
+                u += repel(b.max[a] - pos[a], -n, range, strength);
+            }
+        }
+        for b in &p.boxes {
+            let (d, n) = box_distance(pos, b);
+            u += repel(d, n, range, strength);
+        }
+        for c in &p.pillars {
+            let (d, n) = pillar_distance(pos, c);
+            u += repel(d, n, range, strength);
+        }
+        u
+    }
+
+    /// Seek the goal, or wander: steer toward speed_max along a heading that blends between
+    /// random directions drawn from (seed, boid, period), so no generator state is shared. The
+    /// directions are normalised points of a cube, not uniform on the sphere (a little more
+    /// often diagonal): no trigonometry per boid, and a wander needs no better.
+    fn goal(&self, i: usize, pos: Vec3, vel: Vec3) -> Vec3 {
+        let p = self.p;
+        if let Some(g) = p.goal {
+            let desired = (Vec3::from(g) - pos).try_normalize().unwrap_or(Vec3::ZERO) * p.speed_max;
+            return (desired - vel) * p.goal_weight;
+        }
+        if p.wander_weight == 0.0 {
+            return Vec3::ZERO;
+        }
+        let phase = self.t / p.wander_period_s.max(1e-3);
+        let k = phase.floor();
+        let w = phase - k;
+        let heading = |period: u64| {
+            let bits = hash(p.seed ^ hash((i as u64) << 32 ^ period));
+            // Three 21-bit coordinates in [-1, 1).
+            let c = |shift: u32| ((bits >> shift) & 0x1F_FFFF) as f32 * (2.0 / (1u32 << 21) as f32) - 1.0;
+            Vec3::new(c(0), c(21), c(42))
+        };
+        let smooth = w * w * (3.0 - 2.0 * w);
+        let dir = heading(k as u64).lerp(heading(k as u64 + 1), smooth).try_normalize().unwrap_or(Vec3::X);
+        (dir * p.speed_max - vel) * p.wander_weight
+    }
+}
