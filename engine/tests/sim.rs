@@ -364,6 +364,9 @@ fn grid_neighbours_equal_brute_force() {
         // On borders of the grid's own cells, and on whole multiples of R.
         let b = k as f32 * cell;
         push(Vec3::new(b, 0.3 * k as f32, -b));
+        // On the middles of cells, where a query switches which neighbour cell it reads.
+        let m = (k as f32 + 0.5) * cell;
+        push(Vec3::new(m, -m, 0.5 * cell));
         push(Vec3::new(k as f32 * build_r, k as f32 * build_r, 7.0));
         // A pair exactly R (and exactly 3) apart along each axis, at negative coordinates.
         let base = Vec3::new(-20.0 + k as f32, -13.0, -31.0);
