@@ -97,7 +97,12 @@ impl Overlay {
         let ctx = egui::Context::default();
         ctx.set_theme(egui::Theme::Dark);
         ctx.set_visuals_of(egui::Theme::Dark, overlay_visuals());
-        ctx.all_styles_mut(|s| s.animation_time = 0.0);
+        ctx.all_styles_mut(|s| {
+            s.animation_time = 0.0;
+            // Text never wraps: wrapping depends on last frame's column widths, so rows could
+            // change height from frame to frame and move the controls under the pointer.
+            s.wrap_mode = Some(egui::TextWrapMode::Extend);
+        });
         Ok(Overlay {
             ctx,
             painter,
@@ -244,12 +249,14 @@ fn show_panel(ui: &mut egui::Ui, panel: &mut dyn Panel, open: bool) {
     egui::CollapsingHeader::new(title).default_open(open).show(ui, |ui| panel.ui(ui));
 }
 
-/// Dark, translucent, without shadows: the scene stays visible around and through the window,
-/// and nothing is drawn outside the window's rectangle.
+/// Dark and without shadows, so nothing is drawn outside the window's rectangle.
 fn overlay_visuals() -> egui::Visuals {
     let mut v = egui::Visuals::dark();
     v.window_shadow = egui::Shadow::NONE;
     v.popup_shadow = egui::Shadow::NONE;
-    v.window_fill = egui::Color32::from_rgba_unmultiplied(20, 22, 26, 225);
+    // Nearly opaque and light text: blending happens in linear light on the sRGB targets, which
+    // makes a translucent dark fill look much thinner than egui's gamma-space design intends.
+    v.window_fill = egui::Color32::from_rgba_unmultiplied(16, 18, 22, 242);
+    v.override_text_color = Some(egui::Color32::from_gray(225));
     v
 }

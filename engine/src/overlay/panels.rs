@@ -4,7 +4,7 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
-use crate::renderer::Renderer;
+use crate::renderer::{Renderer, ShaderInvocations};
 use crate::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 
@@ -124,23 +124,14 @@ fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
             .map(|(i, n)| if i + 1 == LOD_BUCKETS { format!("{i}+:{n}") } else { format!("{i}:{n}") })
             .collect();
         row("LOD histogram", buckets.join(" "));
-        match last.pass_ms {
-            Some((pre, shade)) => row("GPU ms pre-pass / shading", format!("{pre:.3} / {shade:.3}")),
-            None => row("GPU ms per pass", "n/a (no timestamps)".into()),
-        }
-        match last.pass_stats {
-            Some(s) => {
-                match s.prepass {
-                    Some(p) => row("pre-pass VS / FS invocations", format!("{} / {}", p.vertex, p.fragment)),
-                    None => row("pre-pass", "off".into()),
-                }
-                row("shading VS / FS invocations", format!("{} / {}", s.shading.vertex, s.shading.fragment));
-            }
-            None => row("shader invocations", "n/a (no pipeline statistics)".into()),
-        }
-        match last.fragments_shaded {
-            Some(n) => row("fragments shaded (counter)", n.to_string()),
-            None => row("fragments shaded (counter)", "off".into()),
-        }
+        // A fixed set of rows, so the layout (and where the switches are) does not move when
+        // the first measurements arrive.
+        let na = || "n/a".to_string();
+        row("GPU ms pre-pass / shading", last.pass_ms.map_or_else(na, |(pre, shade)| format!("{pre:.3} / {shade:.3}")));
+        let invocations = |s: ShaderInvocations| format!("{} / {}", s.vertex, s.fragment);
+        let prepass = last.pass_stats.map_or_else(na, |s| s.prepass.map_or_else(|| "off".to_string(), invocations));
+        row("pre-pass VS / FS invocations", prepass);
+        row("shading VS / FS invocations", last.pass_stats.map_or_else(na, |s| invocations(s.shading)));
+        row("fragments shaded (counter)", last.fragments_shaded.map_or_else(|| "off".to_string(), |n| n.to_string()));
     });
 }
