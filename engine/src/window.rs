@@ -30,6 +30,8 @@ pub struct WindowOptions {
     /// Close after this many presented frames (for tests); run until closed when `None`.
     pub max_frames: Option<u64>,
     pub title: String,
+    /// Show the debug overlay from the first frame (F1 toggles it either way).
+    pub overlay: bool,
 }
 
 /// What a finished windowed run reports.
@@ -222,7 +224,8 @@ impl State {
                 return Err(e);
             }
         };
-        let overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
         let (min, max) = scene.bounds();
         let frames = Frames::new(&gpu)?;

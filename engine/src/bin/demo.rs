@@ -1,6 +1,7 @@
-//! `demo`: render a cooked pack. In a window with a fly camera and the debug overlay (F1) when
-//! there is a display; headless (offscreen frames, screenshots, frame times) with `--headless` or
-//! when there is none, with the overlay drawn into the frames when `--overlay` asks for it.
+//! `demo`: render a cooked pack. In a window with a fly camera and the debug overlay (F1, or
+//! `--overlay` from the start) when there is a display; headless (offscreen frames, screenshots,
+//! frame times) with `--headless` or when there is none, the overlay drawn into the frames with
+//! `--overlay`.
 //!
 //! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
 
@@ -25,17 +26,17 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --width/--height     image or window size in pixels (default 1280x720)
   --screenshot PATH    headless: write the last frame here (default build/screenshots/demo.png)
   --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
-  --overlay            headless: draw the debug overlay (frame-time graph, counters, switches)
-                       into the frames, so screenshots show it
+  --overlay            show the debug overlay (frame-time graph, counters, switches) from the
+                       start; headless, it is drawn into the frames, so screenshots show it
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
 
 In the window: WASD move, Q/E down/up, Shift faster, drag with a mouse button to look, Esc quits.
-F1 shows or hides the debug overlay (shown at start): frame-time graph (CPU frame and GPU ms,
-median and p99), culling/LOD counters, shader invocations and GPU ms per pass, and switches for
-the depth pre-pass, frustum culling, LOD selection, fragment counting and the LOD pixel error.
-While the pointer is over the overlay, the mouse works the overlay instead of the camera.";
+F1 shows or hides the debug overlay (hidden at start unless --overlay): frame-time graph (CPU
+frame and GPU ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass,
+and switches for the depth pre-pass, frustum culling, LOD selection, fragment counting and the
+LOD pixel error. While the pointer is over the overlay, the mouse works it, not the camera.";
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
@@ -150,6 +151,7 @@ fn main() -> ExitCode {
             height: args.height,
             max_frames: args.frames,
             title: format!("demo - {}", pack_path.display()),
+            overlay: args.overlay,
         };
         match window::run(&pack, opts) {
             Ok(run) => {
