@@ -135,7 +135,10 @@ impl Overlay {
     /// from the next frame. Returns what egui asks of the platform (cursor, clipboard).
     pub fn build(&mut self, input: egui::RawInput, renderer: &mut Renderer, extra: &mut [&mut dyn Panel]) -> egui::PlatformOutput {
         if !self.visible {
-            self.prepared = None;
+            // Nothing to draw; texture changes not yet recorded still go up with the next record.
+            if let Some(p) = self.prepared.as_mut() {
+                p.primitives.clear();
+            }
             return egui::PlatformOutput::default();
         }
         self.controls.clear();
