@@ -316,16 +316,7 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
     // camera back, the drawn LOD never goes back to a finer one and ends at the coarsest; the
     // triangle counter follows the LOD drawn.
     let gpu = gpu();
-    let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
-    let lod0 = pack.manifest.meshes[0].lods[0].clone();
-    for (faces, error) in [(4u32, 0.05f32), (2, 0.3)] {
-        let mut l = lod0.clone();
-        l.index_count = faces * 6;
-        l.submeshes[0].index_count = faces * 6;
-        l.error = error;
-        pack.manifest.meshes[0].lods.push(l);
-    }
-    let mut rig = Rig::new(&gpu, &pack, 64, 64);
+    let mut rig = Rig::new(&gpu, &three_lod_cube_pack(), 64, 64);
     let mut last = 0u8;
     let mut seen = vec![];
     for step in 0..40 {
@@ -342,6 +333,39 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
         last = lod;
     }
     assert_eq!(seen, vec![0, 1, 2]);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+/// One cube mesh with three LODs: 6, 4 and 2 of its faces, errors 0, 5 cm and 30 cm.
+fn three_lod_cube_pack() -> Pack {
+    let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
+    let lod0 = pack.manifest.meshes[0].lods[0].clone();
+    for (faces, error) in [(4u32, 0.05f32), (2, 0.3)] {
+        let mut l = lod0.clone();
+        l.index_count = faces * 6;
+        l.submeshes[0].index_count = faces * 6;
+        l.error = error;
+        pack.manifest.meshes[0].lods.push(l);
+    }
+    pack
+}
+
+#[test]
+fn frozen_lods_stay_as_the_camera_moves_away_and_pick_again_when_thawed() {
+    let gpu = gpu();
+    let mut rig = Rig::new(&gpu, &three_lod_cube_pack(), 64, 64);
+    let mut lod_at = |rig: &mut Rig, distance: f32| {
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
+        (rig.renderer.visibility.draws[0].lod, rig.renderer.visibility.counts.triangles)
+    };
+    assert_eq!(lod_at(&mut rig, 1.5), (0, 12));
+    rig.renderer.visibility.freeze_lod = true;
+    assert_eq!(lod_at(&mut rig, 1000.0), (0, 12), "a frozen LOD does not follow the distance");
+    rig.renderer.visibility.freeze_lod = false;
+    assert_eq!(lod_at(&mut rig, 1000.0), (2, 4));
+    rig.renderer.visibility.freeze_lod = true;
+    assert_eq!(lod_at(&mut rig, 1.5), (2, 4), "frozen coarse stays coarse up close");
     rig.destroy(&gpu);
     assert_clean(&gpu);
 }

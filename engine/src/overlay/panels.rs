@@ -52,6 +52,7 @@ impl RendererPanel<'_> {
         control("depth pre-pass", ui.checkbox(&mut r.prepass, "depth pre-pass"));
         control("frustum culling", ui.checkbox(&mut r.visibility.culling, "frustum culling"));
         control("LOD selection", ui.checkbox(&mut r.visibility.lod_selection, "LOD selection (off: LOD 0 everywhere)"));
+        control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
         let policy = &mut r.visibility.policy;
         control(
