@@ -261,5 +261,7 @@ fn overlay_visuals() -> egui::Visuals {
     // makes a translucent dark fill look much thinner than egui's gamma-space design intends.
     v.window_fill = egui::Color32::from_rgba_unmultiplied(16, 18, 22, 242);
     v.override_text_color = Some(egui::Color32::from_gray(225));
+    // An unchecked box must stand out from the fill.
+    v.widgets.inactive.bg_stroke = egui::Stroke::new(1.0, egui::Color32::from_gray(150));
     v
 }
