@@ -90,6 +90,23 @@ impl Offscreen {
         lighting: &Lighting,
         capture: bool,
     ) -> Result<FrameTiming> {
+        self.render_with(gpu, renderer, scene, camera, lighting, capture, |_, _, _| Ok(()))
+    }
+
+    /// `render`, with `after` recording more drawing onto the finished image (the overlay)
+    /// before it is captured. It gets the command buffer, the target (colour image in
+    /// COLOR_ATTACHMENT_OPTIMAL, to be left so) and the renderer that just recorded.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_with(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        scene: &GpuScene,
+        camera: &Camera,
+        lighting: &Lighting,
+        capture: bool,
+        after: impl FnOnce(vk::CommandBuffer, &FrameTarget, &mut Renderer) -> Result<()>,
+    ) -> Result<FrameTiming> {
         let d = &gpu.device;
         let start = Instant::now();
         let target = FrameTarget {
@@ -108,6 +125,7 @@ impl Offscreen {
             }
         }
         renderer.record(gpu, self.cb, 0, scene, camera, lighting, &target)?;
+        after(self.cb, &target, renderer)?;
         unsafe {
             if capture {
                 barrier(gpu, self.cb, self.color.image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_TRANSFER_SRC);

@@ -154,6 +154,13 @@ pub struct PassTimes {
     pub tonemap_ms: f64,
 }
 
+impl PassTimes {
+    /// GPU time of all the renderer's passes.
+    pub fn total(&self) -> f64 {
+        self.shadow_ms + self.prepass_ms + self.shading_ms + self.tonemap_ms
+    }
+}
+
 /// Shader invocations counted by the pipeline statistics queries.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ShaderInvocations {

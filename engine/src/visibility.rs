@@ -31,6 +31,9 @@ pub struct Visibility {
     pub culling: bool,
     /// Off: every instance draws LOD 0.
     pub lod_selection: bool,
+    /// On: instances keep the LOD they were last drawn with (ones never drawn still pick), so
+    /// the choices made from one viewpoint can be inspected from another.
+    pub freeze_lod: bool,
     previous: Vec<Option<u8>>,
     visible: Vec<u32>,
     pub draws: Vec<Draw>,
@@ -43,6 +46,7 @@ impl Default for Visibility {
             policy: LodPolicy::default(),
             culling: true,
             lod_selection: true,
+            freeze_lod: false,
             previous: Vec::new(),
             visible: Vec::new(),
             draws: Vec::new(),
@@ -70,7 +74,9 @@ impl Visibility {
         for &i in &self.visible {
             let inst = &scene.instances[i as usize];
             let mesh = &scene.meshes[inst.mesh as usize];
-            let lod = if self.lod_selection && mesh.lods.len() > 1 {
+            let lod = if let Some(frozen) = self.previous[i as usize].filter(|_| self.freeze_lod) {
+                usize::from(frozen).min(mesh.lods.len() - 1)
+            } else if self.lod_selection && mesh.lods.len() > 1 {
                 // Distance to the nearest point of the bounding sphere: an object the camera is
                 // inside or touching is at full detail.
                 let s = &scene.spheres;

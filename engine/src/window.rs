@@ -1,7 +1,9 @@
-//! The windowed front end: winit window, Vulkan surface and swapchain, fly camera input.
+//! The windowed front end: winit window, Vulkan surface and swapchain, fly camera input, and the
+//! debug overlay (egui-winit feeds it input; F1 shows or hides it).
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
+use crate::overlay::{FrameStats, Overlay};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::scene::GpuScene;
 use anyhow::{anyhow, Context, Result};
@@ -30,6 +32,8 @@ pub struct WindowOptions {
     /// Texels per side of the sun's shadow map.
     pub shadow_map_size: u32,
     pub title: String,
+    /// Show the debug overlay from the first frame (F1 toggles it either way).
+    pub overlay: bool,
 }
 
 /// What a finished windowed run reports.
@@ -68,6 +72,9 @@ struct App<'a> {
 
 /// Everything that exists while the window is open. Field order is destruction order.
 struct State {
+    /// Taken by `destroy`; dropped before `gpu` in any case (field order).
+    overlay: Option<Overlay>,
+    egui: egui_winit::State,
     swapchain: Swapchain,
     renderer: Renderer,
     scene: GpuScene,
@@ -103,6 +110,9 @@ impl ApplicationHandler for App<'_> {
 
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
         let Some(s) = self.state.as_mut() else { return };
+        // egui sees every event (it tracks the pointer and focus even while hidden); `consumed`
+        // means the overlay is using it, so the camera must not.
+        let consumed = s.egui.on_window_event(&s.window, &event).consumed && s.overlay.as_ref().is_some_and(|o| o.visible);
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::Resized(_) => s.needs_resize = true,
@@ -112,14 +122,23 @@ impl ApplicationHandler for App<'_> {
                         if code == KeyCode::Escape {
                             el.exit();
                         }
-                        s.keys.insert(code);
+                        if code == KeyCode::F1 && !event.repeat {
+                            if let Some(o) = s.overlay.as_mut() {
+                                o.visible = !o.visible;
+                            }
+                        }
+                        if !consumed {
+                            s.keys.insert(code);
+                        }
                     } else {
+                        // Releases always count, so no key sticks down.
                         s.keys.remove(&code);
                     }
                 }
             }
             WindowEvent::MouseInput { state, button: MouseButton::Left | MouseButton::Right, .. } => {
-                s.looking = state == ElementState::Pressed;
+                // A drag that starts on the overlay works the overlay.
+                s.looking = state == ElementState::Pressed && !consumed;
                 s.last_cursor = None;
             }
             WindowEvent::CursorMoved { position, .. } => {
@@ -207,9 +226,14 @@ impl State {
                 return Err(e);
             }
         };
+        let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        overlay.visible = opts.overlay;
+        let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
         let (min, max) = scene.bounds();
         let frames = Frames::new(&gpu)?;
         Ok(State {
+            overlay: Some(overlay),
+            egui,
             swapchain,
             renderer,
             scene,
@@ -241,6 +265,7 @@ impl State {
 
     fn frame(&mut self) -> Result<()> {
         let now = Instant::now();
+        let frame_ms = (now - self.last_frame).as_secs_f64() * 1e3;
         let dt = (now - self.last_frame).as_secs_f32().min(0.1);
         self.last_frame = now;
         self.update_camera(dt);
@@ -255,6 +280,11 @@ impl State {
         let slot = (self.presented % FRAMES_IN_FLIGHT as u64) as usize;
         let (cb, fence, acquired) = (self.frames.cbs[slot], self.frames.fences[slot], self.frames.acquired[slot]);
         unsafe { d.wait_for_fences(&[fence], true, u64::MAX)? };
+        // The frame this slot last held is finished: its GPU measurements are readable (before
+        // the slot's first use there is nothing to read).
+        if let Some(o) = self.overlay.as_mut().filter(|_| self.presented >= FRAMES_IN_FLIGHT as u64) {
+            o.push_frame(frame_ms, None, FrameStats::read(&self.gpu, &self.renderer, slot));
+        }
         let image_index = match unsafe {
             self.swapchain.loader.acquire_next_image(self.swapchain.swapchain, u64::MAX, acquired, vk::Fence::null())
         } {
@@ -279,6 +309,13 @@ impl State {
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
         self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
+        // Taken every frame, shown or not, so input does not pile up while the overlay is hidden.
+        let input = self.egui.take_egui_input(&self.window);
+        if let Some(o) = self.overlay.as_mut().filter(|o| o.visible) {
+            let platform = o.build(input, &mut self.renderer, &mut []);
+            self.egui.handle_platform_output(&self.window, platform);
+            o.record(&self.gpu, cb, &target)?;
+        }
         barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
         let rendered = self.swapchain.rendered[i];
         unsafe {
@@ -304,6 +341,9 @@ impl State {
 
     fn destroy(&mut self) {
         self.gpu.wait_idle();
+        if let Some(o) = self.overlay.take() {
+            o.destroy(&self.gpu);
+        }
         self.frames.destroy(&self.gpu);
         self.scene.destroy(&self.gpu);
         self.renderer.destroy(&self.gpu);

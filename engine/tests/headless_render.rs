@@ -4,6 +4,7 @@
 use engine::camera::Camera;
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::overlay::{headless_input, FrameStats, Overlay};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
@@ -315,16 +316,7 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
     // camera back, the drawn LOD never goes back to a finer one and ends at the coarsest; the
     // triangle counter follows the LOD drawn.
     let gpu = gpu();
-    let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
-    let lod0 = pack.manifest.meshes[0].lods[0].clone();
-    for (faces, error) in [(4u32, 0.05f32), (2, 0.3)] {
-        let mut l = lod0.clone();
-        l.index_count = faces * 6;
-        l.submeshes[0].index_count = faces * 6;
-        l.error = error;
-        pack.manifest.meshes[0].lods.push(l);
-    }
-    let mut rig = Rig::new(&gpu, &pack, 64, 64);
+    let mut rig = Rig::new(&gpu, &three_lod_cube_pack(), 64, 64);
     let mut last = 0u8;
     let mut seen = vec![];
     for step in 0..40 {
@@ -341,6 +333,39 @@ fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
         last = lod;
     }
     assert_eq!(seen, vec![0, 1, 2]);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+/// One cube mesh with three LODs: 6, 4 and 2 of its faces, errors 0, 5 cm and 30 cm.
+fn three_lod_cube_pack() -> Pack {
+    let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
+    let lod0 = pack.manifest.meshes[0].lods[0].clone();
+    for (faces, error) in [(4u32, 0.05f32), (2, 0.3)] {
+        let mut l = lod0.clone();
+        l.index_count = faces * 6;
+        l.submeshes[0].index_count = faces * 6;
+        l.error = error;
+        pack.manifest.meshes[0].lods.push(l);
+    }
+    pack
+}
+
+#[test]
+fn frozen_lods_stay_as_the_camera_moves_away_and_pick_again_when_thawed() {
+    let gpu = gpu();
+    let mut rig = Rig::new(&gpu, &three_lod_cube_pack(), 64, 64);
+    let mut lod_at = |rig: &mut Rig, distance: f32| {
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
+        (rig.renderer.visibility.draws[0].lod, rig.renderer.visibility.counts.triangles)
+    };
+    assert_eq!(lod_at(&mut rig, 1.5), (0, 12));
+    rig.renderer.visibility.freeze_lod = true;
+    assert_eq!(lod_at(&mut rig, 1000.0), (0, 12), "a frozen LOD does not follow the distance");
+    rig.renderer.visibility.freeze_lod = false;
+    assert_eq!(lod_at(&mut rig, 1000.0), (2, 4));
+    rig.renderer.visibility.freeze_lod = true;
+    assert_eq!(lod_at(&mut rig, 1.5), (2, 4), "frozen coarse stays coarse up close");
     rig.destroy(&gpu);
     assert_clean(&gpu);
 }
@@ -927,4 +952,106 @@ fn half_to_f64(h: u16) -> f64 {
     let (e, m) = ((h >> 10) & 0x1f, (h & 0x3ff) as f64);
     assert!(h >> 15 == 0 && e != 0x1f, "unexpected half {h:#x}");
     if e == 0 { m * 2f64.powi(-24) } else { (1.0 + m / 1024.0) * 2f64.powi(e as i32 - 15) }
+}
+
+/// One headless frame with the overlay built from `events` and drawn over it (hidden: built and
+/// drawn as nothing), captured.
+fn render_with_overlay(gpu: &Gpu, rig: &mut Rig, overlay: &mut Overlay, camera: &Camera, frame: u64, events: Vec<egui::Event>) -> Vec<u8> {
+    let (w, h) = (rig.target.extent.width, rig.target.extent.height);
+    let t = rig
+        .target
+        .render_with(gpu, &mut rig.renderer, &rig.scene, camera, &Lighting::default(), true, |cb, target, renderer| {
+            overlay.build(headless_input(w, h, frame as f64 / 60.0, events), renderer, &mut []);
+            overlay.record(gpu, cb, target)
+        })
+        .unwrap();
+    overlay.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(gpu, &rig.renderer, 0));
+    rig.target.pixels().to_vec()
+}
+
+#[test]
+fn overlay_draws_inside_its_window_and_leaves_the_rest_of_the_frame_alone() {
+    let gpu = gpu();
+    let (w, h) = (640u32, 560u32);
+    let pack = cube_pack(&[Mat4::from_translation(Vec3::new(0.0, 0.0, -3.0)) * Mat4::from_rotation_y(0.6)], WHITE4, Material::default());
+    let mut rig = Rig::new(&gpu, &pack, w, h);
+    let cam = looking_down_neg_z(0.0);
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let plain = rig.target.pixels().to_vec();
+    let mut overlay = Overlay::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    // A few frames, so the history has samples and the window's layout has settled.
+    let mut shown = Vec::new();
+    for f in 0..3 {
+        shown = render_with_overlay(&gpu, &mut rig, &mut overlay, &cam, f, Vec::new());
+    }
+    assert_eq!(overlay.history.cpu_ms.len(), 3);
+    let [x0, y0, x1, y1] = overlay.window_rect_px().expect("the overlay window is shown");
+    assert!(x1 - x0 >= 200.0 && y1 - y0 >= 150.0 && x0 >= 0.0 && y0 >= 0.0 && x1 < w as f32 && y1 < h as f32, "window rect {:?}", [x0, y0, x1, y1]);
+    // Edges are anti-aliased over about a pixel: allow one pixel of feathering around the rect.
+    let inside = |x: u32, y: u32, margin: f32| (x as f32 + 0.5) >= x0 - margin && (x as f32 + 0.5) <= x1 + margin && (y as f32 + 0.5) >= y0 - margin && (y as f32 + 0.5) <= y1 + margin;
+    let (mut in_total, mut in_changed) = (0u32, 0u32);
+    for y in 0..h {
+        for x in 0..w {
+            let changed = pixel(&plain, w, x, y) != pixel(&shown, w, x, y);
+            if inside(x, y, -1.0) {
+                in_total += 1;
+                in_changed += changed as u32;
+            } else if !inside(x, y, 1.5) {
+                assert!(!changed, "pixel ({x},{y}) outside the overlay window changed: {:?} -> {:?}", pixel(&plain, w, x, y), pixel(&shown, w, x, y));
+            }
+        }
+    }
+    // The window is filled (nearly opaque), so almost every pixel under it changes.
+    assert!(in_changed as f32 > 0.95 * in_total as f32, "{in_changed} of {in_total} pixels under the overlay changed");
+    // Hidden (F1), nothing is drawn at all.
+    overlay.visible = false;
+    let hidden = render_with_overlay(&gpu, &mut rig, &mut overlay, &cam, 3, Vec::new());
+    assert!(hidden == plain, "the hidden overlay changed the frame");
+    assert_eq!(overlay.window_rect_px(), None);
+    overlay.destroy(&gpu);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
+fn the_overlays_prepass_switch_changes_the_shaded_fragment_count() {
+    // The 8 full-screen layers of the pre-pass test: W H fragments shaded with the pre-pass,
+    // 8 W H without. The switch is pressed the way a user would: pointer events on its checkbox.
+    let gpu = gpu();
+    let (w, h) = (480u32, 600u32);
+    let pack = screen_triangles_pack(&[8.0, 7.0, 6.0, 5.0, 4.0, 3.0, 2.0, 1.0]);
+    let mut rig = Rig::new(&gpu, &pack, w, h);
+    let cam = looking_down_neg_z(0.0);
+    rig.renderer.count_fragments = true;
+    let mut overlay = Overlay::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let pixels = w * h;
+    let mut frame = 0u64;
+    let mut run = |overlay: &mut Overlay, rig: &mut Rig, events: Vec<egui::Event>| {
+        render_with_overlay(&gpu, rig, overlay, &cam, frame, events);
+        frame += 1;
+        rig.renderer.fragment_count(0).expect("lavapipe can count")
+    };
+    for _ in 0..2 {
+        assert_eq!(run(&mut overlay, &mut rig, Vec::new()), pixels);
+    }
+    assert_eq!(overlay.last.fragments_shaded, Some(pixels), "the overlay shows what the renderer counted");
+    let [_, _, _, bottom] = overlay.window_rect_px().unwrap();
+    assert!(bottom <= h as f32, "the whole overlay fits the image ({bottom} px tall)");
+    let at = overlay.control_centre("depth pre-pass").expect("the pre-pass checkbox was laid out");
+    let button = |pressed| egui::Event::PointerButton { pos: at, button: egui::PointerButton::Primary, pressed, modifiers: egui::Modifiers::NONE };
+    for expect_prepass in [false, true] {
+        // Press in one frame, release in the next: the checkbox flips on release, after that
+        // frame was recorded, so the frame after it is the first without (or with) the pre-pass.
+        run(&mut overlay, &mut rig, vec![egui::Event::PointerMoved(at), button(true)]);
+        assert_eq!(rig.renderer.prepass, !expect_prepass, "a press alone does not toggle");
+        assert_eq!(overlay.control_centre("depth pre-pass"), Some(at), "the layout moved under the pointer");
+        run(&mut overlay, &mut rig, vec![button(false)]);
+        assert_eq!(rig.renderer.prepass, expect_prepass);
+        let shaded = run(&mut overlay, &mut rig, vec![egui::Event::PointerGone]);
+        assert_eq!(shaded, if expect_prepass { pixels } else { 8 * pixels });
+        assert_eq!(overlay.last.pass_stats.map(|s| s.prepass.is_some()), Some(expect_prepass));
+    }
+    overlay.destroy(&gpu);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
 }

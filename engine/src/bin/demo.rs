@@ -1,11 +1,14 @@
-//! `demo`: render a cooked pack. In a window with a fly camera when there is a display; headless
-//! (offscreen frames, screenshots, frame times) with `--headless` or when there is none.
+//! `demo`: render a cooked pack. In a window with a fly camera and the debug overlay (F1, or
+//! `--overlay` from the start) when there is a display; headless (offscreen frames, screenshots,
+//! frame times) with `--headless` or when there is none, the overlay drawn into the frames with
+//! `--overlay`.
 //!
 //! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
 
 use engine::camera::Camera;
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
-use engine::headless::Offscreen;
+use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::overlay::{self, FrameStats, Overlay};
 use engine::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::stats::{median, percentile};
@@ -14,8 +17,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
-            [--screenshot PATH] [--screenshot-every K] [--device auto|cpu|gpu|NAME] [--validation]
-            [--shadow-map-size N]
+            [--screenshot PATH] [--screenshot-every K] [--overlay] [--device auto|cpu|gpu|NAME]
+            [--validation] [--shadow-map-size N]
        demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`)
@@ -24,12 +27,21 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --width/--height     image or window size in pixels (default 1280x720)
   --screenshot PATH    headless: write the last frame here (default build/screenshots/demo.png)
   --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
+  --overlay            show the debug overlay (frame-time graph, counters, switches) from the
+                       start; headless, it is drawn into the frames, so screenshots show it
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
   --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
-                       world matrices, joint matrices, morph weights, skinned LOD 0 vertices";
+                       world matrices, joint matrices, morph weights, skinned LOD 0 vertices
+
+In the window: WASD move, Q/E down/up, Shift faster, drag with a mouse button to look, Esc quits.
+F1 shows or hides the debug overlay (hidden at start unless --overlay): frame-time graph (CPU
+frame and GPU ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass,
+and switches for the depth pre-pass, frustum culling, LOD selection and freezing, fragment
+counting and the LOD pixel error. While the pointer is over the overlay, the mouse works it,
+not the camera.";
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
@@ -41,6 +53,7 @@ struct Args {
     height: u32,
     screenshot: PathBuf,
     screenshot_every: Option<u64>,
+    overlay: bool,
     device: DevicePreference,
     validation: bool,
     shadow_map_size: u32,
@@ -57,6 +70,7 @@ fn parse_args() -> Result<Args, String> {
         height: 720,
         screenshot: PathBuf::from("build/screenshots/demo.png"),
         screenshot_every: None,
+        overlay: false,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
         shadow_map_size: engine::shadow::DEFAULT_SHADOW_MAP_SIZE,
@@ -75,6 +89,7 @@ fn parse_args() -> Result<Args, String> {
             }
             "--headless" => a.headless = true,
             "--validation" => a.validation = true,
+            "--overlay" => a.overlay = true,
             "--frames" => a.frames = Some(number("--frames", value("--frames")?)?),
             "--width" => a.width = number("--width", value("--width")?)?,
             "--height" => a.height = number("--height", value("--height")?)?,
@@ -162,6 +177,7 @@ fn main() -> ExitCode {
             max_frames: args.frames,
             shadow_map_size: args.shadow_map_size,
             title: format!("demo - {}", pack_path.display()),
+            overlay: args.overlay,
         };
         match window::run(&pack, opts) {
             Ok(run) => {
@@ -197,6 +213,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
+    // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
+    let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
@@ -208,7 +226,18 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     for f in 0..frames {
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
-        let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, last || every)?;
+        let capture = last || every;
+        let t = match overlay.as_mut() {
+            Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
+                // A fixed 60 Hz clock: the same frames give the same pictures.
+                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut []);
+                o.record(&gpu, cb, frame)
+            })?,
+            None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
+        };
+        if let Some(o) = overlay.as_mut() {
+            o.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(&gpu, &renderer, 0));
+        }
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
         if let Some(p) = renderer.pass_times_ms(&gpu, 0) {
@@ -245,6 +274,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     }
     if let [Some(s), Some(a), Some(b), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
         println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, tone map {t:.3}", renderer.shadow_casters);
+    }
+    if let Some(o) = overlay.take() {
+        o.destroy(&gpu);
     }
     scene.destroy(&gpu);
     renderer.destroy(&gpu);

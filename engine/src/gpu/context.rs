@@ -78,7 +78,9 @@ pub struct Gpu {
     pub queue: vk::Queue,
     pub queue_family: u32,
     pub caps: Capabilities,
-    pub allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// Shared (Arc) so the overlay's egui renderer allocates from the same heaps; every holder
+    /// of a clone is destroyed before the `Gpu`, like any other object made from it.
+    pub allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
     /// Pool for one-off transfer command buffers.
     upload_pool: vk::CommandPool,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
@@ -220,7 +222,7 @@ impl Gpu {
             queue,
             queue_family,
             caps,
-            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
             upload_pool,
             debug,
             validation_log,
@@ -274,7 +276,11 @@ impl Drop for Gpu {
         unsafe {
             let _ = self.device.device_wait_idle();
             self.device.destroy_command_pool(self.upload_pool, None);
-            // The allocator frees its memory blocks on drop, which needs the device alive.
+            // The allocator frees its memory blocks on drop, which needs the device alive: a clone
+            // still held here (an overlay not destroyed) would free them after the device.
+            if !std::thread::panicking() {
+                assert_eq!(Arc::strong_count(&self.allocator), 1, "an allocator clone outlives the Gpu");
+            }
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
             if let Some((du, m)) = self.debug.take() {

@@ -302,6 +302,15 @@ impl Transition {
         dst_stage: vk::PipelineStageFlags2::COPY,
         dst_access: vk::AccessFlags2::TRANSFER_READ,
     };
+    /// The overlay's pass loads and blends onto what the scene passes wrote.
+    pub const COLOR_ATTACHMENT_TO_OVERLAY: Transition = Transition {
+        old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+        dst_access: vk::AccessFlags2::from_raw(vk::AccessFlags2::COLOR_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE.as_raw()),
+    };
     pub const COLOR_ATTACHMENT_TO_PRESENT: Transition = Transition {
         old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
         new: vk::ImageLayout::PRESENT_SRC_KHR,

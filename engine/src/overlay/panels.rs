@@ -1,0 +1,139 @@
+//! What the overlay shows. Every section is a `Panel`: the renderer's own (frame-time graph,
+//! counters, switches) and whatever a caller adds for the frame (simulation parameters later),
+//! so a new panel is one trait impl handed to `Overlay::build`, not a change to the overlay.
+
+use super::history::{FrameHistory, Ring};
+use super::FrameStats;
+use crate::renderer::{Renderer, ShaderInvocations};
+use crate::visibility::LOD_BUCKETS;
+use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
+
+/// One collapsible section of the overlay window.
+pub trait Panel {
+    fn title(&self) -> &str;
+    fn ui(&mut self, ui: &mut egui::Ui);
+}
+
+/// Where each labelled control was laid out last frame (points), so scripted input (tests, the
+/// headless demo) can press it like a user would.
+pub type ControlRects = Vec<(&'static str, Rect)>;
+
+pub const CPU_COLOR: Color32 = Color32::from_rgb(255, 190, 60);
+pub const GPU_COLOR: Color32 = Color32::from_rgb(90, 200, 255);
+
+/// The renderer's section: reads its counters and flips its real switches.
+pub struct RendererPanel<'a> {
+    pub renderer: &'a mut Renderer,
+    pub history: &'a FrameHistory,
+    pub last: &'a FrameStats,
+    pub controls: &'a mut ControlRects,
+}
+
+impl Panel for RendererPanel<'_> {
+    fn title(&self) -> &str {
+        "renderer"
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui) {
+        frame_time_graph(ui, self.history);
+        ui.separator();
+        counters(ui, self.renderer, self.last);
+        ui.separator();
+        self.switches(ui);
+    }
+}
+
+impl RendererPanel<'_> {
+    fn switches(&mut self, ui: &mut egui::Ui) {
+        let r = &mut *self.renderer;
+        let mut control = |name: &'static str, response: egui::Response| {
+            self.controls.push((name, response.rect));
+        };
+        control("depth pre-pass", ui.checkbox(&mut r.prepass, "depth pre-pass"));
+        control("frustum culling", ui.checkbox(&mut r.visibility.culling, "frustum culling"));
+        control("LOD selection", ui.checkbox(&mut r.visibility.lod_selection, "LOD selection (off: LOD 0 everywhere)"));
+        control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
+        control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
+        let policy = &mut r.visibility.policy;
+        control(
+            "LOD threshold",
+            ui.add(egui::Slider::new(&mut policy.threshold_px, 0.1..=32.0).logarithmic(true).text("LOD pixel error")),
+        );
+        control("LOD hysteresis", ui.add(egui::Slider::new(&mut policy.band, 0.0..=0.5).text("LOD hysteresis band")));
+    }
+}
+
+/// CPU frame time and GPU time over the history, with the last value, median and p99.
+fn frame_time_graph(ui: &mut egui::Ui, h: &FrameHistory) {
+    let line = |ui: &mut egui::Ui, name: &str, ring: &Ring, color: Color32| {
+        let text = match (ring.last(), ring.median(), ring.p99()) {
+            (Some(last), Some(median), Some(p99)) => format!("{name} ms: {last:6.2}  median {median:6.2}  p99 {p99:6.2}"),
+            _ => format!("{name} ms: (no samples yet)"),
+        };
+        ui.colored_label(color, egui::RichText::new(text).monospace());
+    };
+    line(ui, "CPU frame", &h.cpu_ms, CPU_COLOR);
+    line(ui, "GPU      ", &h.gpu_ms, GPU_COLOR);
+    let (rect, _) = ui.allocate_exact_size(Vec2::new(ui.available_width().max(240.0), 70.0), Sense::hover());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 2.0, Color32::from_black_alpha(120));
+    // Scale to the p99 of either series (with headroom) so one hitch does not flatten the rest.
+    let top = [h.cpu_ms.p99(), h.gpu_ms.p99()].into_iter().flatten().fold(1.0f64, f64::max) * 1.25;
+    painter.text(
+        rect.left_top() + Vec2::new(3.0, 1.0),
+        egui::Align2::LEFT_TOP,
+        format!("{top:.1} ms"),
+        egui::FontId::monospace(10.0),
+        Color32::GRAY,
+    );
+    let capacity = super::history::HISTORY_FRAMES as f32;
+    for (ring, color) in [(&h.cpu_ms, CPU_COLOR), (&h.gpu_ms, GPU_COLOR)] {
+        // Newest sample at the right edge.
+        let start = capacity - ring.len() as f32;
+        let points: Vec<Pos2> = ring
+            .iter()
+            .enumerate()
+            .map(|(i, ms)| {
+                let x = rect.left() + rect.width() * (start + i as f32) / (capacity - 1.0).max(1.0);
+                let y = rect.bottom() - rect.height() * (ms / top).min(1.0) as f32;
+                Pos2::new(x, y)
+            })
+            .collect();
+        if points.len() >= 2 {
+            painter.add(Shape::line(points, Stroke::new(1.5, color)));
+        }
+    }
+}
+
+/// This frame's culling and LOD counters, and the last finished frame's GPU measurements.
+fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
+    let c = &renderer.visibility.counts;
+    egui::Grid::new("counters").num_columns(2).striped(true).show(ui, |ui| {
+        let mut row = |name: &str, value: String| {
+            ui.label(name);
+            ui.monospace(value);
+            ui.end_row();
+        };
+        row("instances tested", c.cull.tested.to_string());
+        row("instances culled", c.cull.culled.to_string());
+        row("instances drawn", c.cull.visible.to_string());
+        row("triangles drawn", c.triangles.to_string());
+        let buckets: Vec<String> = c
+            .lod_histogram
+            .iter()
+            .enumerate()
+            .map(|(i, n)| if i + 1 == LOD_BUCKETS { format!("{i}+:{n}") } else { format!("{i}:{n}") })
+            .collect();
+        row("LOD histogram", buckets.join(" "));
+        // A fixed set of rows, so the layout (and where the switches are) does not move when
+        // the first measurements arrive.
+        let na = || "n/a".to_string();
+        row("GPU ms pre-pass / shading", last.pass_ms.map_or_else(na, |t| format!("{:.3} / {:.3}", t.prepass_ms, t.shading_ms)));
+        row("GPU ms shadow / tone map", last.pass_ms.map_or_else(na, |t| format!("{:.3} / {:.3}", t.shadow_ms, t.tonemap_ms)));
+        let invocations = |s: ShaderInvocations| format!("{} / {}", s.vertex, s.fragment);
+        let prepass = last.pass_stats.map_or_else(na, |s| s.prepass.map_or_else(|| "off".to_string(), invocations));
+        row("pre-pass VS / FS invocations", prepass);
+        row("shading VS / FS invocations", last.pass_stats.map_or_else(na, |s| invocations(s.shading)));
+        row("fragments shaded (counter)", last.fragments_shaded.map_or_else(|| "off".to_string(), |n| n.to_string()));
+    });
+}
