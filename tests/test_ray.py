@@ -221,3 +221,19 @@ def test_bad_executor_arguments_are_one_line_errors(room, tmp_path, args, messag
     assert "Traceback" not in r.stderr and r.stderr.strip().splitlines()[-1].startswith("cook: error:"), r.stderr
     assert not (tmp_path / "x.pack").exists()
     assert time.monotonic() - t0 < 60
+
+
+def test_local_cook_does_not_import_ray(room, tmp_path):
+    # A fresh interpreter: this module has imported ray into the test process.
+    code = textwrap.dedent(f"""
+        import sys
+        from asset_pipeline import bake
+        from asset_pipeline.pipeline import CookSettings, cook
+        cook({str(room)!r}, {str(tmp_path / 'room.pack')!r}, CookSettings(bake=bake.BakeSettings(preset="draft", samples=1, probe_samples=1),
+             lods=True, report=False))
+        print("ray" in sys.modules)
+    """)
+    r = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "False"
+    assert (tmp_path / "room.pack").exists()
