@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     scale.add_argument("--executor", choices=EXECUTORS, default="local",
                        help="where independent work runs: this process (local, default) or Ray tasks (ray)")
     scale.add_argument("--ray-address", metavar="HOST:PORT",
-                       help="the Ray head's address (as `ray start --head` prints; default: $RAY_ADDRESS, else a local Ray instance)")
+                       help="the Ray head's address (as `ray start --head` prints; default: $RAY_ADDRESS, else a cluster started on this machine, else a new local instance)")
     scale.add_argument("--tile-texels", type=_positive, metavar="N", default=BakeSettings.tile_texels,
                        help=f"lightmap texels per Ray task (default: {BakeSettings.tile_texels})")
     args = parser.parse_args(argv)

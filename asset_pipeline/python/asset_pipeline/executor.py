@@ -172,13 +172,20 @@ class RayExecutor:
                     if on_done is not None:
                         on_done(i, results[i])
             return results
-        except BaseException:
+        except BaseException as e:
             for ref in pending:
                 try:
                     ray.cancel(ref)
                     self.cancelled += 1
                 except Exception:  # noqa: BLE001 - already finished or gone: nothing to cancel
                     pass
+            # A bad input found by a task is the same one-line error as in a local cook; a task
+            # that failed for good (retries used up, cluster gone) is one line too, not Ray's trace.
+            if isinstance(e, ray.exceptions.RayTaskError) and isinstance(e.cause, CookError):
+                raise e.cause from None
+            if isinstance(e, ray.exceptions.RayError) and not isinstance(e, ray.exceptions.RayTaskError):
+                first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+                raise CookError(f"ray: {type(e).__name__}: {first}") from None
             raise
 
 

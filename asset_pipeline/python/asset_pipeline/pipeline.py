@@ -44,7 +44,8 @@ class CookSettings:
     cache_dir: Path | None = None  # default: .cook-cache beside the output
     report: bool = True
     # Where independent work runs (executor.py): "local" (this process) or "ray" (Ray tasks on
-    # the cluster at ray_address; None: $RAY_ADDRESS, else a local Ray instance). Same bytes.
+    # the cluster at ray_address; None: as ray.init(): $RAY_ADDRESS, else a cluster `ray start`ed
+    # on this machine, else a new local instance). Same bytes either way.
     # An executor.RayExecutor instance may be given instead, to share one across cooks and read
     # its counters (tasks submitted, cancelled).
     executor: "str | object" = "local"
