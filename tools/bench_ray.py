@@ -7,7 +7,9 @@ bake on k threads, and the Ray bake on a loopback cluster started here with k wo
 (one head node, k CPUs; one CPU per task) for each tile size. Compared: the tracing wall time
 (lightmap tiles + probes; the clean-up after it runs in the driver either way and is left out)
 and the whole ``bake_level``. The overhead is Ray's tracing time over the local one, minus 1;
-the report ends with the smallest tile size whose overhead stays under 10%.
+the report ends with the smallest tile size whose overhead stays under 10%. Since two runs on a
+shared machine can differ by more than that, each Ray run also prints the share of its workers'
+time spent outside tasks (scheduling, transfers, the last tiles' tail), from one run.
 
 Every Ray bake is checked to give the local bake's pages and probes bit for bit. Worker start-up
 (process spawn, imports) is paid by a warm-up bake first and printed separately.
@@ -89,9 +91,12 @@ def main() -> int:
                 total = time.perf_counter() - t
                 r = got.stats["ray"]
                 overhead = r["wall_seconds"] / local_trace - 1.0
+                # Less sensitive to other load on the machine than the ratio of two runs: the share
+                # of the workers' wall time spent outside the tasks (scheduling, transfers, the tail).
+                idle = 1.0 - r["task_seconds"] / (r["wall_seconds"] * k)
                 rows.append((k, tile, overhead))
                 print(f"  tile {tile:>6}: {r['tiles']:>4} tiles + {r['probe_batches']} probe batches, tracing {r['wall_seconds']:.2f} s "
-                      f"({r['rays_per_s'] / 1e6:.2f} M rays/s), bake_level {total:.2f} s; overhead {overhead * 100:+.1f}%; "
+                      f"({r['rays_per_s'] / 1e6:.2f} M rays/s), bake_level {total:.2f} s; overhead {overhead * 100:+.1f}%, workers idle {idle * 100:.1f}%; "
                       f"scene built {r['scene_builds']}x on {r['workers']} worker(s); identical: {same(got, local)}")
         finally:
             ray.shutdown()

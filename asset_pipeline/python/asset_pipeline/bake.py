@@ -359,6 +359,7 @@ def _bake_on_ray(executor, scene: ir.Scene, st: StaticScene, inputs, probe_point
         probe_seconds += seconds
     stats["ray"] = {"tiles": len(tiles), "probe_batches": len(probe_batches), "tile_texels": s.tile_texels, "probe_tile": s.probe_tile,
                     "workers": len(workers), "scene_builds": builds[0], "wall_seconds": wall,
+                    "task_seconds": sum(t[2] for t in traced) + probe_seconds,
                     "rays_per_s": rays[0] / wall if wall > 0 else 0.0}
     return traced, (sh, sun, back, probe_rays), probe_seconds
 
