@@ -31,7 +31,7 @@ cooker: setup $(VENV)/.cooker-built
 
 $(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt
 	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
-	  $(VENV)/bin/maturin develop --release --locked --extras test,denoise -m asset_pipeline/Cargo.toml -q
+	  $(VENV)/bin/maturin develop --release --locked --extras test,denoise,ray -m asset_pipeline/Cargo.toml -q
 	@touch $@
 
 # The project's own content, cooked: the CSG demo level, and a generated glTF scene that keeps

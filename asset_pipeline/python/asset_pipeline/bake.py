@@ -28,6 +28,11 @@ Determinism: a texel's random streams are keyed by (seed, page, texel index), a 
 grid index, so the same seed gives the same bytes for any thread count and batch size.
 Ctrl-C is honoured between batches (about a second of work each): the stage raises
 ``KeyboardInterrupt`` and nothing is written.
+
+With a Ray executor (executor.py) the texels of every page are cut into tiles of
+``tile_texels`` and the probes into batches of ``probe_tile``, all submitted at once as tasks
+against the scene put once into the object store; rasterising the pages, the clean-up
+(``finish_page``) and filling the probes inside geometry stay in the driver.
 """
 
 from __future__ import annotations
@@ -61,12 +66,18 @@ class BakeSettings:
     post: LightmapPostSettings = field(default_factory=LightmapPostSettings)
     batch_texels: int = 16384  # texels per call: progress and Ctrl-C granularity
     threads: int | None = None  # None: all cores (does not change the result)
+    # With the Ray executor: texels per task and probes per task (neither changes the result).
+    # Smaller tiles balance better across workers; each costs a round trip (see README).
+    tile_texels: int = 4096
+    probe_tile: int = 128
 
     def key_doc(self) -> dict:
-        d = dataclasses.asdict(self)
-        d.pop("threads")
-        d.pop("batch_texels")
-        return d
+        return {k: v for k, v in dataclasses.asdict(self).items() if k not in SCHEDULING}
+
+
+# Settings that change how the work is cut up and where it runs, never the result: left out of
+# every cache key.
+SCHEDULING = ("threads", "batch_texels", "tile_texels", "probe_tile")
 
 
 @dataclass
@@ -217,7 +228,8 @@ def _texel_ids(page: int, flat: np.ndarray) -> np.ndarray:
     return (np.uint64(page) << np.uint64(40)) | flat.astype(np.uint64)
 
 
-def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=None) -> Baked:
+def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=None, executor=None) -> Baked:
+    """`executor`: None bakes in this process; a RayExecutor bakes tiles as Ray tasks (same bytes)."""
     s = settings or BakeSettings()
     if s.preset not in PRESETS:
         raise ValueError(f"bake: unknown preset '{s.preset}' ({', '.join(PRESETS)})")
@@ -226,33 +238,32 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     stats: dict = {"preset": s.preset, "static_triangles": int(len(st.triangles))}
     if len(st.triangles) == 0:
         return Baked(pages=[], probes=None, stats=stats)
-    t0 = time.perf_counter()
-    baker = _core.Baker(st.positions, st.triangles, st.albedo, st.emission, _lights_json(scene), _sky(scene))
-    stats["bvh_seconds"] = time.perf_counter() - t0
     kw = dict(preset=s.preset, seed=int(s.seed), bounces=s.bounces, threads=s.threads)
-
-    pages: list[np.ndarray] = []
-    rays_total, texels_total, bake_seconds = 0, 0, 0.0
-    page_stats = []
+    inputs = []  # per page: (w, h, chart, covered, points, normals, ids)
     for page, (w, h) in enumerate(layout.pages if layout else []):
         r = rasterize_page(st.lods, layout, page, positions=st.world_positions, normals=st.world_normals)
         chart = r["chart"]
         covered = np.flatnonzero(chart.ravel() != NONE)
         points = np.ascontiguousarray(r["position"].reshape(-1, 3)[covered])
         normals = np.ascontiguousarray(r["normal"].reshape(-1, 3)[covered])
-        ids = _texel_ids(page, covered)
-        raw = np.zeros((h * w, 3), np.float32)
-        rays, t_page = 0, time.perf_counter()
-        with _stage(progress, f"bake p{page}", len(covered)) as bar:
-            for a in range(0, len(covered), s.batch_texels):
-                b = min(a + s.batch_texels, len(covered))
-                out, n = baker.bake_points(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
-                raw[covered[a:b]] = out
-                rays += n
-                seconds = time.perf_counter() - t_page
-                bar.note(f"{rays / max(seconds, 1e-9) / 1e6:.2f} Mrays/s")
-                bar.advance(b - a)
-        seconds = time.perf_counter() - t_page
+        inputs.append((w, h, chart, covered, points, normals, _texel_ids(page, covered)))
+    probe_points, probe_layout = _probe_points(st, s)
+
+    if executor is None:
+        t0 = time.perf_counter()
+        baker = _core.Baker(st.positions, st.triangles, st.albedo, st.emission, _lights_json(scene), _sky(scene))
+        stats["bvh_seconds"] = time.perf_counter() - t0
+        traced = [_bake_page_local(baker, page, inp, s, kw, progress) for page, inp in enumerate(inputs)]
+        t_probes = time.perf_counter()
+        probe_out = _bake_probes_local(baker, probe_points, s, progress, kw)
+        probe_seconds = time.perf_counter() - t_probes
+    else:
+        traced, probe_out, probe_seconds = _bake_on_ray(executor, scene, st, inputs, probe_points, s, kw, progress, stats)
+
+    pages: list[np.ndarray] = []
+    rays_total, texels_total, bake_seconds = 0, 0, 0.0
+    page_stats = []
+    for page, ((w, h, chart, covered, *_), (raw, rays, seconds)) in enumerate(zip(inputs, traced)):
         seams = page_seams(st.lods, layout, page, positions=st.world_positions, normals=st.world_normals,
                            min_normal_cos=s.post.seam_min_normal_cos) if s.post.stitch else None
         t_post = time.perf_counter()
@@ -266,11 +277,91 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     stats.update(pages=page_stats, texels=int(texels_total), rays=int(rays_total), lightmap_seconds=bake_seconds,
                  rays_per_s=rays_total / bake_seconds if bake_seconds > 0 else 0.0)
 
-    t_probes = time.perf_counter()
-    probes, probe_stats = _bake_probes(baker, st, s, progress, kw)
+    probes, probe_stats = _finish_probes(probe_layout, probe_out, s)
     stats["probes"] = probe_stats
-    stats["probe_seconds"] = time.perf_counter() - t_probes
+    stats["probe_seconds"] = probe_seconds
     return Baked(pages=pages, probes=probes, stats=stats)
+
+
+def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, progress):
+    """One page's covered texels in batches: (raw (h*w, 3), rays, seconds)."""
+    w, h, _, covered, points, normals, ids = inp
+    raw = np.zeros((h * w, 3), np.float32)
+    rays, t_page = 0, time.perf_counter()
+    with _stage(progress, f"bake p{page}", len(covered)) as bar:
+        for a in range(0, len(covered), s.batch_texels):
+            b = min(a + s.batch_texels, len(covered))
+            out, n = baker.bake_points(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
+            raw[covered[a:b]] = out
+            rays += n
+            seconds = time.perf_counter() - t_page
+            bar.note(f"{rays / max(seconds, 1e-9) / 1e6:.2f} Mrays/s")
+            bar.advance(b - a)
+    return raw, rays, time.perf_counter() - t_page
+
+
+def _bake_on_ray(executor, scene: ir.Scene, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, progress, stats: dict):
+    """Every page's texels in tiles and the probes in batches as Ray tasks, submitted together so
+    the cluster stays busy across page boundaries. Returns what the local path returns."""
+    from asset_pipeline import executor as ex
+
+    # The scene goes into the object store once; tasks carry the reference boxed in a list (a
+    # bare ObjectRef argument would be fetched and deserialised for every task).
+    ref = executor.put((st.positions, st.triangles, st.albedo, st.emission, _lights_json(scene), _sky(scene)))
+    boxed = [ref]
+    key = ref.hex()
+    task_kw = {**kw, "threads": 1}  # one CPU per task (executor.RayExecutor._task)
+    tiles, probe_batches = [], []
+    for page, (_, _, _, covered, points, normals, ids) in enumerate(inputs):
+        for a in range(0, len(covered), s.tile_texels):
+            b = min(a + s.tile_texels, len(covered))
+            tiles.append((page, a, b, (key, boxed, points[a:b], normals[a:b], ids[a:b], {**task_kw, "samples": s.samples})))
+    ids = np.arange(len(probe_points), dtype=np.uint64)
+    for a in range(0, len(probe_points), s.probe_tile):
+        b = min(a + s.probe_tile, len(probe_points))
+        probe_batches.append((a, b, (key, boxed, probe_points[a:b], ids[a:b], {**task_kw, "probe_samples": s.probe_samples})))
+
+    total = len(tiles) + len(probe_batches)
+    rays = [0]
+    workers: set = set()
+    builds = [0]
+    t0 = time.perf_counter()
+    with _stage(progress, "bake tiles", total) as bar:
+        def done(result):
+            rays[0] += result[-4]
+            workers.add(result[-3])
+            builds[0] += bool(result[-2])
+            bar.note(f"{rays[0] / max(time.perf_counter() - t0, 1e-9) / 1e6:.2f} Mrays/s on {len(workers)} worker(s)")
+            bar.advance()
+
+        # Both kinds are submitted before waiting on either, so they share the cluster.
+        calls = [(ex.bake_tile, t[3]) for t in tiles] + [(ex.bake_probe_batch, p[2]) for p in probe_batches]
+        results = executor.run(calls, on_done=lambda i, r: done(r))
+    tile_results, probe_results = results[:len(tiles)], results[len(tiles):]
+    wall = time.perf_counter() - t0
+
+    traced = []
+    for page, (w, h, _, covered, *_) in enumerate(inputs):
+        raw = np.zeros((h * w, 3), np.float32)
+        page_rays, page_seconds = 0, 0.0
+        for (p, a, b, _), (out, n, _, _, seconds) in zip(tiles, tile_results):
+            if p == page:
+                raw[covered[a:b]] = out
+                page_rays += n
+                page_seconds += seconds
+        traced.append((raw, page_rays, page_seconds))  # seconds: summed over the page's tasks
+    n = len(probe_points)
+    sh, sun, back = np.zeros((n, 9, 3), np.float32), np.ones(n, np.float32), np.zeros(n, np.float32)
+    probe_rays, probe_seconds = 0, 0.0
+    for (a, b, _), (bsh, bsun, bback, r, _, _, seconds) in zip(probe_batches, probe_results):
+        sh[a:b], sun[a:b], back[a:b] = bsh, bsun, bback
+        probe_rays += r
+        probe_seconds += seconds
+    stats["ray"] = {"tiles": len(tiles), "probe_batches": len(probe_batches), "tile_texels": s.tile_texels, "probe_tile": s.probe_tile,
+                    "workers": len(workers), "scene_builds": builds[0], "wall_seconds": wall,
+                    "task_seconds": sum(t[2] for t in traced) + probe_seconds,
+                    "rays_per_s": rays[0] / wall if wall > 0 else 0.0}
+    return traced, (sh, sun, back, probe_rays), probe_seconds
 
 
 # ---- probes -------------------------------------------------------------------------------------
@@ -291,12 +382,17 @@ def probe_grid(positions: np.ndarray, spacing: float, max_probes: int) -> tuple[
     return lo + 0.5 * cell, cell, counts
 
 
-def _bake_probes(baker, st: StaticScene, s: BakeSettings, progress, kw) -> tuple[ir.ProbeGrid, dict]:
+def _probe_points(st: StaticScene, s: BakeSettings):
+    """The probe positions (float32 (n, 3), probe = i + nx (j + ny k)) and the grid (origin, cell, counts)."""
     origin, cell, counts = probe_grid(st.positions, s.probe_spacing, s.max_probes)
     nx, ny, nz = (int(c) for c in counts)
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")  # probe = i + nx (j + ny k)
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     idx = np.stack([i.ravel(), j.ravel(), k.ravel()], 1)
-    points = np.ascontiguousarray((origin + idx * cell).astype(np.float32))
+    return np.ascontiguousarray((origin + idx * cell).astype(np.float32)), (origin, cell, counts)
+
+
+def _bake_probes_local(baker, points: np.ndarray, s: BakeSettings, progress, kw):
+    """(sh, sun visibility, backface, rays) of every probe, in batches."""
     ids = np.arange(len(points), dtype=np.uint64)
     sh = np.zeros((len(points), 9, 3), np.float32)
     sun = np.ones(len(points), np.float32)
@@ -309,11 +405,18 @@ def _bake_probes(baker, st: StaticScene, s: BakeSettings, progress, kw) -> tuple
             sh[a:b], sun[a:b], back[a:b], n = baker.bake_probes(points[a:b], ids[a:b], probe_samples=s.probe_samples, **kw)
             rays += n
             bar.advance(b - a)
+    return sh, sun, back, rays
+
+
+def _finish_probes(grid, traced, s: BakeSettings) -> tuple[ir.ProbeGrid, dict]:
+    (origin, cell, counts), (sh, sun, back, rays) = grid, traced
+    nx, ny, nz = (int(c) for c in counts)
+    count = len(back)
     inside = back > s.max_backface
     sh, sun = _fill_invalid(sh.reshape(nz, ny, nx, 27), sun.reshape(nz, ny, nx), inside.reshape(nz, ny, nx))
     grid = ir.ProbeGrid(origin=tuple(float(x) for x in origin), spacing=tuple(float(x) for x in cell), counts=(nx, ny, nz),
                         sh=np.ascontiguousarray(sh.reshape(-1, 9, 3)), sun_visibility=np.ascontiguousarray(sun.reshape(-1)))
-    return grid, {"count": int(len(points)), "counts": [nx, ny, nz], "spacing": [float(x) for x in cell],
+    return grid, {"count": int(count), "counts": [nx, ny, nz], "spacing": [float(x) for x in cell],
                   "inside_geometry": int(inside.sum()), "rays": int(rays)}
 
 
@@ -385,6 +488,11 @@ def describe(stats: dict) -> list[str]:
         for p in stats.get("pages", []):
             lines.append(f"- page {p['page']}: {p['texels']} texels, {p['rays'] / 1e6:.1f} M rays, {p['seconds']:.1f} s bake + "
                          f"{p['post_seconds']:.1f} s clean-up{' (denoised)' if p['denoised'] else ''}")
+    r = stats.get("ray")
+    if r:
+        lines.append(f"On Ray: {r['tiles']} tiles of {r['tile_texels']} texels and {r['probe_batches']} probe batches of {r['probe_tile']} "
+                     f"on {r['workers']} worker(s) (scene built {r['scene_builds']} time(s)), {r['wall_seconds']:.1f} s wall, "
+                     f"{r['rays_per_s'] / 1e6:.2f} M rays/s across the cluster; per-page seconds are summed over tasks.")
     pr = stats.get("probes")
     if pr:
         lines.append(f"Probes: {pr['count']} ({' x '.join(str(c) for c in pr['counts'])}, cells "

@@ -13,6 +13,7 @@ from pathlib import Path
 from asset_pipeline import CookError
 from asset_pipeline.bake import PRESETS, BakeSettings
 from asset_pipeline.cook import cook_detailed
+from asset_pipeline.executor import EXECUTORS
 from asset_pipeline.pipeline import CookSettings
 
 
@@ -58,12 +59,21 @@ def main(argv: list[str] | None = None) -> int:
     bake.add_argument("--probe-samples", type=_positive, metavar="N", help="rays per light probe (overrides the preset)")
     bake.add_argument("--seed", type=_non_negative, default=0, help="random seed: the same seed gives the same bytes")
     bake.add_argument("--threads", type=_positive, metavar="N", help="bake threads (default: all cores; the result is the same)")
+    scale = parser.add_argument_group("scale-out (the same bytes wherever the work runs)")
+    scale.add_argument("--executor", choices=EXECUTORS, default="local",
+                       help="where independent work runs: this process (local, default) or Ray tasks (ray)")
+    scale.add_argument("--ray-address", metavar="HOST:PORT",
+                       help="the Ray head's address (as `ray start --head` prints; default: $RAY_ADDRESS, else a cluster started on this machine, else a new local instance)")
+    scale.add_argument("--tile-texels", type=_positive, metavar="N", default=BakeSettings.tile_texels,
+                       help=f"lightmap texels per Ray task (default: {BakeSettings.tile_texels})")
     args = parser.parse_args(argv)
+    if args.ray_address is not None and args.executor != "ray":
+        parser.error("--ray-address needs --executor ray")
     bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
-                                 seed=args.seed, threads=args.threads)
+                                 seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report,
-                            mips=not args.no_mips, mip_filter=args.mip_filter)
+                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=args.executor, ray_address=args.ray_address)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
     except CookError as e:
@@ -77,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cook: {args.out} is up to date")
     else:
         print(f"cook: wrote {args.out}: {_count(s['meshes'], 'mesh', 'meshes')}, {_count(s['triangles'], 'triangle', 'triangles')}, "
-              f"{_count(s['textures'], 'texture', 'textures')}, {s['bytes']} bytes")
+              f"{_count(s['textures'], 'texture', 'textures')}, {s['bytes']} bytes"
+              + (f" ({_count(result.tasks_submitted, 'Ray task', 'Ray tasks')})" if args.executor == "ray" else ""))
     return 0
 
 

@@ -43,6 +43,13 @@ class CookSettings:
     force: bool = False  # ignore every cache entry and rebuild
     cache_dir: Path | None = None  # default: .cook-cache beside the output
     report: bool = True
+    # Where independent work runs (executor.py): "local" (this process) or "ray" (Ray tasks on
+    # the cluster at ray_address; None: as ray.init(): $RAY_ADDRESS, else a cluster `ray start`ed
+    # on this machine, else a new local instance). Same bytes either way.
+    # An executor.RayExecutor instance may be given instead, to share one across cooks and read
+    # its counters (tasks submitted, cancelled).
+    executor: "str | object" = "local"
+    ray_address: str | None = None
 
 
 @dataclass
@@ -59,6 +66,7 @@ class CookResult:
     up_to_date: bool
     stages: list[StageRecord] = field(default_factory=list)
     report: Path | None = None
+    tasks_submitted: int = 0  # tasks the executor submitted (0 for local, and for a fully cached cook)
 
 
 def _settings_doc(obj) -> object:
@@ -137,9 +145,16 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
     stages: list[StageRecord] = []
 
-    settings_doc = {k: _settings_doc(v) for k, v in dataclasses.asdict(settings).items() if k not in ("force", "cache_dir", "report")}
+    from asset_pipeline.bake import SCHEDULING
+    from asset_pipeline.executor import make_executor
+
+    executor = make_executor(settings.executor, settings.ray_address)
+    # Where and how finely the work runs does not change the bytes, so it is not in the key.
+    settings_doc = {f.name: _settings_doc(getattr(settings, f.name)) for f in dataclasses.fields(settings)
+                    if f.name not in ("force", "cache_dir", "report", "executor", "ray_address")}
     if isinstance(settings_doc.get("bake"), dict):
-        settings_doc["bake"].pop("threads", None)  # the result does not depend on it
+        for k in SCHEDULING:
+            settings_doc["bake"].pop(k, None)
     source_key = Hasher("source")
     for f in _source_files(source):
         source_key.file(f)
@@ -155,6 +170,10 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
                 return CookResult(summary=recorded["summary"], up_to_date=True)
         except (OSError, ValueError, KeyError):
             pass
+
+    if executor is not None:
+        # Connect now, so a bad address fails before minutes of work rather than after.
+        executor.connect()
 
     # Stage 1: source -> scene.
     rec = StageRecord("import" if source.suffix.lower() != ".toml" else "level")
@@ -179,15 +198,15 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
         scene, uv2_stats, rec = _uv2_stage(scene, settings, cache, progress)
         stages.append(rec)
     if settings.lods:
-        scene, rec = _lod_stage(scene, settings, cache, progress)
+        scene, rec = _lod_stage(scene, settings, cache, progress, executor)
         stages.append(rec)
     bake_stats: dict = {}
     if settings.baking and scene.lightmap is not None and scene.lightmap.pages:
-        scene, bake_stats, rec = _bake_stage(scene, settings, cache, progress)
+        scene, bake_stats, rec = _bake_stage(scene, settings, cache, progress, executor)
         stages.append(rec)
 
     if settings.mips and scene.textures:
-        scene, rec = _textures_stage(scene, settings, cache, progress)
+        scene, rec = _textures_stage(scene, settings, cache, progress, executor)
         stages.append(rec)
 
     rec = StageRecord("write", items=1)
@@ -208,7 +227,8 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     tmp = stamp.with_suffix(".tmp")
     tmp.write_text(json.dumps({"key": cook_key, "files": files, "summary": summary}))
     os.replace(tmp, stamp)
-    return CookResult(summary=summary, up_to_date=False, stages=stages, report=report)
+    return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
+                      tasks_submitted=executor.submitted if executor is not None else 0)
 
 
 def _unchanged(path: Path, size: int, mtime_ns: int) -> bool:
@@ -281,16 +301,19 @@ def _uv2_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
 # ---- LOD chains ---------------------------------------------------------------------------------
 
 
-def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None):
+    from asset_pipeline.executor import lod_chain
     from asset_pipeline.lod import LodSettings, build_lods
 
     lod_settings = settings.lod or LodSettings()
     doc = _settings_doc(lod_settings)
     rec = StageRecord("lod", items=len(scene.meshes))
     t0 = time.perf_counter()
-    meshes = []
+    chains: list = [None] * len(scene.meshes)
+    keys = []
     with progress.stage("lod", len(scene.meshes)) as bar:
-        for m in scene.meshes:
+        todo = []
+        for i, m in enumerate(scene.meshes):
             base = m.base
             if base.morph_positions is not None:
                 # Morph deltas are per vertex and simplification merges vertices; until the lod
@@ -302,16 +325,30 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])
             key = key.array(base.triangles).array(base.materials).array(base.lightmap_pages).key()
+            keys.append(key)
             hit = cache.load("lod", key)
             if hit is not None:
-                chain = ir.lods_from_wire(hit[0]["lods"], hit[1])
+                chains[i] = ir.lods_from_wire(hit[0]["lods"], hit[1])
                 rec.cached += 1
-            else:
-                chain = build_lods(base, lod_settings)
-                docs, arrays = ir.lods_to_wire(chain)
+                bar.advance()
+            elif executor is None:
+                chains[i] = build_lods(base, lod_settings)
+                docs, arrays = ir.lods_to_wire(chains[i])
                 cache.store("lod", key, {"lods": docs}, arrays)
-            meshes.append(dataclasses.replace(m, lods=[base, *chain]))
+                bar.advance()
+            else:
+                todo.append(i)
+
+        def done(j, chain):
+            i = todo[j]
+            chains[i] = chain
+            docs, arrays = ir.lods_to_wire(chain)
+            cache.store("lod", keys[i], {"lods": docs}, arrays)
             bar.advance()
+
+        if todo:  # the meshes not in the cache, one Ray task each
+            executor.run([(lod_chain, (scene.meshes[i].base, lod_settings)) for i in todo], on_done=done)
+    meshes = [dataclasses.replace(m, lods=[m.base, *chain]) for m, chain in zip(scene.meshes, chains)]
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), rec
 
@@ -340,7 +377,7 @@ def _bake_key(scene: ir.Scene, bake_settings) -> str:
     return key.key()
 
 
-def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None):
     from asset_pipeline.bake import BakeSettings, Baked, attach, bake_level
 
     bake_settings = settings.bake or BakeSettings()
@@ -359,7 +396,7 @@ def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, prog
         rec.cached = pages
         progress.line(f"bake: {pages} page(s) from the cache")
     else:
-        baked = bake_level(scene, bake_settings, progress)
+        baked = bake_level(scene, bake_settings, progress, executor)
         arrays = list(baked.pages)
         probes = None
         if baked.probes is not None:
@@ -385,7 +422,7 @@ def _alpha_cutoffs(scene: ir.Scene) -> dict[int, float]:
     return cutoffs
 
 
-def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None):
     """Every material texture gets its full mip chain by its usage (cook_core::mips): colour in
     linear light with premultiplied alpha, data per channel, normals renormalised and stored
     16-bit at every level (level 0 re-encoded: 8 bits cannot hold a unit vector), HDR with a
@@ -393,7 +430,7 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
     as the runtime's sampler repeats. Lightmap pages are left at one level: they are magnified,
     and their 2-texel chart gutters would bleed neighbouring charts into level 1 and below.
     Textures that arrive with more than one level keep theirs."""
-    from asset_pipeline._core import mip_chain, normal_chain
+    from asset_pipeline.executor import texture_levels
 
     skip = set(scene.lightmap.textures) if scene.lightmap is not None else set()
     cutoffs = _alpha_cutoffs(scene)
@@ -402,32 +439,40 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
     t0 = time.perf_counter()
     textures = list(scene.textures)
     with progress.stage("textures", len(todo)) as bar:
-        for i in todo:
+        def finish(i, key, levels, cached):
             t = textures[i]
-            job = {"usage": t.usage, "filter": settings.mip_filter, "edge": "wrap", "alpha_cutoff": cutoffs.get(i)}
-            key = Hasher("textures").settings(job).array(t.mips[0]).key()
-            # Normal maps come back whole (level 0 re-encoded 16-bit), the rest as levels 1..
-            normal = t.usage == "normal"
-            hit = cache.load("textures", key)
-            if hit is not None:
-                levels = hit[1]
-                rec.cached += 1
-            else:
-                level0 = np.ascontiguousarray(t.mips[0].view(np.uint16) if t.usage == "hdr" else t.mips[0])
-                try:
-                    if normal:
-                        levels = normal_chain(level0, filter=job["filter"], edge="wrap")
-                    else:
-                        levels = mip_chain(level0, t.usage, filter=job["filter"], edge="wrap", alpha_cutoff=job["alpha_cutoff"])
-                except ValueError as e:
-                    raise CookError(f"{scene.source}: texture {i} '{t.name}': {e}") from None
+            if not cached:
+                status, levels = levels
+                if status != "ok":
+                    raise CookError(f"{scene.source}: texture {i} '{t.name}': {levels}")
                 if t.usage == "hdr":
                     levels = [l.view(np.float16) for l in levels]
                 cache.store("textures", key, {}, levels)
-            if normal:
+            # Normal maps come back whole (level 0 re-encoded 16-bit), the rest as levels 1..
+            if t.usage == "normal":
                 textures[i] = dataclasses.replace(t, format="Rgba16Unorm", mips=list(levels))
             else:
                 textures[i] = dataclasses.replace(t, mips=[t.mips[0], *levels])
             bar.advance()
+
+        remote = []  # (texture, key, args) not in the cache, for the Ray executor
+        for i in todo:
+            t = textures[i]
+            job = {"usage": t.usage, "filter": settings.mip_filter, "edge": "wrap", "alpha_cutoff": cutoffs.get(i)}
+            key = Hasher("textures").settings(job).array(t.mips[0]).key()
+            hit = cache.load("textures", key)
+            if hit is not None:
+                rec.cached += 1
+                finish(i, key, hit[1], True)
+                continue
+            level0 = np.ascontiguousarray(t.mips[0].view(np.uint16) if t.usage == "hdr" else t.mips[0])
+            args = (level0, t.usage, t.usage == "normal", job)
+            if executor is None:
+                finish(i, key, texture_levels(*args), False)
+            else:
+                remote.append((i, key, args))
+        if remote:  # one Ray task per texture
+            executor.run([(texture_levels, args) for _, _, args in remote],
+                         on_done=lambda j, r: finish(remote[j][0], remote[j][1], r, False))
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, textures=textures), rec

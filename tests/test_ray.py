@@ -1,0 +1,239 @@
+"""Scale-out cooking on Ray (issue 10), against a cluster this module starts on 127.0.0.1 and
+stops: a head node and one extra worker node, one CPU each (two worker processes run tasks).
+
+- the demo level cooked with `--executor ray` is byte-identical to `--executor local` (pack and
+  EXR pages), and the scene reached every worker once, not once per task;
+- a worker process killed mid-bake has its tile retried; the pack is still identical;
+- with every stage cached, a Ray cook submits no task;
+- Ctrl-C (an exception from the progress callback) cancels the submitted tasks and leaves the
+  previous pack as it was;
+- bad --executor / unreachable --ray-address are one-line errors with status 2.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+# Before Ray is imported anywhere in this process (and inherited by the `cook` processes): no
+# usage reporting from the test cluster, and 127.0.0.1 stays 127.0.0.1. Ray otherwise rewrites a
+# loopback address to the machine's own IP before connecting (services.resolve_ip_for_localhost),
+# which nothing listens on here: this cluster is on loopback only. The variable's name says
+# Windows/OSX, but on Linux it only switches that rewrite off.
+os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
+os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+
+import ray  # noqa: E402  (the `ray` extra is installed by `make cooker`)
+from ray.cluster_utils import Cluster  # noqa: E402
+
+from asset_pipeline import bake  # noqa: E402
+from asset_pipeline.executor import RayExecutor  # noqa: E402
+from asset_pipeline.pipeline import CookSettings, cook  # noqa: E402
+from asset_pipeline.progress import Progress  # noqa: E402
+
+from test_bake import ROOM  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+COOK = REPO / ".venv" / "bin" / "cook"
+TEMPLE = REPO / "content" / "levels" / "temple.toml"
+
+# Small bakes: identity does not need converged lightmaps, only the same work split differently.
+DEMO_BAKE = ("--quality", "draft", "--samples", "4", "--probe-samples", "8")
+ROOM_BAKE = bake.BakeSettings(preset="draft", samples=16, probe_samples=16, seed=5, tile_texels=64)
+
+NODE = {"num_cpus": 1, "node_ip_address": "127.0.0.1", "object_store_memory": 80 * 1024 * 1024}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """(address, the extra worker node) of a two-node loopback cluster, this process connected."""
+    c = Cluster(initialize_head=True, head_node_args={**NODE, "include_dashboard": False})
+    try:
+        worker = c.add_node(**NODE)
+        c.wait_for_nodes()
+        ray.init(address=c.address, log_to_driver=False)
+        yield c.address, worker
+    finally:
+        ray.shutdown()
+        c.shutdown()
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("room") / "room.toml"
+    p.write_text(textwrap.dedent(ROOM))
+    return p
+
+
+def _files(out: Path) -> dict[str, bytes]:
+    """The pack and its EXR pages by name."""
+    return {p.name: p.read_bytes() for p in sorted(out.parent.glob(f"{out.stem}.*")) if p.suffix in (".pack", ".exr")}
+
+
+def _cli(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([str(COOK), *map(str, args)], capture_output=True, text=True, timeout=600)
+
+
+def test_demo_level_on_ray_is_byte_identical_to_local(cluster, tmp_path):
+    address, _ = cluster
+    outs = {}
+    for executor in ("local", "ray"):
+        d = tmp_path / executor
+        d.mkdir()
+        extra = ("--ray-address", address) if executor == "ray" else ()
+        # Separate caches: the Ray cook must do the work, not read the local cook's results.
+        r = _cli(TEMPLE, "-o", d / "temple.pack", "--cache", d / "cache", "--no-report", "--executor", executor, *extra, *DEMO_BAKE)
+        assert r.returncode == 0, r.stderr
+        outs[executor] = (d / "temple.pack", r.stdout)
+    local, on_ray = (_files(outs[k][0]) for k in ("local", "ray"))
+    assert "temple.pack" in local and any(n.endswith(".exr") for n in local), sorted(local)
+    assert sorted(local) == sorted(on_ray)
+    for name in local:
+        assert local[name] == on_ray[name], f"{name} differs between local and Ray"
+    assert "Ray tasks)" in outs["ray"][1] and "(0 Ray tasks)" not in outs["ray"][1], outs["ray"][1]
+
+
+def _local_room(room: Path, tmp_path: Path) -> Path:
+    out = tmp_path / "local" / "room.pack"
+    out.parent.mkdir()
+    cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=out.parent / "cache"))
+    return out
+
+
+def _busy_workers(raylet_pid: int, task: str) -> list[int]:
+    """Worker processes of one raylet that are running `task` (Ray titles a busy worker
+    `ray::<task>`)."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            title = (d / "cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == raylet_pid and title.startswith(f"ray::{task}"):
+            pids.append(int(d.name))
+    return pids
+
+
+def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room, tmp_path):
+    _, worker_node = cluster
+    raylet_pid = worker_node.all_processes["raylet"][0].process.pid
+    local = _local_room(room, tmp_path)
+    killed: list[int] = []
+
+    def kill_one(stage, done, total):
+        # Once some tiles are in and most are still to come, kill a worker that is inside a tile.
+        if stage == "bake tiles" and not killed and 2 <= done < total // 2:
+            for pid in _busy_workers(raylet_pid, "bake_tile"):
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+                break
+
+    out = tmp_path / "ray" / "room.pack"
+    out.parent.mkdir()
+    executor = RayExecutor()
+    result = cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=out.parent / "cache", executor=executor),
+                  progress=Progress(callback=kill_one))
+    assert killed, "no busy worker was found to kill"
+    assert result.tasks_submitted > 0
+    # The killed worker's tile was retried: the pack and the EXR are the local cook's bytes.
+    assert _files(out) == _files(local)
+
+
+def test_scene_is_built_once_per_worker_not_per_task(cluster, room, tmp_path):
+    out = tmp_path / "room.pack"
+    executor = RayExecutor()
+    result = cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=True, cache_dir=tmp_path / "cache", executor=executor))
+    report = result.report.read_text()
+    assert "On Ray:" in report, report
+    line = next(l for l in report.splitlines() if l.startswith("On Ray:"))
+    tiles = int(line.split()[2])
+    builds = int(line.split("scene built ")[1].split()[0])
+    workers = int(line.split(" on ")[1].split()[0])
+    assert tiles >= 10 and 1 <= workers <= 2, line
+    assert builds == workers, line  # one BVH per worker process for this bake, however many tiles
+
+
+def test_fully_cached_ray_cook_submits_no_tasks(cluster, room, tmp_path):
+    cache = tmp_path / "cache"
+    first = RayExecutor()
+    a = cook(room, tmp_path / "a.pack", CookSettings(bake=ROOM_BAKE, report=False, cache_dir=cache, executor=first))
+    assert a.tasks_submitted == first.submitted > 0
+    # Another output, so the cook runs every stage, each of which finds its result in the cache.
+    second = RayExecutor()
+    b = cook(room, tmp_path / "b.pack", CookSettings(bake=ROOM_BAKE, report=False, cache_dir=cache, executor=second))
+    assert not b.up_to_date
+    assert b.tasks_submitted == second.submitted == 0
+    assert all(s.cached == s.items for s in b.stages if s.name != "write"), [(s.name, s.cached, s.items) for s in b.stages]
+    assert (tmp_path / "a.pack").read_bytes() == (tmp_path / "b.pack").read_bytes()
+
+
+def test_interrupt_cancels_tasks_and_leaves_the_previous_pack(cluster, room, tmp_path):
+    out = tmp_path / "room.pack"
+    cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=tmp_path / "cache"))
+    before = _files(out)
+    executor = RayExecutor()
+
+    def interrupt(stage, done, total):
+        if stage == "bake tiles" and done > 0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        cook(room, out, CookSettings(bake=dataclass_replace(ROOM_BAKE, seed=6), lods=False, report=False, cache_dir=tmp_path / "cache",
+                                     executor=executor), progress=Progress(callback=interrupt))
+    assert executor.cancelled > 0 and executor.cancelled < executor.submitted
+    assert _files(out) == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp") or ".tmp" in p.name]
+
+
+def dataclass_replace(obj, **kw):
+    import dataclasses
+
+    return dataclasses.replace(obj, **kw)
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--executor", "foo"), "argument --executor: invalid choice: 'foo'"),
+    (("--ray-address", "127.0.0.1:1"), "--ray-address needs --executor ray"),
+    (("--executor", "ray", "--ray-address", "nowhere"), "expected HOST:PORT"),
+    (("--executor", "ray", "--ray-address", "127.0.0.1:{port}"), "ray: cannot reach a cluster at 127.0.0.1:"),
+])
+def test_bad_executor_arguments_are_one_line_errors(room, tmp_path, args, message):
+    args = [a.format(port=_closed_port()) for a in args]
+    t0 = time.monotonic()
+    r = _cli(room, "-o", tmp_path / "x.pack", *args)
+    assert r.returncode == 2 and message in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.strip().splitlines()[-1].startswith("cook: error:"), r.stderr
+    assert not (tmp_path / "x.pack").exists()
+    assert time.monotonic() - t0 < 60
+
+
+def test_local_cook_does_not_import_ray(room, tmp_path):
+    # A fresh interpreter: this module has imported ray into the test process.
+    code = textwrap.dedent(f"""
+        import sys
+        from asset_pipeline import bake
+        from asset_pipeline.pipeline import CookSettings, cook
+        cook({str(room)!r}, {str(tmp_path / 'room.pack')!r}, CookSettings(bake=bake.BakeSettings(preset="draft", samples=1, probe_samples=1),
+             lods=True, report=False))
+        print("ray" in sys.modules)
+    """)
+    r = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "False"
+    assert (tmp_path / "room.pack").exists()
