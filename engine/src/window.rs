@@ -207,6 +207,13 @@ impl State {
                 return Err(e);
             }
         };
+        renderer.animation = match engine_animated(&gpu, pack, &scene) {
+            Ok(a) => a,
+            Err(e) => {
+                renderer.destroy(&gpu);
+                return Err(e);
+            }
+        };
         let (min, max) = scene.bounds();
         let frames = Frames::new(&gpu)?;
         Ok(State {
@@ -244,6 +251,7 @@ impl State {
         let dt = (now - self.last_frame).as_secs_f32().min(0.1);
         self.last_frame = now;
         self.update_camera(dt);
+        self.renderer.animate(&mut self.scene, dt);
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
@@ -488,4 +496,9 @@ impl Swapchain {
             self.surface_loader.destroy_surface(self.surface, None);
         }
     }
+}
+
+/// The scene's animated instances, one skinning job per frame in flight.
+fn engine_animated(gpu: &Gpu, pack: &pack::Pack, scene: &GpuScene) -> Result<Option<crate::animated::AnimatedScene>> {
+    crate::animated::AnimatedScene::new(gpu, pack, scene, FRAMES_IN_FLIGHT)
 }
