@@ -99,7 +99,27 @@ impl AnimatedScene {
             out.lookup[i] = Some(out.instances.len() as u32);
             out.instances.push(inst);
         }
+        out.start_characters(pack);
         Ok(Some(out))
+    }
+
+    /// One animator per character spawn: the instances under the spawn's root node (the level
+    /// cooker names them "<spawn>/...") play "<spawn>/<animation>" at the spawn's `speed`, from a
+    /// phase set by the spawn's index (golden-ratio steps through the clip), so two characters
+    /// playing one clip are not in lockstep.
+    fn start_characters(&mut self, pack: &Pack) {
+        for (k, spawn) in pack.manifest.spawns.iter().enumerate().filter(|(_, s)| s.kind == "character") {
+            let Some(animation) = spawn.params.get("animation").and_then(|a| a.as_str()) else { continue };
+            let Some(clip) = self.rig.clip_index(&format!("{}/{animation}", spawn.name)) else { continue };
+            let speed = spawn.params.get("speed").and_then(|v| v.as_f64()).unwrap_or(1.0) as f32;
+            let phase = (k as f32 * 0.618_034).fract() * self.rig.clips[clip].duration;
+            let prefix = format!("{}/", spawn.name);
+            for i in 0..self.instances.len() {
+                if pack.manifest.nodes[self.instances[i].node as usize].name.starts_with(&prefix) {
+                    self.play(i, clip, phase, speed);
+                }
+            }
+        }
     }
 
     fn instance(&self, gpu: &Gpu, pack: &Pack, scene: &GpuScene, index: usize, node: usize, slots: usize) -> Result<AnimatedInstance> {
