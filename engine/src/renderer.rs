@@ -335,8 +335,9 @@ impl Renderer {
         }
     }
 
-    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`); the sun's shadow
-    /// map when dynamic objects in view need it; depth pre-pass; shading into the HDR target;
+    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`); skinning of the
+    /// animated instances drawn or casting (`self.animation`); the sun's shadow map when dynamic
+    /// objects in view need it; depth pre-pass; shading into the HDR target;
     /// tone map into `target`'s colour image. Attachments go from UNDEFINED to attachment
     /// layouts; the colour image is left in COLOR_ATTACHMENT_OPTIMAL for the caller to present
     /// or copy. `slot` selects the per-frame uniform buffer, which must not be in use by the GPU.
