@@ -112,7 +112,10 @@ def temple() -> ir.Scene:
 
 def test_temple_meshes_are_closed_and_outward(temple):
     assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
-    for m in temple.meshes:
+    # The character spawns' golems are the only dynamic meshes, each skinned by its own skin.
+    assert [m.name for m in temple.meshes if not m.static] == ["golem", "golem"]
+    assert [s.name for s in temple.skins] == ["priest/golem", "pilgrim/golem"]
+    for m in (m for m in temple.meshes if m.static):
         check_closed(m.base, m.name)
         check_shading(m.base, m.name)
         assert m.static and m.texels_per_metre is None
@@ -127,9 +130,10 @@ def test_temple_contents(temple):
     assert temple.sky is not None and temple.sky.intensity > 0
     assert any(max(m.emissive) > 0 for m in temple.materials)
     assert all(t.format == "Rgba8Srgb" and t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
-    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes) < 50_000
-    # every mesh sits at the world origin: positions are world space
-    assert all(n.local == ir.Node(n.name).local for n in temple.nodes)
+    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes if m.static) < 50_000
+    # every level mesh sits at the world origin: positions are world space (characters are placed
+    # by their spawn's root node)
+    assert all(n.local == ir.Node(n.name).local for n in temple.nodes if n.mesh is not None and temple.meshes[n.mesh].static)
     # the hall is open to the sky: straight down through the oculus the first surface is the floor
     lod = temple.meshes[[m.name for m in temple.meshes].index("temple")].base
     p = lod.attributes["position"].astype(np.float64)[lod.triangles]
