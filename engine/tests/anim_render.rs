@@ -213,3 +213,55 @@ fn an_animated_instance_changes_between_two_times() {
     assert!(changed > (W * H / 100) as usize, "only {changed} pixels changed");
     assert_clean(&gpu);
 }
+
+#[test]
+fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
+    // The sphere comes from the joints plus a bind-pose margin; check it against the CPU
+    // reference's vertices over the whole clip, so a sphere that is too small (culling a visible
+    // character) fails here.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    for name in ["SimpleSkin", "RiggedSimple", "SimpleMorph"] {
+        let pack = cook(&dir, name);
+        let renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+        let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+        let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
+        let duration = anim.rig.clips[0].duration;
+        let mut worst = f32::INFINITY;
+        for step in 0..24 {
+            let t = duration * step as f32 / 23.0;
+            for i in 0..anim.instances.len() {
+                anim.play(i, 0, t, 1.0);
+            }
+            anim.advance(&mut scene, 0.0);
+            let rig = Rig::from_pack(&pack);
+            let mut pose = rig.new_pose();
+            rig.sample(0, t, true, &mut pose);
+            rig.update_globals(&mut pose);
+            for a in &anim.instances {
+                let node = a.node as usize;
+                let data = DeformData::for_node(&pack, node, 0).unwrap();
+                let mut joints = vec![Mat4::IDENTITY; joint_count(&pack, node)];
+                node_joint_matrices(&pack, &rig, node, &pose, &mut joints);
+                let mut v = data.vertices.clone();
+                skin_cpu(&data, rig.node_weights(node, &pose), &joints, &mut v);
+                let s = &scene.spheres;
+                let i = a.instance as usize;
+                let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
+                for p in &v {
+                    let slack = r - (Vec3::from(p.position) - c).length();
+                    worst = worst.min(slack / r);
+                    assert!(slack >= -1e-4 * r, "{name} at {t} s: a vertex lies {} outside the culling sphere (radius {r})", -slack);
+                }
+            }
+        }
+        // Conservative but not absurd: the tightest vertex comes within half the radius of the edge.
+        println!("{name}: smallest slack {:.3} of the radius", worst);
+        assert!(worst < 0.5, "{name}: the sphere is more than twice as large as needed");
+        let mut r = renderer;
+        anim.destroy(&gpu);
+        scene.destroy(&gpu);
+        r.destroy(&gpu);
+    }
+    assert_clean(&gpu);
+}
