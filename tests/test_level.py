@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import subprocess
 import textwrap
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 from asset_pipeline import CookError, ir
 from asset_pipeline.csg import build_level
 from asset_pipeline.level import load_level
+from conftest import COOK
 
 REPO = Path(__file__).resolve().parent.parent
 TEMPLE = REPO / "content" / "levels" / "temple.toml"
@@ -110,7 +112,10 @@ def temple() -> ir.Scene:
 
 def test_temple_meshes_are_closed_and_outward(temple):
     assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
-    for m in temple.meshes:
+    # The character spawns' golems are the only dynamic meshes, each skinned by its own skin.
+    assert [m.name for m in temple.meshes if not m.static] == ["golem", "golem"]
+    assert [s.name for s in temple.skins] == ["priest/golem", "pilgrim/golem"]
+    for m in (m for m in temple.meshes if m.static):
         check_closed(m.base, m.name)
         check_shading(m.base, m.name)
         assert m.static and m.texels_per_metre is None
@@ -125,9 +130,10 @@ def test_temple_contents(temple):
     assert temple.sky is not None and temple.sky.intensity > 0
     assert any(max(m.emissive) > 0 for m in temple.materials)
     assert all(t.format == "Rgba8Srgb" and t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
-    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes) < 50_000
-    # every mesh sits at the world origin: positions are world space
-    assert all(n.local == ir.Node(n.name).local for n in temple.nodes)
+    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes if m.static) < 50_000
+    # every level mesh sits at the world origin: positions are world space (characters are placed
+    # by their spawn's root node)
+    assert all(n.local == ir.Node(n.name).local for n in temple.nodes if n.mesh is not None and temple.meshes[n.mesh].static)
     # the hall is open to the sky: straight down through the oculus the first surface is the floor
     lod = temple.meshes[[m.name for m in temple.meshes].index("temple")].base
     p = lod.attributes["position"].astype(np.float64)[lod.triangles]
@@ -544,3 +550,72 @@ static = true
     assert [m.name for m in scene.meshes][0] == "o" and len(scene.meshes) == 2 and scene.meshes[1].static
     assert scene.materials[2].base_color_texture == 0 and len(scene.textures) == 1
     assert scene.nodes[1].name == "crate" and scene.nodes[2].parent == 1
+
+
+# ---- character spawns bring their skinned assets in -----------------------------------------
+
+def skinned_prop() -> ir.Scene:
+    """A one-triangle skinned character: root, mesh node and one joint; clips 'idle' and 'walk'."""
+    lod = ir.Lod(attributes={"position": np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)},
+                 triangles=np.array([[0, 1, 2]], np.uint32), materials=np.array([0], np.uint32))
+    key = lambda node, x: ir.Channel(node, "translation", "linear", np.array([0, 1], np.float32), np.array([[0, 0, 0], [x, 0, 0]], np.float32))
+    return ir.Scene(name="golem", source="golem.gltf", meshes=[ir.Mesh("body", [lod], static=True)], materials=[ir.Material("skin")],
+                    nodes=[ir.Node("root"), ir.Node("body", parent=0, mesh=0, skin=0), ir.Node("hip", parent=0)],
+                    skins=[ir.Skin("rig", joints=[2], inverse_bind=np.eye(4, dtype=np.float32).reshape(1, 16))],
+                    clips=[ir.Clip("idle", [key(2, 0.1)]), ir.Clip("walk", [key(2, 1.0)])])
+
+
+CHARACTERS = ONE_BOX + """
+
+    [[spawns]]
+    name = "priest"
+    kind = "character"
+    position = [3, 0, 0]
+    params = { asset = "golem.gltf", animation = "idle" }
+
+    [[spawns]]
+    name = "pilgrim"
+    kind = "character"
+    position = [-3, 0, 0]
+    params = { asset = "golem.gltf", animation = "walk", speed = 1.2 }
+"""
+
+
+def test_character_spawns_merge_their_asset_as_dynamic_skinned_meshes(tmp_path):
+    (tmp_path / "golem.gltf").write_text("{}")  # only its existence is checked here
+    prop = skinned_prop()
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent(CHARACTERS)))
+    scene = build_level(spec, import_gltf=lambda p: prop)
+    assert [n.name for n in scene.nodes] == ["o", "priest", "priest/root", "priest/body", "priest/hip",
+                                              "pilgrim", "pilgrim/root", "pilgrim/body", "pilgrim/hip"]
+    # Both characters are dynamic (never lightmapped), each node skinned by its own copy of the skin.
+    assert [m.static for m in scene.meshes] == [True, False, False]
+    assert [scene.nodes[i].skin for i in (3, 7)] == [0, 1]
+    assert [s.joints for s in scene.skins] == [[4], [8]]
+    assert [c.name for c in scene.clips] == ["priest/idle", "priest/walk", "pilgrim/idle", "pilgrim/walk"]
+    assert [c.channels[0].node for c in scene.clips] == [4, 4, 8, 8]
+    assert np.allclose(np.array(scene.nodes[5].local).reshape(4, 4, order="F")[:3, 3], [-3, 0, 0])
+    assert prop.skins[0].joints == [2] and prop.nodes[1].skin == 0  # the asset is untouched
+
+
+def test_error_character_asset_missing(tmp_path):
+    msg = error_of(tmp_path, CHARACTERS, build_too=True)
+    line = line_of(tmp_path, '"idle"')
+    assert f":{line}: spawns[0].params.asset: character 'priest': asset 'golem.gltf' not found" in msg
+    # The command line reports it as a cook error: exit 2, one line, no traceback.
+    r = subprocess.run([str(COOK), str(tmp_path / "level.toml"), "-o", str(tmp_path / "out.pack")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert f"level.toml:{line}: spawns[0].params.asset: character 'priest': asset 'golem.gltf' not found" in r.stderr
+
+
+def test_error_character_without_the_named_clip_or_a_skin(tmp_path):
+    (tmp_path / "golem.gltf").write_text("{}")
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent(CHARACTERS.replace('"walk"', '"dance"'))))
+    with pytest.raises(CookError) as e:
+        build_level(spec, import_gltf=lambda p: skinned_prop())
+    assert "spawns[1].params.animation: character 'pilgrim': 'golem.gltf' has no clip 'dance' (it has: idle, walk)" in str(e.value)
+    unskinned = skinned_prop()
+    unskinned.skins = []
+    with pytest.raises(CookError) as e:
+        build_level(load_level(tmp_path / "level.toml"), import_gltf=lambda p: unskinned)
+    assert "spawns[0].params.asset: character 'priest': 'golem.gltf' has no skin" in str(e.value)

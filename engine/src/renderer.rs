@@ -2,6 +2,7 @@
 //! (`shadow`), a depth pre-pass, the shading pass into an HDR target, and the tone map into any
 //! colour + depth attachment pair (`tonemap`). Used by the headless target and the window.
 
+use crate::animated::AnimatedScene;
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
@@ -123,6 +124,9 @@ pub struct Renderer {
     frame_sets: Vec<vk::DescriptorSet>,
     /// Culling and LOD state and settings; `visibility.counts` are the last frame's counters.
     pub visibility: Visibility,
+    /// Skinned and morphed instances (`animated`): advanced by `animate`, skinned in `record`
+    /// and drawn from their skinned output. Set by the owner of the scene; destroyed here.
+    pub animation: Option<AnimatedScene>,
 }
 
 /// The graphics pipelines of the mesh passes (all share one layout and the vertex shader).
@@ -142,12 +146,14 @@ struct Pipelines {
     shadow_masked: vk::Pipeline,
 }
 
-/// Timestamps written per frame slot.
-const TIMESTAMPS_PER_FRAME: u32 = 5;
+/// Timestamps written per frame slot: 0..=4 around the passes, 5 and 6 around skinning.
+const TIMESTAMPS_PER_FRAME: u32 = 7;
 
 /// GPU milliseconds of each pass of one frame (0 for a pass the frame skipped).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PassTimes {
+    /// The skinning compute pass (0 without animated instances in the frame).
+    pub skinning_ms: f64,
     pub shadow_ms: f64,
     pub prepass_ms: f64,
     pub shading_ms: f64,
@@ -157,7 +163,7 @@ pub struct PassTimes {
 impl PassTimes {
     /// GPU time of all the renderer's passes.
     pub fn total(&self) -> f64 {
-        self.shadow_ms + self.prepass_ms + self.shading_ms + self.tonemap_ms
+        self.skinning_ms + self.shadow_ms + self.prepass_ms + self.shading_ms + self.tonemap_ms
     }
 }
 
@@ -319,6 +325,7 @@ impl Renderer {
             frame_ubos,
             frame_sets,
             visibility: Visibility::default(),
+            animation: None,
         })
     }
 
@@ -327,8 +334,17 @@ impl Renderer {
         SceneLayouts { material: self.material_layout, scene: self.scene_layout }
     }
 
-    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`); the sun's shadow
-    /// map when dynamic objects in view need it; depth pre-pass; shading into the HDR target;
+    /// Advance the animated instances by `dt` seconds and move their culling spheres; call once
+    /// per frame before `record`.
+    pub fn animate(&mut self, scene: &mut GpuScene, dt: f32) {
+        if let Some(a) = &mut self.animation {
+            a.advance(scene, dt);
+        }
+    }
+
+    /// Record one frame: cull and pick LODs for `camera` (`self.visibility`); skinning of the
+    /// animated instances drawn or casting (`self.animation`); the sun's shadow map when dynamic
+    /// objects in view need it; depth pre-pass; shading into the HDR target;
     /// tone map into `target`'s colour image. Attachments go from UNDEFINED to attachment
     /// layouts; the colour image is left in COLOR_ATTACHMENT_OPTIMAL for the caller to present
     /// or copy. `slot` selects the per-frame uniform buffer, which must not be in use by the GPU.
@@ -400,6 +416,12 @@ impl Renderer {
         if let Some(pool) = self.timestamps {
             unsafe { d.cmd_reset_query_pool(cb, pool, first_stamp, TIMESTAMPS_PER_FRAME) };
         }
+        // Skinning once per frame, before every pass that reads its output.
+        stamp(5);
+        if let Some(a) = &mut self.animation {
+            a.record(gpu, cb, slot, &self.visibility.draws, if draw_shadow { &self.shadow.casters } else { &[] });
+        }
+        stamp(6);
         stamp(0);
         if draw_shadow {
             let shadow_area = self.shadow.begin(gpu, cb);
@@ -411,7 +433,7 @@ impl Renderer {
                 .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
             let rendering = vk::RenderingInfo::default().render_area(shadow_area).layer_count(1).depth_attachment(&depth_attachment);
             let p = &self.pipelines;
-            let pass = PassSetup { frame_set: self.shadow.sets[slot], draws: &self.shadow.casters, query: None, depth_test: true, cull: false };
+            let pass = PassSetup { slot, frame_set: self.shadow.sets[slot], draws: &self.shadow.casters, query: None, depth_test: true, cull: false };
             self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
             self.shadow.end(gpu, cb);
         }
@@ -431,7 +453,7 @@ impl Renderer {
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .clear_value(depth_clear);
             let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
-            let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_a), depth_test: true, cull: true };
+            let pass = PassSetup { slot, frame_set, draws: &self.visibility.draws, query: Some(query_a), depth_test: true, cull: true };
             self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
@@ -459,7 +481,7 @@ impl Renderer {
             _ => if prepass { p.shade_equal } else { p.shade },
         };
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
-        let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
+        let pass = PassSetup { slot, frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
         self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
         stamp(3);
         self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
@@ -474,7 +496,7 @@ impl Renderer {
         let mut t = [0u64; TIMESTAMPS_PER_FRAME as usize];
         unsafe { gpu.device.get_query_pool_results(pool, TIMESTAMPS_PER_FRAME * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
         let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * gpu.caps.timestamp_period_ns as f64 * 1e-6;
-        Some(PassTimes { shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), tonemap_ms: ms(t[3], t[4]) })
+        Some(PassTimes { skinning_ms: ms(t[5], t[6]), shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), tonemap_ms: ms(t[3], t[4]) })
     }
 
     /// Make the sun's shadow map `size` texels square (default `shadow::DEFAULT_SHADOW_MAP_SIZE`).
@@ -513,13 +535,26 @@ impl Renderer {
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
             let mut bound = vk::Pipeline::null();
+            let mut bound_vertices = scene.vertex_buffer.buffer;
             for draw in setup.draws {
                 let inst = &scene.instances[draw.instance as usize];
                 let mesh = &scene.meshes[inst.mesh as usize];
                 let lod = &mesh.lods[draw.lod as usize];
-                let n = normal_matrix(inst.world);
+                // An animated instance draws its skinned vertices: already in world space, from
+                // vertex 0 of its own buffer; every pass reads the same buffer, so the pre-pass
+                // and the EQUAL shading pass see identical positions.
+                let skinned = self.animation.as_ref().and_then(|a| a.vertex_buffer(draw.instance, draw.lod, setup.slot));
+                let (vertices, base_vertex, model) = match skinned {
+                    Some(b) => (b, 0, Mat4::IDENTITY),
+                    None => (scene.vertex_buffer.buffer, lod.base_vertex, inst.world),
+                };
+                if vertices != bound_vertices {
+                    d.cmd_bind_vertex_buffers(cb, 0, &[vertices], &[0]);
+                    bound_vertices = vertices;
+                }
+                let n = normal_matrix(model);
                 // A mirrored instance (negative determinant) reverses its winding.
-                let front = if inst.world.determinant() < 0.0 { vk::FrontFace::CLOCKWISE } else { vk::FrontFace::COUNTER_CLOCKWISE };
+                let front = if model.determinant() < 0.0 { vk::FrontFace::CLOCKWISE } else { vk::FrontFace::COUNTER_CLOCKWISE };
                 d.cmd_set_front_face(cb, front);
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
@@ -531,7 +566,7 @@ impl Renderer {
                         bound = pipeline;
                     }
                     let push = DrawPush {
-                        model: inst.world,
+                        model,
                         normal_cols: [n.x_axis.extend(mat.alpha_cutoff), n.y_axis.extend(page.is_some() as u32 as f32), n.z_axis.extend(sm.material as f32)],
                         base_color: Vec4::from(mat.base_color),
                     };
@@ -540,7 +575,7 @@ impl Renderer {
                     let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
                     d.cmd_set_cull_mode(cb, cull);
                     d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set, *page.unwrap_or(&scene.unlit_set)], &[]);
-                    d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, lod.base_vertex, 0);
+                    d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, base_vertex, 0);
                 }
             }
             d.cmd_end_rendering(cb);
@@ -576,6 +611,9 @@ impl Renderer {
         }
         self.tonemap.destroy(gpu);
         self.shadow.destroy(gpu);
+        if let Some(a) = &mut self.animation {
+            a.destroy(gpu);
+        }
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);
             let p = &self.pipelines;
@@ -597,6 +635,8 @@ impl Renderer {
 /// the draw list, its statistics query, depth testing, and back-face culling (off for shadow
 /// casters: a single-sided occluder blocks the sun whichever side faces it).
 struct PassSetup<'a> {
+    /// The frame slot (selects the skinned vertex buffers).
+    slot: usize,
     frame_set: vk::DescriptorSet,
     draws: &'a [Draw],
     query: Option<u32>,

@@ -226,6 +226,13 @@ impl State {
                 return Err(e);
             }
         };
+        renderer.animation = match engine_animated(&gpu, pack, &scene) {
+            Ok(a) => a,
+            Err(e) => {
+                renderer.destroy(&gpu);
+                return Err(e);
+            }
+        };
         let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
@@ -269,6 +276,7 @@ impl State {
         let dt = (now - self.last_frame).as_secs_f32().min(0.1);
         self.last_frame = now;
         self.update_camera(dt);
+        self.renderer.animate(&mut self.scene, dt);
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
@@ -528,4 +536,9 @@ impl Swapchain {
             self.surface_loader.destroy_surface(self.surface, None);
         }
     }
+}
+
+/// The scene's animated instances, one skinning job per frame in flight.
+fn engine_animated(gpu: &Gpu, pack: &pack::Pack, scene: &GpuScene) -> Result<Option<crate::animated::AnimatedScene>> {
+    crate::animated::AnimatedScene::new(gpu, pack, scene, FRAMES_IN_FLIGHT)
 }

@@ -76,3 +76,47 @@ fn sampling_blending_and_joint_matrices_do_not_allocate() {
     assert_eq!(n, 0, "{n} allocations in 200 animation frames");
     assert!(joints.iter().all(|m| m.is_finite()));
 }
+
+#[test]
+fn the_renderers_per_frame_animation_and_skinning_record_do_not_allocate() {
+    use engine::animated::AnimatedScene;
+    use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+    use engine::renderer::Renderer;
+    use engine::scene::GpuScene;
+    use engine::visibility::Draw;
+    let dir = std::env::var_os("GLTF_SAMPLES_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/gltf-samples"));
+    let path = dir.join("RiggedSimple/RiggedSimple.gltf");
+    if !path.exists() {
+        eprintln!("skipped: {} not found (set GLTF_SAMPLES_DIR)", path.display());
+        return;
+    }
+    let pack = cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap();
+    let gpu = Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![] }).expect("a Vulkan 1.3 device");
+    let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 2).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 2).unwrap().expect("RiggedSimple is skinned");
+    let draws: Vec<Draw> = (0..scene.instances.len() as u32).map(|instance| Draw { instance, lod: 0 }).collect();
+    let n = allocations_during(|| {
+        for _ in 0..200 {
+            anim.advance(&mut scene, 1.0 / 60.0);
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 200 frames of AnimatedScene::advance");
+    let recorded = gpu
+        .one_shot(|cb| {
+            allocations_during(|| {
+                for slot in [0, 1] {
+                    anim.record(&gpu, cb, slot, &draws, &draws);
+                }
+            })
+        })
+        .unwrap();
+    assert_eq!(recorded, 0, "{recorded} allocations recording the skinning pass");
+    assert!(anim.dispatches > 0);
+    anim.destroy(&gpu);
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
+}

@@ -167,6 +167,47 @@ def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray
                                                 direction=tuple(float(x) for x in d)))
 
 
+def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, base_dir: Path, import_gltf) -> None:
+    """Bring in the glTF of character spawn `index` (`asset`, relative to the toml) as dynamic
+    meshes under a root node named after the spawn, placed at its position and rotation, with
+    its skins and clips remapped onto the merged nodes. Clips are renamed "<spawn>/<clip>" so
+    two characters from one asset keep apart; the runtime plays "<spawn>/<animation>"."""
+    sp = spec.spawns[index]
+    key = ("spawns", index, "params", "asset")
+    asset = sp.params["asset"]
+    if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
+        raise spec.error(key, f"character '{sp.name}': expected a .gltf or .glb asset, got {asset!r}")
+    path = base_dir / asset
+    if not path.is_file():
+        raise spec.error(key, f"character '{sp.name}': asset '{asset}' not found (looked in {base_dir})")
+    try:
+        prop = import_gltf(path)
+    except Exception as e:  # the importer's message names the problem; the level error names the spawn
+        raise spec.error(key, f"character '{sp.name}': cannot import '{asset}': {e}") from None
+    if not prop.skins:
+        raise spec.error(key, f"character '{sp.name}': '{asset}' has no skin")
+    animation = sp.params.get("animation")
+    clips = [c.name for c in prop.clips]
+    if animation is not None and animation not in clips:
+        raise spec.error(("spawns", index, "params", "animation"),
+                         f"character '{sp.name}': '{asset}' has no clip '{animation}' (it has: {', '.join(clips) or 'none'})")
+    q = np.asarray(sp.rotation, dtype=np.float64)
+    x, y, z, w = q / max(np.linalg.norm(q), 1e-12)
+    transform = np.eye(4)
+    transform[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    transform[:3, 3] = sp.position
+    node0, skin0 = len(scene.nodes) + 1, len(scene.skins)  # +1: merge_prop's root node
+    merge_prop(scene, prop, sp.name, transform, static=False)
+    for nd in scene.nodes[node0:]:
+        if nd.skin is not None:
+            nd.skin += skin0
+    scene.skins += [dataclasses.replace(sk, name=f"{sp.name}/{sk.name}", joints=[j + node0 for j in sk.joints]) for sk in prop.skins]
+    scene.clips += [ir.Clip(name=f"{sp.name}/{c.name}", channels=[dataclasses.replace(ch, node=ch.node + node0) for ch in c.channels])
+                    for c in prop.clips]
+
+
 def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_gltf=None) -> ir.Scene:
     """Build the scene of a loaded level. Relative paths (textures, props) resolve against
     `base_dir`, by default the spec's directory. `import_gltf(path) -> ir.Scene` loads props
@@ -234,6 +275,9 @@ def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_g
 
     for i, p in enumerate(spec.props):
         merge_prop(scene, (import_gltf or gltf_import.import_gltf)(base_dir / p.gltf), p.name, p.transform, p.static)
+    for i, sp in enumerate(spec.spawns):
+        if sp.kind == "character" and "asset" in sp.params:
+            merge_character(scene, spec, i, base_dir, import_gltf or gltf_import.import_gltf)
 
     scene.validate()
     return scene

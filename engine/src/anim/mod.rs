@@ -1,6 +1,6 @@
 //! Animation on the CPU side: clip sampling (`sample`), poses and skeletons (`pose`), the CPU
 //! reference of skinning and morphing (`skin_cpu`), the GPU skinning pass (`skin_gpu`) and the
-//! pose dump for tools (`dump`). Renderer integration comes separately.
+//! pose dump for tools (`dump`). The renderer drives them through `crate::animated`.
 
 pub mod dump;
 pub mod pose;

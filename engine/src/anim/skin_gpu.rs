@@ -187,15 +187,24 @@ impl SkinnedMesh {
         let d = &gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, pipe.pipeline);
-            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.set], &[]);
-            d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytes_of(std::slice::from_ref(&self.params)));
-            d.cmd_dispatch(cb, self.params.vertex_count.div_ceil(GROUP), 1, 1);
+            self.dispatch(gpu, pipe, cb);
             let barrier = [vk::MemoryBarrier2::default()
                 .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
                 .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
                 .dst_stage_mask(vk::PipelineStageFlags2::VERTEX_ATTRIBUTE_INPUT | vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::COPY)
                 .dst_access_mask(vk::AccessFlags2::VERTEX_ATTRIBUTE_READ | vk::AccessFlags2::SHADER_STORAGE_READ | vk::AccessFlags2::TRANSFER_READ)];
             d.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&barrier));
+        }
+    }
+
+    /// Only the dispatch: the caller has bound `pipe.pipeline` and records one barrier after
+    /// all of a frame's dispatches (`renderer` skins every character, then one barrier).
+    pub fn dispatch(&self, gpu: &Gpu, pipe: &SkinPipeline, cb: vk::CommandBuffer) {
+        let d = &gpu.device;
+        unsafe {
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.set], &[]);
+            d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytes_of(std::slice::from_ref(&self.params)));
+            d.cmd_dispatch(cb, self.params.vertex_count.div_ceil(GROUP), 1, 1);
         }
     }
 

@@ -8,6 +8,11 @@
 //! it. Reports CPU culling + LOD time per frame (median), and GPU time per frame with culling
 //! and the depth pre-pass each on and off.
 //!
+//! Subcommand "skinned" (`bench skinned --pack build/golem.pack [--characters N] [--frames F]`):
+//! N copies (default 64) of the pack's skinned character on a grid, each playing clip 0 at its
+//! own phase, all in view. Reports the skinning pass's GPU time per frame (timestamps) and the
+//! CPU time of advancing every animator per frame (sampling, globals, joint matrices, bounds).
+//!
 //! Subcommand "sim" (CPU only, no device): boid step time for each flock size, grid against
 //! brute force up to --brute-max in the same run, and particle update time.
 
@@ -160,6 +165,9 @@ fn on(b: bool) -> &'static str {
 fn main() -> ExitCode {
     if std::env::args().nth(1).as_deref() == Some("sim") {
         return sim_bench::main(std::env::args().skip(2).collect());
+    }
+    if std::env::args().nth(1).as_deref() == Some("skinned") {
+        return skinned_bench::main(std::env::args().skip(2).collect());
     }
     let args = match parse() {
         Ok(a) => a,
@@ -358,5 +366,155 @@ mod sim_bench {
         println!("particles {n:>8} live {live:>8}: update_ms {} ({:.0} M particles/s at the median); warm-up {warm_s:.1} s", update.describe(), live as f64 / m / 1e3);
         println!("particles {n:>8} billboards_ms sorted (alpha): {}", fill[0].describe());
         println!("particles {n:>8} billboards_ms unsorted (additive): {}", fill[1].describe());
+    }
+}
+
+/// `bench skinned`: the skinning pass and CPU animation cost of many characters (issue 7).
+mod skinned_bench {
+    use super::*;
+    use engine::animated::AnimatedScene;
+
+    const USAGE: &str = "usage: bench skinned --pack PACK [--characters N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]";
+
+    struct Args {
+        pack: Option<std::path::PathBuf>,
+        characters: usize,
+        frames: usize,
+        width: u32,
+        height: u32,
+        device: DevicePreference,
+    }
+
+    fn parse(args: Vec<String>) -> Result<Args, String> {
+        let mut a = Args { pack: None, characters: 64, frames: 60, width: 640, height: 360, device: DevicePreference::from_env() };
+        let mut it = args.into_iter();
+        while let Some(flag) = it.next() {
+            let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
+            let number = |name: &str, v: String| v.parse::<usize>().map_err(|_| format!("{name}: '{v}' is not a whole number"));
+            match flag.as_str() {
+                "--pack" => a.pack = Some(value("--pack")?.into()),
+                "--characters" => a.characters = number("--characters", value("--characters")?)?.max(1),
+                "--frames" => a.frames = number("--frames", value("--frames")?)?.max(1),
+                "--width" => a.width = number("--width", value("--width")?)?.max(1) as u32,
+                "--height" => a.height = number("--height", value("--height")?)?.max(1) as u32,
+                "--device" => a.device = DevicePreference::parse(&value("--device")?),
+                "-h" | "--help" => return Err(USAGE.into()),
+                other => return Err(format!("unknown argument '{other}' (try --help)")),
+            }
+        }
+        if a.pack.is_none() {
+            return Err(format!("--pack is required\n{USAGE}"));
+        }
+        Ok(a)
+    }
+
+    /// `pack` with its whole node tree copied `n` times, copy k under a root node on a grid 2 m
+    /// apart; meshes, vertex data and clip keys are shared, skins, clips and node bindings are
+    /// repeated with node indices moved. Clip c of copy k becomes clip c + k * clips.
+    fn replicate(pack: &Pack, n: usize) -> Pack {
+        let mut out = pack.clone();
+        let m = &pack.manifest;
+        let (nodes, skins) = (m.nodes.len() as u32, m.animation.skins.len() as u32);
+        out.manifest.nodes.clear();
+        out.manifest.animation.skins.clear();
+        out.manifest.animation.clips.clear();
+        out.manifest.animation.nodes.clear();
+        let side = (n as f32).sqrt().ceil() as usize;
+        for k in 0..n as u32 {
+            let base = k * (nodes + 1);
+            let at = Vec3::new((k as usize % side) as f32 * 2.0, 0.0, -((k as usize / side) as f32) * 2.0);
+            out.manifest.nodes.push(Node { name: format!("copy{k}"), parent: None, local: Mat4::from_translation(at).to_cols_array(), mesh: None });
+            for nd in &m.nodes {
+                out.manifest.nodes.push(Node { name: format!("copy{k}/{}", nd.name), parent: Some(nd.parent.map_or(base, |p| base + 1 + p)), ..nd.clone() });
+            }
+            for sk in &m.animation.skins {
+                out.manifest.animation.skins.push(pack::Skin { joints: sk.joints.iter().map(|j| j + base + 1).collect(), ..sk.clone() });
+            }
+            for c in &m.animation.clips {
+                let channels = c.channels.iter().map(|ch| pack::Channel { node: ch.node + base + 1, ..ch.clone() }).collect();
+                out.manifest.animation.clips.push(pack::Clip { channels, ..c.clone() });
+            }
+            for b in &m.animation.nodes {
+                out.manifest.animation.nodes.push(pack::NodeBinding { node: b.node + base + 1, skin: b.skin.map(|s| s + k * skins), ..b.clone() });
+            }
+        }
+        out
+    }
+
+    fn run(args: &Args) -> anyhow::Result<usize> {
+        let path = args.pack.as_ref().unwrap();
+        let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+        let single = Pack::from_bytes(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        if single.manifest.animation.skins.is_empty() || single.manifest.animation.clips.is_empty() {
+            anyhow::bail!("{} has no skin or no clip", path.display());
+        }
+        let pack = replicate(&single, args.characters);
+        let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![] })?;
+        let mut target = Offscreen::new(&gpu, args.width, args.height)?;
+        let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1)?;
+        let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts())?;
+        let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1)?.ok_or_else(|| anyhow::anyhow!("nothing in the pack deforms"))?;
+        let per_copy = single.manifest.animation.clips.len();
+        for i in 0..anim.instances.len() {
+            let clip = (i % args.characters) * per_copy;
+            let phase = (i as f32 * 0.618_034).fract() * anim.rig.clips[clip].duration;
+            anim.play(i, clip, phase, 1.0);
+        }
+        let animated = anim.instances.len();
+        renderer.animation = Some(anim);
+        // Every character at full detail, all in view: the pass skins every one each frame.
+        renderer.visibility.lod_selection = false;
+        renderer.animate(&mut scene, 0.0);
+        let (lo, hi) = scene.bounds();
+        let camera = Camera::framing(lo - Vec3::splat(1.0), hi + Vec3::splat(1.0));
+        let (mut gpu_ms, mut cpu_ms) = (Vec::new(), Vec::new());
+        for _ in 0..args.frames {
+            renderer.animate(&mut scene, 1.0 / 60.0);
+            target.render(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), false)?;
+            if let Some(t) = renderer.pass_times_ms(&gpu, 0) {
+                gpu_ms.push(t.skinning_ms);
+            }
+            cpu_ms.push(renderer.animation.as_ref().unwrap().cpu_ms);
+        }
+        let a = renderer.animation.as_ref().unwrap();
+        println!(
+            "skinned: {} on {}, {} characters ({} animated instances), {} dispatches / {} vertices skinned per frame, {} frames at {}x{}",
+            path.display(),
+            gpu.caps.device_name,
+            args.characters,
+            animated,
+            a.dispatches,
+            a.skinned_vertices,
+            args.frames,
+            args.width,
+            args.height
+        );
+        println!("skinning pass gpu_ms per frame: median {:.3}", median(&gpu_ms).unwrap_or(f64::NAN));
+        println!("animation cpu_ms per frame (sample + globals + joint matrices + bounds, all characters): median {:.3}", median(&cpu_ms).unwrap_or(f64::NAN));
+        scene.destroy(&gpu);
+        renderer.destroy(&gpu);
+        target.destroy(&gpu);
+        Ok(gpu.validation().error_count())
+    }
+
+    pub fn main(args: Vec<String>) -> ExitCode {
+        let args = match parse(args) {
+            Ok(a) => a,
+            Err(e) => {
+                eprintln!("bench: {e}");
+                return ExitCode::from(2);
+            }
+        };
+        match run(&args) {
+            Ok(0) => ExitCode::SUCCESS,
+            Ok(n) => {
+                eprintln!("bench: {n} validation errors");
+                ExitCode::from(3)
+            }
+            Err(e) => {
+                eprintln!("bench: {e:#}");
+                ExitCode::FAILURE
+            }
+        }
     }
 }

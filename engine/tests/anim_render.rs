@@ -1,0 +1,267 @@
+//! Skinned and morphed meshes through the renderer (lavapipe in CI, validation on): the image of
+//! an animated instance at time t equals the image of a static copy of the pack whose vertices
+//! are the CPU reference's skinning of the same pose; the depth pre-pass with EQUAL shading
+//! still covers every pixel (both passes read the same skinned buffer); and time moves the
+//! image. Sample models are cooked in-process ($GLTF_SAMPLES_DIR, default ../shared/gltf-samples).
+
+use engine::anim::skin_cpu::{skin_cpu, DeformData};
+use engine::anim::{joint_count, node_joint_matrices, Rig};
+use engine::animated::AnimatedScene;
+use engine::camera::Camera;
+use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::scene::{world_transforms, GpuScene};
+use glam::{Mat4, Vec3};
+use pack::{Pack, Vertex};
+use std::path::PathBuf;
+
+const W: u32 = 96;
+const H: u32 = 72;
+
+fn gpu() -> Gpu {
+    Gpu::new(&GpuOptions {
+        validation: true,
+        device: DevicePreference::from_env(),
+        surface_extensions: vec![],
+    })
+    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
+}
+
+fn samples() -> Option<PathBuf> {
+    let dir = std::env::var_os("GLTF_SAMPLES_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/gltf-samples"));
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("skipped: glTF samples not found at {} (set GLTF_SAMPLES_DIR)", dir.display());
+        None
+    }
+}
+
+fn cook(dir: &std::path::Path, name: &str) -> Pack {
+    let path = dir.join(name).join(format!("{name}.gltf"));
+    cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap_or_else(|e| panic!("cooking {name}: {e}"))
+}
+
+/// The pack with clip 0 at `time` baked in: every deforming node's LODs replaced by the CPU
+/// reference's skinned (world-space) vertices, the node placed at the identity, its bounds
+/// refitted, and no animation section left, so the renderer draws it as ordinary static data.
+fn baked(pack: &Pack, time: f32) -> Pack {
+    let mut out = pack.clone();
+    let rig = Rig::from_pack(pack);
+    let mut pose = rig.new_pose();
+    rig.sample(0, time, true, &mut pose);
+    rig.update_globals(&mut pose);
+    let world = world_transforms(&pack.manifest.nodes);
+    for node in 0..pack.manifest.nodes.len() {
+        if !engine::animated::animated_node(pack, node) {
+            continue;
+        }
+        let mesh = pack.manifest.nodes[node].mesh.unwrap() as usize;
+        let mut joints = vec![Mat4::IDENTITY; joint_count(pack, node)];
+        node_joint_matrices(pack, &rig, node, &pose, &mut joints);
+        let weights = rig.node_weights(node, &pose).to_vec();
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for lod in 0..pack.manifest.meshes[mesh].lods.len() {
+            let data = DeformData::for_node(pack, node, lod).unwrap();
+            let mut v = data.vertices.clone();
+            skin_cpu(&data, &weights, &joints, &mut v);
+            for p in &v {
+                lo = lo.min(Vec3::from(p.position));
+                hi = hi.max(Vec3::from(p.position));
+            }
+            let r = pack.manifest.meshes[mesh].lods[lod].vertices;
+            out.data[r.offset as usize..(r.offset + r.len) as usize].copy_from_slice(Vertex::slice_as_bytes(&v));
+        }
+        out.manifest.meshes[mesh].bounds_min = lo.to_array();
+        out.manifest.meshes[mesh].bounds_max = hi.to_array();
+        // World = parent world x local = identity: the vertices are already in world space.
+        let parent = pack.manifest.nodes[node].parent.map_or(Mat4::IDENTITY, |p| world[p as usize]);
+        out.manifest.nodes[node].local = parent.inverse().to_cols_array();
+    }
+    out.manifest.animation = Default::default();
+    out
+}
+
+struct Frame {
+    pixels: Vec<u8>,
+    /// Pixels not showing the clear colour.
+    covered: usize,
+}
+
+fn clear_bytes() -> [u8; 3] {
+    let enc = |l: f32| {
+        let c = if l <= 0.0031308 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
+        (c.clamp(0.0, 1.0) * 255.0).round() as i32
+    };
+    [enc(CLEAR_COLOR[0]) as u8, enc(CLEAR_COLOR[1]) as u8, enc(CLEAR_COLOR[2]) as u8]
+}
+
+fn frame(pixels: Vec<u8>) -> Frame {
+    let clear = clear_bytes();
+    let covered = pixels.chunks_exact(4).filter(|p| (0..3).any(|c| (p[c] as i32 - clear[c] as i32).abs() > 1)).count();
+    Frame { pixels, covered }
+}
+
+/// Render `pack` once; with `time`, its animated instances play clip 0 from that time (advanced
+/// by 0 s), otherwise the pack is drawn as it is.
+fn render(gpu: &Gpu, pack: &Pack, camera: &Camera, time: Option<f32>, prepass: bool) -> Frame {
+    let mut target = Offscreen::new(gpu, W, H).unwrap();
+    let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    renderer.prepass = prepass;
+    let mut scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
+    if let Some(t) = time {
+        let mut anim = AnimatedScene::new(gpu, pack, &scene, 1).unwrap().expect("the pack has animated instances");
+        for i in 0..anim.instances.len() {
+            anim.play(i, 0, t, 1.0);
+        }
+        renderer.animation = Some(anim);
+        renderer.animate(&mut scene, 0.0);
+    }
+    target.render(gpu, &mut renderer, &scene, camera, &Lighting::default(), true).unwrap();
+    if time.is_some() {
+        let a = renderer.animation.as_ref().unwrap();
+        assert!(a.dispatches > 0, "no skinning dispatch was recorded");
+    }
+    let px = target.pixels().to_vec();
+    scene.destroy(gpu);
+    renderer.destroy(gpu);
+    target.destroy(gpu);
+    frame(px)
+}
+
+/// A camera framing the baked pose's bounds.
+fn camera_for(gpu: &Gpu, pack: &Pack) -> Camera {
+    let renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
+    let (lo, hi) = scene.bounds();
+    scene.destroy(gpu);
+    let mut r = renderer;
+    r.destroy(gpu);
+    Camera::framing(lo, hi)
+}
+
+fn assert_clean(gpu: &Gpu) {
+    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
+}
+
+fn max_channel_difference(a: &[u8], b: &[u8]) -> (i32, usize) {
+    let mut worst = (0, 0);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        let d = (*x as i32 - *y as i32).abs();
+        if d > worst.0 {
+            worst = (d, i / 4);
+        }
+    }
+    worst
+}
+
+#[test]
+fn an_animated_instance_renders_like_its_pose_baked_into_a_static_mesh() {
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    // (model, time): times inside each clip, away from its keys, where the pose is deformed.
+    for (name, time) in [("SimpleSkin", 1.3f32), ("RiggedSimple", 0.9), ("SimpleMorph", 0.7)] {
+        let pack = cook(&dir, name);
+        let reference_pack = baked(&pack, time);
+        let camera = camera_for(&gpu, &reference_pack);
+        let reference = render(&gpu, &reference_pack, &camera, None, true);
+        let animated = render(&gpu, &pack, &camera, Some(time), true);
+        assert!(reference.covered > (W * H / 50) as usize, "{name}: the baked pose covers only {} pixels", reference.covered);
+        let (worst, at) = max_channel_difference(&reference.pixels, &animated.pixels);
+        println!(
+            "{name} at {time} s: {} pixels covered (baked {}), largest channel difference {worst} at pixel {at}",
+            animated.covered, reference.covered
+        );
+        assert_eq!(animated.covered, reference.covered, "{name}: the silhouettes differ");
+        assert!(worst <= 1, "{name}: pixel {} differs by {worst} steps from the CPU-skinned static mesh", at);
+        // The pose must show: the pack drawn undeformed (bind pose, no skinning) looks different.
+        let bind = render(&gpu, &pack, &camera, None, true);
+        assert!(bind.pixels != reference.pixels, "{name}: the pose at {time} s renders like the bind pose");
+    }
+    assert_clean(&gpu);
+}
+
+#[test]
+fn the_prepass_and_equal_shading_see_identical_skinned_positions() {
+    // If the pre-pass and the shading pass read different positions, depth EQUAL would reject
+    // fragments and leave holes of clear colour; the image must equal one without a pre-pass.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    let pack = cook(&dir, "RiggedSimple");
+    let camera = camera_for(&gpu, &baked(&pack, 0.9));
+    let with = render(&gpu, &pack, &camera, Some(0.9), true);
+    let without = render(&gpu, &pack, &camera, Some(0.9), false);
+    assert!(with.covered > 0);
+    assert_eq!(with.covered, without.covered, "the pre-pass changed the coverage");
+    assert!(with.pixels == without.pixels, "the pre-pass changed the image");
+    assert_clean(&gpu);
+}
+
+#[test]
+fn an_animated_instance_changes_between_two_times() {
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    let pack = cook(&dir, "RiggedSimple");
+    let camera = camera_for(&gpu, &baked(&pack, 0.9));
+    let a = render(&gpu, &pack, &camera, Some(0.3), true);
+    let b = render(&gpu, &pack, &camera, Some(1.7), true);
+    let changed = a.pixels.chunks_exact(4).zip(b.pixels.chunks_exact(4)).filter(|(x, y)| x != y).count();
+    println!("{changed} pixels changed between 0.3 s and 1.7 s");
+    assert!(changed > (W * H / 100) as usize, "only {changed} pixels changed");
+    assert_clean(&gpu);
+}
+
+#[test]
+fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
+    // The sphere comes from the joints plus a bind-pose margin; check it against the CPU
+    // reference's vertices over the whole clip, so a sphere that is too small (culling a visible
+    // character) fails here.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    for name in ["SimpleSkin", "RiggedSimple", "SimpleMorph"] {
+        let pack = cook(&dir, name);
+        let renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+        let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+        let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
+        let duration = anim.rig.clips[0].duration;
+        let mut worst = f32::INFINITY;
+        for step in 0..24 {
+            let t = duration * step as f32 / 23.0;
+            for i in 0..anim.instances.len() {
+                anim.play(i, 0, t, 1.0);
+            }
+            anim.advance(&mut scene, 0.0);
+            let rig = Rig::from_pack(&pack);
+            let mut pose = rig.new_pose();
+            rig.sample(0, t, true, &mut pose);
+            rig.update_globals(&mut pose);
+            for a in &anim.instances {
+                let node = a.node as usize;
+                let data = DeformData::for_node(&pack, node, 0).unwrap();
+                let mut joints = vec![Mat4::IDENTITY; joint_count(&pack, node)];
+                node_joint_matrices(&pack, &rig, node, &pose, &mut joints);
+                let mut v = data.vertices.clone();
+                skin_cpu(&data, rig.node_weights(node, &pose), &joints, &mut v);
+                let s = &scene.spheres;
+                let i = a.instance as usize;
+                let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
+                for p in &v {
+                    let slack = r - (Vec3::from(p.position) - c).length();
+                    worst = worst.min(slack / r);
+                    assert!(slack >= -1e-4 * r, "{name} at {t} s: a vertex lies {} outside the culling sphere (radius {r})", -slack);
+                }
+            }
+        }
+        // Conservative but not absurd: the tightest vertex comes within half the radius of the edge.
+        println!("{name}: smallest slack {:.3} of the radius", worst);
+        assert!(worst < 0.5, "{name}: the sphere is more than twice as large as needed");
+        let mut r = renderer;
+        anim.destroy(&gpu);
+        scene.destroy(&gpu);
+        r.destroy(&gpu);
+    }
+    assert_clean(&gpu);
+}
