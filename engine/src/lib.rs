@@ -6,6 +6,7 @@ pub mod cull;
 pub mod gpu;
 pub mod headless;
 pub mod lod_select;
+pub mod particles_pass;
 pub mod renderer;
 pub mod scene;
 pub mod shaders;

@@ -4,6 +4,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::particles_pass::ParticlePass;
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
 use crate::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE, DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
@@ -103,12 +104,14 @@ pub struct Renderer {
     /// Whether the frame recorded in each slot ran the pre-pass (its query was begun).
     slot_prepass: Vec<bool>,
     /// GPU timestamps per frame slot (`TIMESTAMPS_PER_FRAME`): before the shadow pass, then after
-    /// each of the shadow, pre-pass, shading and tone-map passes.
+    /// each of the shadow, pre-pass, shading, particle and tone-map passes.
     timestamps: Option<vk::QueryPool>,
     /// The HDR target and the pass that tone-maps it to the display target.
     pub tonemap: ToneMap,
     /// The sun's shadow map for dynamic objects.
     pub shadow: SunShadow,
+    /// Blended billboards after the shading pass; the caller fills its queue before `record`.
+    pub particles: ParticlePass,
     /// Casters the last recorded frame drew into the shadow map (0 when it skipped the pass).
     pub shadow_casters: u32,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
@@ -143,7 +146,7 @@ struct Pipelines {
 }
 
 /// Timestamps written per frame slot.
-const TIMESTAMPS_PER_FRAME: u32 = 5;
+const TIMESTAMPS_PER_FRAME: u32 = 6;
 
 /// GPU milliseconds of each pass of one frame (0 for a pass the frame skipped).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -151,6 +154,7 @@ pub struct PassTimes {
     pub shadow_ms: f64,
     pub prepass_ms: f64,
     pub shading_ms: f64,
+    pub particles_ms: f64,
     pub tonemap_ms: f64,
 }
 
@@ -303,6 +307,7 @@ impl Renderer {
             slot_prepass: vec![false; frames_in_flight],
             timestamps,
             tonemap: ToneMap::new(gpu, color_format)?,
+            particles: ParticlePass::new(gpu, frame_layout, depth_format, frames_in_flight)?,
             shadow,
             shadow_casters: 0,
             prepass: true,
@@ -332,6 +337,10 @@ impl Renderer {
         let aspect = target.extent.width as f32 / target.extent.height as f32;
         let view_proj = camera.view_proj(aspect);
         self.visibility.update(scene, view_proj, camera.position, camera.fov_y, target.extent.height as f32);
+        // Skipped when empty: nothing to blend, and the depth need not be stored for it.
+        let draw_particles = !self.particles.is_empty();
+        self.visibility.counts.particles = self.particles.len() as u32;
+        self.particles.upload(gpu, slot)?;
         let (hdr_image, hdr_view) = self.tonemap.hdr_target(gpu, target.extent)?;
         // The shadow map serves dynamic objects lit by a physical sun: skip it when none is in
         // view (and lavapipe 22.3 crashes on a depth-only rendering without draws).
@@ -443,7 +452,7 @@ impl Renderer {
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
             .load_op(if prepass { vk::AttachmentLoadOp::LOAD } else { vk::AttachmentLoadOp::CLEAR })
-            .store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .store_op(if draw_particles { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
             .clear_value(depth_clear);
         let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
         let p = &self.pipelines;
@@ -455,8 +464,13 @@ impl Renderer {
         let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
         self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
         stamp(3);
-        self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
+        if draw_particles {
+            let up = camera.right().cross(camera.forward());
+            self.particles.record(gpu, cb, slot, frame_set, (hdr_image, hdr_view), (target.depth_image, target.depth_view), target.extent, camera.right(), up);
+        }
         stamp(4);
+        self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
+        stamp(5);
         Ok(())
     }
 
@@ -467,7 +481,7 @@ impl Renderer {
         let mut t = [0u64; TIMESTAMPS_PER_FRAME as usize];
         unsafe { gpu.device.get_query_pool_results(pool, TIMESTAMPS_PER_FRAME * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
         let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * gpu.caps.timestamp_period_ns as f64 * 1e-6;
-        Some(PassTimes { shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), tonemap_ms: ms(t[3], t[4]) })
+        Some(PassTimes { shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), particles_ms: ms(t[3], t[4]), tonemap_ms: ms(t[4], t[5]) })
     }
 
     /// Make the sun's shadow map `size` texels square (default `shadow::DEFAULT_SHADOW_MAP_SIZE`).
@@ -568,6 +582,7 @@ impl Renderer {
             b.destroy(gpu);
         }
         self.tonemap.destroy(gpu);
+        self.particles.destroy(gpu);
         self.shadow.destroy(gpu);
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);

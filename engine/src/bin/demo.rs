@@ -204,7 +204,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
-    let mut pass_ms: [Vec<f64>; 4] = Default::default();
+    let mut pass_ms: [Vec<f64>; 5] = Default::default();
     for f in 0..frames {
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
@@ -212,7 +212,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
         if let Some(p) = renderer.pass_times_ms(&gpu, 0) {
-            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.tonemap_ms]) {
+            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.particles_ms, p.tonemap_ms]) {
                 v.push(ms);
             }
         }
@@ -243,8 +243,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
     }
-    if let [Some(s), Some(a), Some(b), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
-        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, tone map {t:.3}", renderer.shadow_casters);
+    if let [Some(s), Some(a), Some(b), Some(pt), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
+        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, particles {pt:.3} ({} billboards), tone map {t:.3}", renderer.shadow_casters, renderer.visibility.counts.particles);
     }
     scene.destroy(&gpu);
     renderer.destroy(&gpu);
