@@ -1,6 +1,7 @@
 //! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
 
 pub mod anim;
+pub mod boids_draw;
 pub mod camera;
 pub mod cull;
 pub mod gpu;

@@ -4,6 +4,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::boids_draw::BoidsDraw;
 use crate::particles_pass::ParticlePass;
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
@@ -112,6 +113,8 @@ pub struct Renderer {
     pub shadow: SunShadow,
     /// Blended billboards after the shading pass; the caller fills its queue before `record`.
     pub particles: ParticlePass,
+    /// Instanced boid meshes after the shading pass; the caller fills them before `record`.
+    pub boids: BoidsDraw,
     /// Casters the last recorded frame drew into the shadow map (0 when it skipped the pass).
     pub shadow_casters: u32,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
@@ -308,6 +311,7 @@ impl Renderer {
             timestamps,
             tonemap: ToneMap::new(gpu, color_format)?,
             particles: ParticlePass::new(gpu, frame_layout, depth_format, frames_in_flight)?,
+            boids: BoidsDraw::new(gpu, frame_layout, depth_format, frames_in_flight)?,
             shadow,
             shadow_casters: 0,
             prepass: true,
@@ -341,6 +345,16 @@ impl Renderer {
         let draw_particles = !self.particles.is_empty();
         self.visibility.counts.particles = self.particles.len() as u32;
         self.particles.upload(gpu, slot)?;
+        // Boids are instances culled with the scene: their counts join the frame's.
+        let boids = self.boids.cull(view_proj);
+        let c = &mut self.visibility.counts;
+        c.cull.tested += boids.tested;
+        c.cull.culled += boids.culled;
+        c.cull.visible += boids.visible;
+        c.cull.inside += boids.inside;
+        c.boids = boids.visible;
+        let draw_boids = boids.visible > 0;
+        self.boids.upload(gpu, slot)?;
         let (hdr_image, hdr_view) = self.tonemap.hdr_target(gpu, target.extent)?;
         // The shadow map serves dynamic objects lit by a physical sun: skip it when none is in
         // view (and lavapipe 22.3 crashes on a depth-only rendering without draws).
@@ -452,7 +466,7 @@ impl Renderer {
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
             .load_op(if prepass { vk::AttachmentLoadOp::LOAD } else { vk::AttachmentLoadOp::CLEAR })
-            .store_op(if draw_particles { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
+            .store_op(if draw_particles || draw_boids { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
             .clear_value(depth_clear);
         let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
         let p = &self.pipelines;
@@ -463,6 +477,9 @@ impl Renderer {
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
         let pass = PassSetup { frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
         self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        if draw_boids {
+            self.boids.record(gpu, cb, slot, frame_set, (hdr_image, hdr_view), (target.depth_image, target.depth_view), target.extent);
+        }
         stamp(3);
         if draw_particles {
             let up = camera.right().cross(camera.forward());
@@ -583,6 +600,7 @@ impl Renderer {
         }
         self.tonemap.destroy(gpu);
         self.particles.destroy(gpu);
+        self.boids.destroy(gpu);
         self.shadow.destroy(gpu);
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);

@@ -24,6 +24,8 @@ pub struct FrameCounts {
     pub lod_histogram: [u32; LOD_BUCKETS],
     /// Particle billboards the particle pass drew (set by the renderer, not by `update`).
     pub particles: u32,
+    /// Boid instances drawn (also counted in `cull`; set by the renderer).
+    pub boids: u32,
 }
 
 /// The per-view state: settings, last frame's LODs, this frame's draw list.
