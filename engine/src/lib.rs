@@ -13,6 +13,7 @@ pub mod scene;
 pub mod shaders;
 pub mod shadow;
 pub mod sim;
+pub mod sim_level;
 pub mod stats;
 pub mod tonemap;
 pub mod visibility;

@@ -3,6 +3,8 @@
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
+use crate::sim::World;
+use crate::sim_level;
 use crate::scene::GpuScene;
 use anyhow::{anyhow, Context, Result};
 use ash::vk;
@@ -80,6 +82,8 @@ struct State {
     looking: bool,
     last_cursor: Option<(f64, f64)>,
     last_frame: Instant,
+    /// The level's particles and flocks, stepped on the fixed clock by each frame's duration.
+    world: World,
     presented: u64,
     needs_resize: bool,
 }
@@ -208,6 +212,8 @@ impl State {
             }
         };
         let (min, max) = scene.bounds();
+        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        sim_level::warm_up(&mut world);
         let frames = Frames::new(&gpu)?;
         Ok(State {
             swapchain,
@@ -222,6 +228,7 @@ impl State {
             looking: false,
             last_cursor: None,
             last_frame: Instant::now(),
+            world,
             presented: 0,
             needs_resize: false,
         })
@@ -244,6 +251,7 @@ impl State {
         let dt = (now - self.last_frame).as_secs_f32().min(0.1);
         self.last_frame = now;
         self.update_camera(dt);
+        self.world.update(dt as f64);
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
@@ -278,6 +286,7 @@ impl State {
             d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
+        sim_level::prepare_frame(&self.world, &mut self.renderer, &self.camera);
         self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
         barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
         let rendered = self.swapchain.rendered[i];

@@ -201,6 +201,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
     let lighting = Lighting::for_pack(&pack.manifest);
+    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    engine::sim_level::warm_up(&mut world);
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
@@ -208,6 +210,10 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     for f in 0..frames {
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
+        // Headless frames advance the simulation by a fixed 1/60 s: the same frames give the
+        // same image whatever the machine's speed.
+        world.update(1.0 / 60.0);
+        engine::sim_level::prepare_frame(&world, &mut renderer, &camera);
         let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, last || every)?;
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
