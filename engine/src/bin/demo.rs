@@ -230,13 +230,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     target.save_png(&args.screenshot)?;
     println!("wrote {}", args.screenshot.display());
     let c = renderer.visibility.counts;
+    // The cull counts include the boids (culled with the scene); reported apart here.
+    let boids = renderer.boids.boids.len() as u32;
     println!(
-        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
+        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
         args.width,
         args.height,
         scene.instances.len(),
-        c.cull.culled,
-        c.cull.visible,
+        c.cull.culled - (boids - c.boids),
+        c.cull.visible - c.boids,
+        boids,
+        c.boids,
         c.triangles,
         scene.triangle_count(),
         c.lod_histogram
