@@ -2,17 +2,20 @@
 
 pub mod anim;
 pub mod animated;
+pub mod boids_draw;
 pub mod camera;
 pub mod cull;
 pub mod gpu;
 pub mod headless;
 pub mod lod_select;
 pub mod overlay;
+pub mod particles_pass;
 pub mod renderer;
 pub mod scene;
 pub mod shaders;
 pub mod shadow;
 pub mod sim;
+pub mod sim_level;
 pub mod stats;
 pub mod tonemap;
 pub mod visibility;

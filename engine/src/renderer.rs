@@ -5,6 +5,8 @@
 use crate::animated::AnimatedScene;
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::boids_draw::BoidsDraw;
+use crate::particles_pass::ParticlePass;
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
 use crate::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE, DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
@@ -104,12 +106,16 @@ pub struct Renderer {
     /// Whether the frame recorded in each slot ran the pre-pass (its query was begun).
     slot_prepass: Vec<bool>,
     /// GPU timestamps per frame slot (`TIMESTAMPS_PER_FRAME`): before the shadow pass, then after
-    /// each of the shadow, pre-pass, shading and tone-map passes.
+    /// each of the shadow, pre-pass, shading, particle and tone-map passes.
     timestamps: Option<vk::QueryPool>,
     /// The HDR target and the pass that tone-maps it to the display target.
     pub tonemap: ToneMap,
     /// The sun's shadow map for dynamic objects.
     pub shadow: SunShadow,
+    /// Blended billboards after the shading pass; the caller fills its queue before `record`.
+    pub particles: ParticlePass,
+    /// Instanced boid meshes after the shading pass; the caller fills them before `record`.
+    pub boids: BoidsDraw,
     /// Casters the last recorded frame drew into the shadow map (0 when it skipped the pass).
     pub shadow_casters: u32,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
@@ -146,8 +152,8 @@ struct Pipelines {
     shadow_masked: vk::Pipeline,
 }
 
-/// Timestamps written per frame slot: 0..=4 around the passes, 5 and 6 around skinning.
-const TIMESTAMPS_PER_FRAME: u32 = 7;
+/// Timestamps written per frame slot: 0..=5 around the passes, 6 and 7 around skinning.
+const TIMESTAMPS_PER_FRAME: u32 = 8;
 
 /// GPU milliseconds of each pass of one frame (0 for a pass the frame skipped).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -157,13 +163,14 @@ pub struct PassTimes {
     pub shadow_ms: f64,
     pub prepass_ms: f64,
     pub shading_ms: f64,
+    pub particles_ms: f64,
     pub tonemap_ms: f64,
 }
 
 impl PassTimes {
     /// GPU time of all the renderer's passes.
     pub fn total(&self) -> f64 {
-        self.skinning_ms + self.shadow_ms + self.prepass_ms + self.shading_ms + self.tonemap_ms
+        self.skinning_ms + self.shadow_ms + self.prepass_ms + self.shading_ms + self.particles_ms + self.tonemap_ms
     }
 }
 
@@ -316,6 +323,8 @@ impl Renderer {
             slot_prepass: vec![false; frames_in_flight],
             timestamps,
             tonemap: ToneMap::new(gpu, color_format)?,
+            particles: ParticlePass::new(gpu, frame_layout, depth_format, frames_in_flight)?,
+            boids: BoidsDraw::new(gpu, frame_layout, depth_format, frames_in_flight)?,
             shadow,
             shadow_casters: 0,
             prepass: true,
@@ -355,6 +364,20 @@ impl Renderer {
         let aspect = target.extent.width as f32 / target.extent.height as f32;
         let view_proj = camera.view_proj(aspect);
         self.visibility.update(scene, view_proj, camera.position, camera.fov_y, target.extent.height as f32);
+        // Skipped when empty: nothing to blend, and the depth need not be stored for it.
+        let draw_particles = !self.particles.is_empty();
+        self.visibility.counts.particles = self.particles.len() as u32;
+        self.particles.upload(gpu, slot)?;
+        // Boids are instances culled with the scene: their counts join the frame's.
+        let boids = self.boids.cull(view_proj);
+        let c = &mut self.visibility.counts;
+        c.cull.tested += boids.tested;
+        c.cull.culled += boids.culled;
+        c.cull.visible += boids.visible;
+        c.cull.inside += boids.inside;
+        c.boids = boids.visible;
+        let draw_boids = boids.visible > 0;
+        self.boids.upload(gpu, slot)?;
         let (hdr_image, hdr_view) = self.tonemap.hdr_target(gpu, target.extent)?;
         // The shadow map serves dynamic objects lit by a physical sun: skip it when none is in
         // view (and lavapipe 22.3 crashes on a depth-only rendering without draws).
@@ -417,11 +440,11 @@ impl Renderer {
             unsafe { d.cmd_reset_query_pool(cb, pool, first_stamp, TIMESTAMPS_PER_FRAME) };
         }
         // Skinning once per frame, before every pass that reads its output.
-        stamp(5);
+        stamp(6);
         if let Some(a) = &mut self.animation {
             a.record(gpu, cb, slot, &self.visibility.draws, if draw_shadow { &self.shadow.casters } else { &[] });
         }
-        stamp(6);
+        stamp(7);
         stamp(0);
         if draw_shadow {
             let shadow_area = self.shadow.begin(gpu, cb);
@@ -472,7 +495,7 @@ impl Renderer {
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
             .load_op(if prepass { vk::AttachmentLoadOp::LOAD } else { vk::AttachmentLoadOp::CLEAR })
-            .store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .store_op(if draw_particles || draw_boids { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
             .clear_value(depth_clear);
         let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
         let p = &self.pipelines;
@@ -483,9 +506,17 @@ impl Renderer {
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
         let pass = PassSetup { slot, frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
         self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        if draw_boids {
+            self.boids.record(gpu, cb, slot, frame_set, (hdr_image, hdr_view), (target.depth_image, target.depth_view), target.extent);
+        }
         stamp(3);
-        self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
+        if draw_particles {
+            let up = camera.right().cross(camera.forward());
+            self.particles.record(gpu, cb, slot, frame_set, (hdr_image, hdr_view), (target.depth_image, target.depth_view), target.extent, camera.right(), up);
+        }
         stamp(4);
+        self.tonemap.record(gpu, cb, target.color_view, target.extent, uniforms.exposure.x, scene.baked.is_some());
+        stamp(5);
         Ok(())
     }
 
@@ -496,7 +527,7 @@ impl Renderer {
         let mut t = [0u64; TIMESTAMPS_PER_FRAME as usize];
         unsafe { gpu.device.get_query_pool_results(pool, TIMESTAMPS_PER_FRAME * slot as u32, &mut t, vk::QueryResultFlags::TYPE_64) }.ok()?;
         let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * gpu.caps.timestamp_period_ns as f64 * 1e-6;
-        Some(PassTimes { skinning_ms: ms(t[5], t[6]), shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), tonemap_ms: ms(t[3], t[4]) })
+        Some(PassTimes { skinning_ms: ms(t[6], t[7]), shadow_ms: ms(t[0], t[1]), prepass_ms: ms(t[1], t[2]), shading_ms: ms(t[2], t[3]), particles_ms: ms(t[3], t[4]), tonemap_ms: ms(t[4], t[5]) })
     }
 
     /// Make the sun's shadow map `size` texels square (default `shadow::DEFAULT_SHADOW_MAP_SIZE`).
@@ -610,6 +641,8 @@ impl Renderer {
             b.destroy(gpu);
         }
         self.tonemap.destroy(gpu);
+        self.particles.destroy(gpu);
+        self.boids.destroy(gpu);
         self.shadow.destroy(gpu);
         if let Some(a) = &mut self.animation {
             a.destroy(gpu);

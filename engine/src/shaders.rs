@@ -9,6 +9,10 @@ pub const MESH_EQUAL_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mes
 pub const DEPTH_MASKED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/depth_masked.frag.spv"));
 pub const FULLSCREEN_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fullscreen.vert.spv"));
 pub const TONEMAP_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/tonemap.frag.spv"));
+pub const PARTICLE_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/particle.vert.spv"));
+pub const PARTICLE_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/particle.frag.spv"));
+pub const BOID_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/boid.vert.spv"));
+pub const BOID_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/boid.frag.spv"));
 pub const SKIN_COMP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/skin.comp.spv"));
 
 pub fn module(device: &ash::Device, spv: &[u8]) -> Result<vk::ShaderModule> {

@@ -22,6 +22,10 @@ pub struct FrameCounts {
     /// Triangles submitted (visible instances at their chosen LOD).
     pub triangles: u64,
     pub lod_histogram: [u32; LOD_BUCKETS],
+    /// Particle billboards the particle pass drew (set by the renderer, not by `update`).
+    pub particles: u32,
+    /// Boid instances drawn (also counted in `cull`; set by the renderer).
+    pub boids: u32,
 }
 
 /// The per-view state: settings, last frame's LODs, this frame's draw list.

@@ -5,6 +5,8 @@ use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
 use crate::overlay::{FrameStats, Overlay};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
+use crate::sim::World;
+use crate::sim_level;
 use crate::scene::GpuScene;
 use anyhow::{anyhow, Context, Result};
 use ash::vk;
@@ -87,6 +89,8 @@ struct State {
     looking: bool,
     last_cursor: Option<(f64, f64)>,
     last_frame: Instant,
+    /// The level's particles and flocks, stepped on the fixed clock by each frame's duration.
+    world: World,
     presented: u64,
     needs_resize: bool,
 }
@@ -237,6 +241,8 @@ impl State {
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
         let (min, max) = scene.bounds();
+        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        sim_level::warm_up(&mut world);
         let frames = Frames::new(&gpu)?;
         Ok(State {
             overlay: Some(overlay),
@@ -253,6 +259,7 @@ impl State {
             looking: false,
             last_cursor: None,
             last_frame: Instant::now(),
+            world,
             presented: 0,
             needs_resize: false,
         })
@@ -277,6 +284,7 @@ impl State {
         self.last_frame = now;
         self.update_camera(dt);
         self.renderer.animate(&mut self.scene, dt);
+        self.world.update(dt as f64);
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
@@ -316,6 +324,7 @@ impl State {
             d.reset_command_buffer(cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
+        sim_level::prepare_frame(&self.world, &mut self.renderer, &self.camera);
         self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
         // Taken every frame, shown or not, so input does not pile up while the overlay is hidden.
         let input = self.egui.take_egui_input(&self.window);

@@ -309,8 +309,9 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
     doc = _settings_doc(lod_settings)
     rec = StageRecord("lod", items=len(scene.meshes))
     t0 = time.perf_counter()
+    # Per mesh: its LODs below LOD 0, and its cache key.
     chains: list = [None] * len(scene.meshes)
-    keys = []
+    keys: list = [None] * len(scene.meshes)
     with progress.stage("lod", len(scene.meshes)) as bar:
         todo = []
         for i, m in enumerate(scene.meshes):
@@ -318,14 +319,14 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             if base.morph_positions is not None:
                 # Morph deltas are per vertex and simplification merges vertices; until the lod
                 # stage carries them, a morphing mesh keeps its full detail only.
-                meshes.append(dataclasses.replace(m, lods=[base]))
+                chains[i] = []
                 bar.advance()
                 continue
             key = Hasher("lod").settings(doc)
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])
             key = key.array(base.triangles).array(base.materials).array(base.lightmap_pages).key()
-            keys.append(key)
+            keys[i] = key
             hit = cache.load("lod", key)
             if hit is not None:
                 chains[i] = ir.lods_from_wire(hit[0]["lods"], hit[1])

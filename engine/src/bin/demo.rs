@@ -220,16 +220,22 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
     let lighting = Lighting::for_pack(&pack.manifest);
+    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    engine::sim_level::warm_up(&mut world);
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
-    let mut pass_ms: [Vec<f64>; 4] = Default::default();
+    let mut pass_ms: [Vec<f64>; 5] = Default::default();
     let mut skin_ms = Vec::new();
     for f in 0..frames {
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
         renderer.animate(&mut scene, 1.0 / 60.0);
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
+        // Headless frames advance the simulation by a fixed 1/60 s: the same frames give the
+        // same image whatever the machine's speed.
+        world.update(1.0 / 60.0);
+        engine::sim_level::prepare_frame(&world, &mut renderer, &camera);
         let capture = last || every;
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
@@ -245,7 +251,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
         if let Some(p) = renderer.pass_times_ms(&gpu, 0) {
-            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.tonemap_ms]) {
+            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.particles_ms, p.tonemap_ms]) {
                 v.push(ms);
             }
             skin_ms.push(p.skinning_ms);
@@ -258,13 +264,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     target.save_png(&args.screenshot)?;
     println!("wrote {}", args.screenshot.display());
     let c = renderer.visibility.counts;
+    // The cull counts include the boids (culled with the scene); reported apart here.
+    let boids = renderer.boids.boids.len() as u32;
     println!(
-        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
+        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
         args.width,
         args.height,
         scene.instances.len(),
-        c.cull.culled,
-        c.cull.visible,
+        c.cull.culled - (boids - c.boids),
+        c.cull.visible - c.boids,
+        boids,
+        c.boids,
         c.triangles,
         scene.triangle_count(),
         c.lod_histogram
@@ -277,8 +287,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
     }
-    if let [Some(s), Some(a), Some(b), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
-        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, tone map {t:.3}", renderer.shadow_casters);
+    if let [Some(s), Some(a), Some(b), Some(pt), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
+        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, particles {pt:.3} ({} billboards), tone map {t:.3}", renderer.shadow_casters, renderer.visibility.counts.particles);
     }
     if let Some(o) = overlay.take() {
         o.destroy(&gpu);

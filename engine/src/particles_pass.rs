@@ -1,0 +1,339 @@
+//! The particle pass (issue 8): after the opaque shading pass, camera-facing quads blended into
+//! the HDR target, depth-tested against the pre-pass depth without writing it.
+//!
+//! - One instance per `sim::particles::Billboard` (32 bytes), from a host-visible buffer per frame
+//!   in flight, grown on demand (the slot's previous frame has finished when it is refilled).
+//! - Batches per emitter: alpha-blended emitters first, farthest emitter first, each already
+//!   sorted back to front by `fill_billboards`; additive ones after (order-free).
+//! - Particles are emissive (unlit): sparks and spray read as their own colour whatever the
+//!   lighting. Their colour is display-referred; under physical lighting the vertex shader
+//!   divides out the exposure the tone map applies.
+//! - Only RGB is written: the HDR alpha keeps its "0 = background" meaning for the tone map. A
+//!   particle over bare background in a physically lit scene therefore is not tone-mapped and
+//!   comes out brighter than over a surface; accepted for now (it would need the depth as a
+//!   texture to tell the two apart).
+
+use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::shaders;
+use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
+use crate::tonemap::HDR_FORMAT;
+use anyhow::Result;
+use ash::vk;
+use glam::{Vec3, Vec4};
+use gpu_allocator::MemoryLocation;
+
+/// Mirrors the push-constant block of shaders/particle.vert.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+struct ParticlePush {
+    right: Vec4,
+    up: Vec4,
+}
+
+/// A run of instances drawn with one blend mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParticleBatch {
+    pub blend: Blend,
+    pub first: u32,
+    pub count: u32,
+}
+
+pub struct ParticlePass {
+    layout: vk::PipelineLayout,
+    alpha: vk::Pipeline,
+    additive: vk::Pipeline,
+    /// Instance buffers per frame slot, with their capacity in billboards.
+    buffers: Vec<Option<(Buffer, usize)>>,
+    /// This frame's billboards and how they split into batches (filled before `record`).
+    pub billboards: Vec<Billboard>,
+    pub batches: Vec<ParticleBatch>,
+    scratch: BillboardScratch,
+    one_emitter: Vec<Billboard>,
+}
+
+/// The shading pass's colour writes and depth tests, made visible to this pass's blending
+/// (a read-modify-write of the same attachment) and depth tests. Layouts stay as they are.
+const COLOR_WRITE_TO_BLEND: Transition = Transition {
+    old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+    new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+    src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+    src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+    dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+    dst_access: vk::AccessFlags2::from_raw(vk::AccessFlags2::COLOR_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE.as_raw()),
+};
+const DEPTH_TESTS: vk::PipelineStageFlags2 = vk::PipelineStageFlags2::from_raw(vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw());
+const DEPTH_TO_TEST: Transition = Transition {
+    old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+    new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+    src_stage: DEPTH_TESTS,
+    src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+    dst_stage: DEPTH_TESTS,
+    dst_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ,
+};
+
+impl ParticlePass {
+    /// `frame_layout` is the renderer's set 0 (the particle shader reads view_proj and exposure).
+    pub fn new(gpu: &Gpu, frame_layout: vk::DescriptorSetLayout, depth_format: vk::Format, frames_in_flight: usize) -> Result<ParticlePass> {
+        let d = &gpu.device;
+        let push = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::VERTEX)
+            .size(std::mem::size_of::<ParticlePush>() as u32)];
+        let set_layouts = [frame_layout];
+        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
+        let alpha = create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE_MINUS_SRC_ALPHA)?;
+        let additive = create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE)?;
+        Ok(ParticlePass {
+            layout,
+            alpha,
+            additive,
+            buffers: (0..frames_in_flight).map(|_| None).collect(),
+            billboards: Vec::new(),
+            batches: Vec::new(),
+            scratch: BillboardScratch::default(),
+            one_emitter: Vec::new(),
+        })
+    }
+
+    /// Billboards queued for the next frame.
+    pub fn len(&self) -> usize {
+        self.billboards.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.billboards.is_empty()
+    }
+
+    pub fn clear(&mut self) {
+        self.billboards.clear();
+        self.batches.clear();
+    }
+
+    /// Queue one batch (already in draw order).
+    pub fn push(&mut self, blend: Blend, billboards: &[Billboard]) {
+        if billboards.is_empty() {
+            return;
+        }
+        self.batches.push(ParticleBatch {
+            blend,
+            first: self.billboards.len() as u32,
+            count: billboards.len() as u32,
+        });
+        self.billboards.extend_from_slice(billboards);
+    }
+
+    /// Replace the queue with every emitter's live particles for a camera at `eye` looking
+    /// along `forward`, moved on by `extrapolate_s` (see `ParticleSystem::fill_billboards`).
+    /// Alpha-blended emitters are ordered farthest first by their emitter position, which is
+    /// exact for emitters whose particle clouds do not interleave in depth.
+    pub fn fill(&mut self, emitters: &[ParticleSystem], eye: Vec3, forward: Vec3, extrapolate_s: f32) {
+        self.clear();
+        let depth = |e: &ParticleSystem| (Vec3::from(e.params.position) - eye).dot(forward);
+        let mut alpha: Vec<&ParticleSystem> = emitters.iter().filter(|e| e.params.blend == Blend::Alpha).collect();
+        alpha.sort_by(|a, b| depth(b).total_cmp(&depth(a)));
+        let additive = emitters.iter().filter(|e| e.params.blend == Blend::Additive);
+        let mut tmp = std::mem::take(&mut self.one_emitter);
+        for e in alpha.into_iter().chain(additive) {
+            e.fill_billboards(eye, forward, extrapolate_s, &mut tmp, &mut self.scratch);
+            self.push(e.params.blend, &tmp);
+        }
+        self.one_emitter = tmp;
+    }
+
+    /// Copy the queue into `slot`'s instance buffer; the GPU must be done with that slot.
+    pub fn upload(&mut self, gpu: &Gpu, slot: usize) -> Result<()> {
+        let needed = self.billboards.len();
+        if needed == 0 {
+            return Ok(());
+        }
+        let entry = &mut self.buffers[slot];
+        if entry.as_ref().is_none_or(|(_, cap)| *cap < needed) {
+            if let Some((mut old, _)) = entry.take() {
+                old.destroy(gpu);
+            }
+            let cap = needed.next_power_of_two().max(256);
+            let buffer = Buffer::new(
+                gpu,
+                "particle instances",
+                (cap * std::mem::size_of::<Billboard>()) as u64,
+                vk::BufferUsageFlags::VERTEX_BUFFER,
+                MemoryLocation::CpuToGpu,
+            )?;
+            *entry = Some((buffer, cap));
+        }
+        let (buffer, _) = entry.as_mut().unwrap();
+        // SAFETY: Billboard is repr(C) plain floats.
+        let bytes = unsafe { std::slice::from_raw_parts(self.billboards.as_ptr() as *const u8, needed * std::mem::size_of::<Billboard>()) };
+        buffer.mapped()[..bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass stored.
+    /// Call only with a non-empty queue uploaded to `slot` (an empty pass is skipped by the caller).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        cb: vk::CommandBuffer,
+        slot: usize,
+        frame_set: vk::DescriptorSet,
+        hdr: (vk::Image, vk::ImageView),
+        depth: (vk::Image, vk::ImageView),
+        extent: vk::Extent2D,
+        camera_right: Vec3,
+        camera_up: Vec3,
+    ) {
+        let d = &gpu.device;
+        let Some((buffer, _)) = &self.buffers[slot] else { return };
+        barrier(gpu, cb, hdr.0, full_range(vk::ImageAspectFlags::COLOR, 1), COLOR_WRITE_TO_BLEND);
+        barrier(gpu, cb, depth.0, full_range(vk::ImageAspectFlags::DEPTH, 1), DEPTH_TO_TEST);
+        let area = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent,
+        };
+        let color_attachment = [vk::RenderingAttachmentInfo::default()
+            .image_view(hdr.1)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::LOAD)
+            .store_op(vk::AttachmentStoreOp::STORE)];
+        let depth_attachment = vk::RenderingAttachmentInfo::default()
+            .image_view(depth.1)
+            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::LOAD)
+            .store_op(vk::AttachmentStoreOp::DONT_CARE);
+        let rendering = vk::RenderingInfo::default()
+            .render_area(area)
+            .layer_count(1)
+            .color_attachments(&color_attachment)
+            .depth_attachment(&depth_attachment);
+        let push = ParticlePush {
+            right: camera_right.extend(0.0),
+            up: camera_up.extend(0.0),
+        };
+        // SAFETY: ParticlePush is repr(C) plain floats.
+        let push_bytes = unsafe { std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<ParticlePush>()) };
+        unsafe {
+            d.cmd_begin_rendering(cb, &rendering);
+            d.cmd_set_viewport(
+                cb,
+                0,
+                &[vk::Viewport {
+                    x: 0.0,
+                    y: 0.0,
+                    width: extent.width as f32,
+                    height: extent.height as f32,
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                }],
+            );
+            d.cmd_set_scissor(cb, 0, &[area]);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
+            d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::VERTEX, 0, push_bytes);
+            d.cmd_bind_vertex_buffers(cb, 0, &[buffer.buffer], &[0]);
+            let mut bound = vk::Pipeline::null();
+            for b in &self.batches {
+                let pipeline = match b.blend {
+                    Blend::Alpha => self.alpha,
+                    Blend::Additive => self.additive,
+                };
+                if pipeline != bound {
+                    d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+                    bound = pipeline;
+                }
+                d.cmd_draw(cb, 4, b.count, 0, b.first);
+            }
+            d.cmd_end_rendering(cb);
+        }
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        for (mut b, _) in self.buffers.iter_mut().filter_map(Option::take) {
+            b.destroy(gpu);
+        }
+        unsafe {
+            gpu.device.destroy_pipeline(self.alpha, None);
+            gpu.device.destroy_pipeline(self.additive, None);
+            gpu.device.destroy_pipeline_layout(self.layout, None);
+        }
+    }
+}
+
+/// A particle pipeline: colour = src * src_alpha + dst * `dst_factor` (ONE_MINUS_SRC_ALPHA for
+/// soft alpha, ONE for additive), RGB only; reversed-Z depth test, no depth writes.
+fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, dst_factor: vk::BlendFactor) -> Result<vk::Pipeline> {
+    let d = &gpu.device;
+    let vert = shaders::module(d, shaders::PARTICLE_VERT)?;
+    let frag = shaders::module(d, shaders::PARTICLE_FRAG)?;
+    let stages = [
+        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main"),
+        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(c"main"),
+    ];
+    let bindings = [vk::VertexInputBindingDescription {
+        binding: 0,
+        stride: std::mem::size_of::<Billboard>() as u32,
+        input_rate: vk::VertexInputRate::INSTANCE,
+    }];
+    let attributes = [
+        vk::VertexInputAttributeDescription {
+            location: 0,
+            binding: 0,
+            format: vk::Format::R32G32B32A32_SFLOAT,
+            offset: 0,
+        },
+        vk::VertexInputAttributeDescription {
+            location: 1,
+            binding: 0,
+            format: vk::Format::R32G32B32A32_SFLOAT,
+            offset: 16,
+        },
+    ];
+    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
+        .vertex_binding_descriptions(&bindings)
+        .vertex_attribute_descriptions(&attributes);
+    let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_STRIP);
+    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
+    let raster = vk::PipelineRasterizationStateCreateInfo::default()
+        .polygon_mode(vk::PolygonMode::FILL)
+        .cull_mode(vk::CullModeFlags::NONE)
+        .line_width(1.0);
+    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+    // Reversed-Z: nearer is greater.
+    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
+        .depth_test_enable(true)
+        .depth_write_enable(false)
+        .depth_compare_op(vk::CompareOp::GREATER_OR_EQUAL);
+    let blend_attachment = [vk::PipelineColorBlendAttachmentState::default()
+        .blend_enable(true)
+        .src_color_blend_factor(vk::BlendFactor::SRC_ALPHA)
+        .dst_color_blend_factor(dst_factor)
+        .color_blend_op(vk::BlendOp::ADD)
+        .src_alpha_blend_factor(vk::BlendFactor::ZERO)
+        .dst_alpha_blend_factor(vk::BlendFactor::ONE)
+        .alpha_blend_op(vk::BlendOp::ADD)
+        .color_write_mask(vk::ColorComponentFlags::R | vk::ColorComponentFlags::G | vk::ColorComponentFlags::B)];
+    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
+    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
+    let color_formats = [HDR_FORMAT];
+    let mut rendering = vk::PipelineRenderingCreateInfo::default()
+        .color_attachment_formats(&color_formats)
+        .depth_attachment_format(depth_format);
+    let info = vk::GraphicsPipelineCreateInfo::default()
+        .stages(&stages)
+        .vertex_input_state(&vertex_input)
+        .input_assembly_state(&input_assembly)
+        .viewport_state(&viewport)
+        .rasterization_state(&raster)
+        .multisample_state(&multisample)
+        .depth_stencil_state(&depth)
+        .color_blend_state(&blend)
+        .dynamic_state(&dynamic)
+        .layout(layout)
+        .push_next(&mut rendering);
+    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
+    unsafe {
+        d.destroy_shader_module(vert, None);
+        d.destroy_shader_module(frag, None);
+    }
+    let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the particle pipeline: {e}"))?;
+    Ok(pipelines[0])
+}

@@ -1,0 +1,93 @@
+//! The level's simulation built from spawns (engine/src/sim_level.rs): the temple's own spawn
+//! lines map onto emitters and flocks with the authored numbers, and replay identically.
+
+use engine::sim::particles::Blend;
+use engine::sim_level::{warm_up, world_from_spawns};
+use glam::Vec3;
+use pack::Spawn;
+
+/// The temple's boids and particles spawns as authored in content/levels/temple.toml, plus a
+/// player spawn the simulation ignores.
+fn temple_spawns() -> Vec<Spawn> {
+    let spawn = |name: &str, kind: &str, position: [f32; 3], params: &str| Spawn {
+        name: name.into(),
+        kind: kind.into(),
+        position,
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        params: serde_json::from_str(params).unwrap(),
+    };
+    vec![
+        spawn("player", "player", [0.0, 0.0, 18.0], r#"{ "speed": 4.0 }"#),
+        spawn("doves", "boids", [0.0, 9.0, 9.0], r#"{ "count": 32, "radius": 8.0, "speed": 3.0 }"#),
+        spawn(
+            "fountain_spray",
+            "particles",
+            [0.0, 1.95, 10.0],
+            r#"{ "rate_per_s": 200, "lifetime_s": 1.2, "speed": 2.5, "spread_deg": 15, "size": 0.04, "color": [0.7, 0.85, 1.0, 0.6], "gravity": -9.81 }"#,
+        ),
+        spawn(
+            "brazier_sparks_west",
+            "particles",
+            [-3.6, 1.6, -1.6],
+            r#"{ "rate_per_s": 30, "lifetime_s": 2.0, "speed": 0.8, "spread_deg": 25, "size": 0.02, "color": [1.0, 0.6, 0.2, 1.0], "gravity": 0.5 }"#,
+        ),
+    ]
+}
+
+const LEVEL_MIN: Vec3 = Vec3::new(-20.0, 0.0, -20.0);
+const LEVEL_MAX: Vec3 = Vec3::new(20.0, 12.0, 22.0);
+
+#[test]
+fn spawns_become_emitters_and_flocks_with_their_authored_parameters() {
+    let w = world_from_spawns(&temple_spawns(), LEVEL_MIN, LEVEL_MAX);
+    assert_eq!((w.emitters.len(), w.flocks.len()), (2, 1));
+    let spray = &w.emitters[0].params;
+    assert_eq!(spray.position, [0.0, 1.95, 10.0]);
+    assert_eq!((spray.rate_per_s, spray.cone_half_angle_deg, spray.gravity), (200.0, 15.0, [0.0, -9.81, 0.0]));
+    assert!(
+        (spray.life_min_s + spray.life_max_s - 2.4).abs() < 1e-5 && (spray.speed_min + spray.speed_max - 5.0).abs() < 1e-5,
+        "means as authored: {spray:?}"
+    );
+    assert_eq!(spray.color.eval(0.0), [0.7, 0.85, 1.0, 0.6]);
+    assert_eq!(spray.color.eval(1.0)[3], 0.0, "fades out by the end of its life");
+    assert_eq!(spray.blend, Blend::Alpha);
+    assert_eq!(spray.ground_y, Some(LEVEL_MIN.y));
+    assert_eq!(w.emitters[1].params.blend, Blend::Additive, "sparks add light");
+    assert_ne!(spray.seed, w.emitters[1].params.seed);
+    let doves = &w.flocks[0];
+    assert_eq!(doves.len(), 32);
+    let centre = Vec3::new(0.0, 9.0, 9.0);
+    for i in 0..doves.len() {
+        let d = doves.state().position(i) - centre;
+        assert!(d.abs().max_element() <= 8.0 + 1e-4, "dove {i} starts within the spawn radius: {d}");
+        assert!((doves.state().velocity(i).length() - 3.0).abs() < 1e-4);
+    }
+    let b = doves.params.bounds.expect("the level bounds are an obstacle");
+    assert_eq!((b.min, b.max[0], b.max[2]), (LEVEL_MIN.to_array(), LEVEL_MAX.x, LEVEL_MAX.z));
+    assert!(b.max[1] >= 9.0 + 8.0, "the box clears the flock's spawn volume: {b:?}");
+    assert_eq!(doves.params.goal, Some([0.0, 9.0, 9.0]));
+}
+
+#[test]
+fn the_level_world_warms_up_and_replays_identically() {
+    let mut a = world_from_spawns(&temple_spawns(), LEVEL_MIN, LEVEL_MAX);
+    let mut b = world_from_spawns(&temple_spawns(), LEVEL_MIN, LEVEL_MAX);
+    warm_up(&mut a);
+    warm_up(&mut b);
+    // About rate × mean life particles alive after 2 s (1.2 s lives: the fountain is steady).
+    let spray = a.emitters[0].particles.len();
+    assert!((180..=300).contains(&spray), "{spray} spray particles after the warm-up");
+    for _ in 0..30 {
+        a.update(1.0 / 60.0);
+        b.update(1.0 / 60.0);
+    }
+    for (x, y) in a.emitters.iter().zip(&b.emitters) {
+        assert_eq!(x.particles, y.particles);
+    }
+    let (fa, fb) = (a.flocks[0].state(), b.flocks[0].state());
+    assert_eq!((&fa.px, &fa.py, &fa.pz, &fa.roll), (&fb.px, &fb.py, &fb.pz, &fb.roll));
+    for i in 0..fa.len() {
+        let v = fa.velocity(i).length();
+        assert!((1.8 - 1e-3..=4.5 + 1e-3).contains(&v), "dove {i} flies within its speed limits: {v}");
+    }
+}
