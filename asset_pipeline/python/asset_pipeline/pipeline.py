@@ -320,6 +320,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
                 # Morph deltas are per vertex and simplification merges vertices; until the lod
                 # stage carries them, a morphing mesh keeps its full detail only.
                 chains[i] = []
+                rec.items -= 1  # no work, so neither built nor cached
                 bar.advance()
                 continue
             key = Hasher("lod").settings(doc)
