@@ -8,42 +8,18 @@ use engine::anim::skin_cpu::{skin_cpu, DeformData};
 use engine::anim::{joint_count, node_joint_matrices, Rig};
 use engine::animated::AnimatedScene;
 use engine::camera::Camera;
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::gpu::Gpu;
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::{world_transforms, GpuScene};
 use glam::{Mat4, Vec3};
 use pack::{Pack, Vertex};
-use std::path::PathBuf;
+
+mod common;
+use common::{assert_clean, cook, gpu, samples};
 
 const W: u32 = 96;
 const H: u32 = 72;
-
-fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions {
-        validation: true,
-        device: DevicePreference::from_env(),
-        surface_extensions: vec![],
-    })
-    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
-}
-
-fn samples() -> Option<PathBuf> {
-    let dir = std::env::var_os("GLTF_SAMPLES_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/gltf-samples"));
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipped: glTF samples not found at {} (set GLTF_SAMPLES_DIR)", dir.display());
-        None
-    }
-}
-
-fn cook(dir: &std::path::Path, name: &str) -> Pack {
-    let path = dir.join(name).join(format!("{name}.gltf"));
-    cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap_or_else(|e| panic!("cooking {name}: {e}"))
-}
 
 /// The pack with clip 0 at `time` baked in: every deforming node's LODs replaced by the CPU
 /// reference's skinned (world-space) vertices, the node placed at the identity, its bounds
@@ -141,10 +117,6 @@ fn camera_for(gpu: &Gpu, pack: &Pack) -> Camera {
     let mut r = renderer;
     r.destroy(gpu);
     Camera::framing(lo, hi)
-}
-
-fn assert_clean(gpu: &Gpu) {
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
 }
 
 fn max_channel_difference(a: &[u8], b: &[u8]) -> (i32, usize) {

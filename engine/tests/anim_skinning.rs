@@ -5,36 +5,11 @@
 use engine::anim::skin_cpu::{skin_cpu, DeformData};
 use engine::anim::skin_gpu::{SkinPipeline, SkinnedMesh};
 use engine::anim::{joint_count, node_joint_matrices, Rig};
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
 use glam::{Mat4, Quat, Vec3};
-use pack::{Pack, Vertex};
-use std::path::PathBuf;
+use pack::Vertex;
 
-fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions {
-        validation: true,
-        device: DevicePreference::from_env(),
-        surface_extensions: vec![],
-    })
-    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
-}
-
-fn samples() -> Option<PathBuf> {
-    let dir = std::env::var_os("GLTF_SAMPLES_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/gltf-samples"));
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipped: glTF samples not found at {} (set GLTF_SAMPLES_DIR)", dir.display());
-        None
-    }
-}
-
-fn cook(dir: &std::path::Path, name: &str) -> Pack {
-    let path = dir.join(name).join(format!("{name}.gltf"));
-    cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap_or_else(|e| panic!("cooking {name}: {e}"))
-}
+mod common;
+use common::{assert_clean, cook, gpu, samples};
 
 /// Largest position difference over the model's size (bounding box diagonal of `a`).
 fn relative_error(a: &[Vertex], b: &[Vertex]) -> f32 {
@@ -91,7 +66,7 @@ fn gpu_skinning_equals_the_cpu_reference_on_the_sample_models() {
         assert!(moved > 1e-3, "{name}: the pose at {time} s leaves every vertex in place");
     }
     pipe.destroy(&gpu);
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
+    assert_clean(&gpu);
 }
 
 #[test]
@@ -139,7 +114,7 @@ fn gpu_skinning_handles_300_joints_and_four_influences() {
     // Joint 299 is in use, so the joint buffer really holds all 300.
     assert!(data.joints.as_ref().unwrap().iter().flatten().any(|&j| j as usize == joints_n - 1));
     assert!(out.iter().zip(&data.vertices).all(|(o, v)| o.uv0 == v.uv0 && o.color == v.color && o.tangent[3] == v.tangent[3]));
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
+    assert_clean(&gpu);
 }
 
 #[test]

@@ -2,7 +2,6 @@
 //! culled with the scene (their counts join the frame's), drawn where they are in view.
 
 use engine::camera::Camera;
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
@@ -10,17 +9,11 @@ use engine::sim::boids::{BoidParams, Flock, FlockState};
 use glam::{Mat4, Vec3};
 use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
 
+mod common;
+use common::{assert_clean, gpu};
+
 const W: u32 = 64;
 const H: u32 = 48;
-
-fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions {
-        validation: true,
-        device: DevicePreference::from_env(),
-        surface_extensions: vec![],
-    })
-    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
-}
 
 /// One small quad far behind the camera: a scene with one instance, culled.
 fn pack_behind() -> Pack {
@@ -124,5 +117,5 @@ fn boids_in_view_are_drawn_and_those_behind_the_camera_are_culled() {
     scene.destroy(&gpu);
     renderer.destroy(&gpu);
     target.destroy(&gpu);
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
+    assert_clean(&gpu);
 }

@@ -2,7 +2,7 @@
 //! fails on any validation error. Scenes are built in code so these tests need no cooker.
 
 use engine::camera::Camera;
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::gpu::Gpu;
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::overlay::{headless_input, FrameStats, Overlay};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
@@ -10,15 +10,8 @@ use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
 use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Texture, TextureFormat, Vertex};
 
-fn gpu() -> Gpu {
-    // Tests always validate; ENGINE_DEVICE can still point them at a real GPU.
-    Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![] })
-        .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
-}
-
-fn assert_clean(gpu: &Gpu) {
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
-}
+mod common;
+use common::{assert_clean, gpu};
 
 /// An axis-aligned unit cube centred on the origin with per-face normals (so lighting tells the
 /// faces apart) and each face's uv (0,0) at its top-left corner.
@@ -355,7 +348,7 @@ fn three_lod_cube_pack() -> Pack {
 fn frozen_lods_stay_as_the_camera_moves_away_and_pick_again_when_thawed() {
     let gpu = gpu();
     let mut rig = Rig::new(&gpu, &three_lod_cube_pack(), 64, 64);
-    let mut lod_at = |rig: &mut Rig, distance: f32| {
+    let lod_at = |rig: &mut Rig, distance: f32| {
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(distance), &Lighting::default(), false).unwrap();
         (rig.renderer.visibility.draws[0].lod, rig.renderer.visibility.counts.triangles)
     };
@@ -836,7 +829,7 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
     let lit_l = probe_b + sun_lux * towards_sun.dot(Vec3::Z) / std::f32::consts::PI;
     let lit = tone_mapped_bytes([lit_l; 3], exposure, s);
     assert!(lit[0] > shaded[0] + 50, "the test needs the sun to matter: {shaded:?} vs {lit:?}");
-    let mut centre = |cube_x: f32, map_size: u32| {
+    let centre = |cube_x: f32, map_size: u32| {
         let pack = roof_pack(cube_x, probe_b, sun_lux, towards_sun);
         let mut rig = Rig::new(&gpu, &pack, 64, 64);
         rig.renderer.tonemap.saturation = s;

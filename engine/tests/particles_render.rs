@@ -4,7 +4,7 @@
 //! is the sRGB encoding of the blend equation's result.
 
 use engine::camera::Camera;
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::gpu::Gpu;
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
@@ -12,21 +12,11 @@ use engine::sim::particles::{Billboard, Blend};
 use glam::{Mat4, Vec3};
 use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
 
+mod common;
+use common::{assert_clean, gpu};
+
 const W: u32 = 64;
 const H: u32 = 48;
-
-fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions {
-        validation: true,
-        device: DevicePreference::from_env(),
-        surface_extensions: vec![],
-    })
-    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
-}
-
-fn assert_clean(gpu: &Gpu) {
-    assert_eq!(gpu.validation().error_count(), 0, "validation errors: {:#?}", gpu.validation().errors());
-}
 
 /// A grey 8 m square facing +Z, centred on (0, 0, z).
 fn wall_pack(z: f32) -> Pack {
