@@ -6,59 +6,14 @@ use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use engine::sim::boids::{BoidParams, Flock, FlockState};
-use glam::{Mat4, Vec3};
-use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
+use glam::Vec3;
+use pack::Material;
 
 mod common;
-use common::{assert_clean, gpu};
+use common::{assert_clean, gpu, square_pack};
 
 const W: u32 = 64;
 const H: u32 = 48;
-
-/// One small quad far behind the camera: a scene with one instance, culled.
-fn pack_behind() -> Pack {
-    let mut b = PackBuilder::new("generated", "test");
-    let verts: Vec<Vertex> = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
-        .iter()
-        .map(|&(x, y)| Vertex {
-            position: [x, y, 0.0],
-            normal: [0.0, 0.0, 1.0],
-            tangent: [1.0, 0.0, 0.0, 1.0],
-            color: [255; 4],
-            ..Default::default()
-        })
-        .collect();
-    let idx: Vec<u32> = vec![0, 1, 2, 0, 2, 3];
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
-    let indices = b.push_bytes(&idx.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
-    b.manifest.meshes.push(Mesh {
-        name: "quad".into(),
-        lods: vec![MeshLod {
-            vertices,
-            vertex_count: 4,
-            indices,
-            index_count: 6,
-            submeshes: vec![Submesh {
-                first_index: 0,
-                index_count: 6,
-                material: 0,
-                lightmap_page: None,
-            }],
-            error: 0.0,
-        }],
-        bounds_min: [-1.0, -1.0, 0.0],
-        bounds_max: [1.0, 1.0, 0.0],
-        is_static: false,
-    });
-    b.manifest.materials.push(Material::default());
-    b.manifest.nodes.push(Node {
-        name: "quad".into(),
-        parent: None,
-        local: Mat4::from_translation(Vec3::new(0.0, 0.0, 50.0)).to_cols_array(),
-        mesh: Some(0),
-    });
-    b.finish()
-}
 
 fn flock(positions: &[Vec3]) -> Flock {
     let mut s = FlockState::default();
@@ -74,7 +29,7 @@ fn boids_in_view_are_drawn_and_those_behind_the_camera_are_culled() {
     let gpu = gpu();
     let mut target = Offscreen::new(&gpu, W, H).unwrap();
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let scene = GpuScene::upload(&gpu, &pack_behind(), renderer.layouts()).unwrap();
+    let scene = GpuScene::upload(&gpu, &square_pack("quad", 1.0, 50.0, Material::default()), renderer.layouts()).unwrap();
     let camera = Camera {
         position: Vec3::ZERO,
         yaw: 0.0,

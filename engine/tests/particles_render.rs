@@ -9,62 +9,19 @@ use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use engine::sim::particles::{Billboard, Blend};
-use glam::{Mat4, Vec3};
-use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
+use glam::Vec3;
+use pack::{Material, Pack};
 
 mod common;
-use common::{assert_clean, gpu};
-
-const W: u32 = 64;
-const H: u32 = 48;
+use common::{assert_clean, gpu, square_pack};
 
 /// A grey 8 m square facing +Z, centred on (0, 0, z).
 fn wall_pack(z: f32) -> Pack {
-    let mut b = PackBuilder::new("generated", "test");
-    let verts: Vec<Vertex> = [(-4.0, -4.0), (4.0, -4.0), (4.0, 4.0), (-4.0, 4.0)]
-        .iter()
-        .map(|&(x, y)| Vertex {
-            position: [x, y, 0.0],
-            normal: [0.0, 0.0, 1.0],
-            tangent: [1.0, 0.0, 0.0, 1.0],
-            color: [255; 4],
-            ..Default::default()
-        })
-        .collect();
-    let idx: Vec<u32> = vec![0, 1, 2, 0, 2, 3];
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
-    let indices = b.push_bytes(&idx.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
-    b.manifest.meshes.push(Mesh {
-        name: "wall".into(),
-        lods: vec![MeshLod {
-            vertices,
-            vertex_count: 4,
-            indices,
-            index_count: 6,
-            submeshes: vec![Submesh {
-                first_index: 0,
-                index_count: 6,
-                material: 0,
-                lightmap_page: None,
-            }],
-            error: 0.0,
-        }],
-        bounds_min: [-4.0, -4.0, 0.0],
-        bounds_max: [4.0, 4.0, 0.0],
-        is_static: false,
-    });
-    b.manifest.materials.push(Material {
-        base_color: [0.5, 0.5, 0.5, 1.0],
-        ..Material::default()
-    });
-    b.manifest.nodes.push(Node {
-        name: "wall".into(),
-        parent: None,
-        local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(),
-        mesh: Some(0),
-    });
-    b.finish()
+    square_pack("wall", 4.0, z, Material { base_color: [0.5, 0.5, 0.5, 1.0], ..Material::default() })
 }
+
+const W: u32 = 64;
+const H: u32 = 48;
 
 fn camera() -> Camera {
     Camera {

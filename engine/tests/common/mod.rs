@@ -39,3 +39,35 @@ pub fn cook(dir: &Path, name: &str) -> Pack {
     let path = dir.join(name).join(format!("{name}.gltf"));
     cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap_or_else(|e| panic!("cooking {name}: {e}"))
 }
+
+/// One dynamic square mesh named `name`, 2 `half` metres on a side, facing +Z (counter-clockwise
+/// seen from +Z), placed with its centre at (0, 0, z), in `material`.
+pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> Pack {
+    use glam::{Mat4, Vec3};
+    use pack::{Mesh, MeshLod, Node, PackBuilder, Submesh, Vertex};
+    let mut b = PackBuilder::new("generated", "test");
+    let verts: Vec<Vertex> = [(-half, -half), (half, -half), (half, half), (-half, half)]
+        .iter()
+        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], color: [255; 4], ..Default::default() })
+        .collect();
+    let idx: Vec<u32> = vec![0, 1, 2, 0, 2, 3];
+    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let indices = b.push_bytes(&idx.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
+    b.manifest.meshes.push(Mesh {
+        name: name.into(),
+        lods: vec![MeshLod {
+            vertices,
+            vertex_count: 4,
+            indices,
+            index_count: 6,
+            submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: None }],
+            error: 0.0,
+        }],
+        bounds_min: [-half, -half, 0.0],
+        bounds_max: [half, half, 0.0],
+        is_static: false,
+    });
+    b.manifest.materials.push(material);
+    b.manifest.nodes.push(Node { name: name.into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(), mesh: Some(0) });
+    b.finish()
+}
