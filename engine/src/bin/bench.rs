@@ -169,7 +169,12 @@ fn main() -> ExitCode {
     if std::env::args().nth(1).as_deref() == Some("skinned") {
         return skinned_bench::main(std::env::args().skip(2).collect());
     }
-    let args = match parse() {
+    exit_status(parse(), run)
+}
+
+/// Every scenario's exit status: 2 for bad arguments, 3 for validation errors, 1 for a failure.
+fn exit_status<A>(args: Result<A, String>, run: impl FnOnce(&A) -> anyhow::Result<usize>) -> ExitCode {
+    let args = match args {
         Ok(a) => a,
         Err(e) => {
             eprintln!("bench: {e}");
@@ -498,23 +503,6 @@ mod skinned_bench {
     }
 
     pub fn main(args: Vec<String>) -> ExitCode {
-        let args = match parse(args) {
-            Ok(a) => a,
-            Err(e) => {
-                eprintln!("bench: {e}");
-                return ExitCode::from(2);
-            }
-        };
-        match run(&args) {
-            Ok(0) => ExitCode::SUCCESS,
-            Ok(n) => {
-                eprintln!("bench: {n} validation errors");
-                ExitCode::from(3)
-            }
-            Err(e) => {
-                eprintln!("bench: {e:#}");
-                ExitCode::FAILURE
-            }
-        }
+        super::exit_status(parse(args), run)
     }
 }
