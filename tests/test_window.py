@@ -98,7 +98,10 @@ def test_demo_window_shows_the_scene(xvfb, tmp_path):
     offscreen = headless_render(tmp_path)
     assert window.shape == offscreen.shape, f"screenshot {window.shape} vs render {offscreen.shape}"
     diff = np.abs(window - offscreen).max(axis=-1)
-    assert (diff > 3).mean() < 0.01, f"the window does not show the scene: {(diff > 3).mean():.1%} of pixels differ"
+    # The static scene must match. The window advances the golems, particles and doves by wall-clock
+    # time and the headless render by fixed 1/60 s steps, so the moving things (about 1% of the
+    # frame) can sit elsewhere; a window that showed the wrong scene would differ almost everywhere.
+    assert (diff > 3).mean() < 0.03, f"the window does not show the scene: {(diff > 3).mean():.1%} of pixels differ"
     # And it is a scene, not a blank screen.
     assert len({tuple(p // 16) for p in window.reshape(-1, 3)}) > 20
 
