@@ -47,6 +47,13 @@ pub struct AnimatedInstance {
     wanted: Vec<bool>,
 }
 
+impl AnimatedInstance {
+    /// This frame's joint matrices as the skinning pass gets them (world space).
+    pub fn joint_matrices(&self) -> &[Mat4] {
+        &self.joints
+    }
+}
+
 /// Every animated instance of a scene, the skinning pipeline and the timings of the last frame.
 pub struct AnimatedScene {
     pub rig: Rig,
@@ -160,7 +167,10 @@ impl AnimatedScene {
                     .fold(0.0, f32::max)
             })
             .collect();
-        let mut animator = Animator::new(&self.rig, 0);
+        // Pose only this character's skeleton (and the node itself), not the whole level.
+        let mut needed = skin.map_or(vec![], |s| self.rig.skins[s as usize].joints.clone());
+        needed.push(node as u32);
+        let mut animator = Animator::for_nodes(&self.rig, 0, &needed);
         if self.rig.clips.is_empty() {
             // Nothing to play: the animator holds the rest pose (`advance` skips sampling).
             animator.speed = 0.0;

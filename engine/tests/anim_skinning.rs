@@ -82,6 +82,9 @@ fn gpu_skinning_handles_300_joints_and_four_influences() {
                 position: [f.sin(), (f * 0.37).cos(), f * 0.01],
                 normal: Vec3::new(1.0, f.cos(), 0.5).normalize().to_array(),
                 tangent: [1.0, 0.0, 0.0, -1.0],
+                uv0: [f * 0.5, -f],
+                uv1: [f * 0.25, 1.0 - f],
+                color: [i as u8, (i >> 8) as u8, 7, 255],
                 ..Default::default()
             }
         })
@@ -96,24 +99,42 @@ fn gpu_skinning_handles_300_joints_and_four_influences() {
         morph_positions: vec![],
         morph_normals: vec![],
     };
-    let mats: Vec<Mat4> = (0..joints_n)
-        .map(|j| {
-            let a = j as f32 * 0.05;
-            Mat4::from_scale_rotation_translation(Vec3::splat(1.0 + 0.001 * j as f32), Quat::from_rotation_y(a) * Quat::from_rotation_x(0.3 * a), Vec3::new(a, -a, 0.5))
-        })
-        .collect();
-    let mut cpu = data.vertices.clone();
-    skin_cpu(&data, &[], &mats, &mut cpu);
-    let mut skinned = SkinnedMesh::new(&gpu, &pipe, &data, joints_n).unwrap();
-    skinned.update(&mats, &[]);
-    let out = skinned.run_and_read_back(&gpu, &pipe).unwrap();
-    skinned.destroy(&gpu);
+    // `mirror` -1 reflects every joint in x: the normal matrix's determinant is then negative,
+    // and a shader taking the cofactor matrix without its sign would turn normals inside out.
+    for mirror in [1.0f32, -1.0] {
+        let mats: Vec<Mat4> = (0..joints_n)
+            .map(|j| {
+                let a = j as f32 * 0.05;
+                let scale = Vec3::new(mirror, 1.0, 1.0) * (1.0 + 0.001 * j as f32);
+                Mat4::from_scale_rotation_translation(scale, Quat::from_rotation_y(a) * Quat::from_rotation_x(0.3 * a), Vec3::new(a, -a, 0.5))
+            })
+            .collect();
+        let mut cpu = data.vertices.clone();
+        skin_cpu(&data, &[], &mats, &mut cpu);
+        let mut skinned = SkinnedMesh::new(&gpu, &pipe, &data, joints_n).unwrap();
+        skinned.update(&mats, &[]);
+        let out = skinned.run_and_read_back(&gpu, &pipe).unwrap();
+        skinned.destroy(&gpu);
+        let err = relative_error(&cpu, &out);
+        assert!(err <= 1e-5, "mirror {mirror}: relative error {err:e}");
+        let close = |a: [f32; 3], b: [f32; 3]| (Vec3::from(a) - Vec3::from(b)).length() < 1e-4;
+        let bad_normals = cpu.iter().zip(&out).filter(|(c, g)| !close(c.normal, g.normal)).count();
+        assert_eq!(bad_normals, 0, "mirror {mirror}: skinned normals differ from the CPU reference's");
+        let bad_tangents = cpu
+            .iter()
+            .zip(&out)
+            .filter(|(c, g)| !close([c.tangent[0], c.tangent[1], c.tangent[2]], [g.tangent[0], g.tangent[1], g.tangent[2]]))
+            .count();
+        assert_eq!(bad_tangents, 0, "mirror {mirror}: skinned tangents differ from the CPU reference's");
+        // Everything after the tangent's xyz passes through bit for bit.
+        assert!(out
+            .iter()
+            .zip(&data.vertices)
+            .all(|(o, v)| o.uv0 == v.uv0 && o.uv1 == v.uv1 && o.color == v.color && o.tangent[3] == v.tangent[3]));
+    }
     pipe.destroy(&gpu);
-    let err = relative_error(&cpu, &out);
-    assert!(err <= 1e-5, "relative error {err:e}");
     // Joint 299 is in use, so the joint buffer really holds all 300.
     assert!(data.joints.as_ref().unwrap().iter().flatten().any(|&j| j as usize == joints_n - 1));
-    assert!(out.iter().zip(&data.vertices).all(|(o, v)| o.uv0 == v.uv0 && o.color == v.color && o.tangent[3] == v.tangent[3]));
     assert_clean(&gpu);
 }
 

@@ -1,6 +1,11 @@
 //! Poses: node-local TRS from sampled clips (with cross-fade), global matrices through the
 //! hierarchy, and skin joint matrices (global x inverse bind). A `Pose` is allocated once per
 //! rig; evaluating a frame writes into it without allocating.
+//!
+//! A pose evaluates a scope: the nodes some consumer needs (a character's joints and mesh node)
+//! and their ancestors, not the whole pack. A level holds many characters and props in one node
+//! tree; posing all of it for every character made the per-frame cost grow with the square of
+//! the character count.
 
 use super::sample::{clip_time, nlerp, ClipData, Track};
 use glam::{Mat4, Quat, Vec3};
@@ -41,7 +46,13 @@ pub struct Rig {
     pub clips: Vec<ClipData>,
 }
 
+/// Indexed by node over the whole rig, but only the nodes of `scope` are evaluated; the others
+/// keep their rest values and an identity `global`.
 pub struct Pose {
+    /// The nodes this pose evaluates, ascending, so parents come before children.
+    pub scope: Vec<u32>,
+    /// Per node, whether it is in `scope` (channels on other nodes are skipped).
+    in_scope: Vec<bool>,
     pub local: Vec<Trs>,
     /// Nodes whose `local` came from a channel this frame (the others use the rest matrix).
     pub touched: Vec<bool>,
@@ -114,9 +125,24 @@ impl Rig {
         self.clips.iter().position(|c| c.name == name)
     }
 
-    /// A pose buffer sized for this rig, at rest.
+    /// A pose buffer evaluating every node of this rig, at rest.
     pub fn new_pose(&self) -> Pose {
+        self.pose_for(&(0..self.parents.len() as u32).collect::<Vec<_>>())
+    }
+
+    /// A pose buffer evaluating `needed` and their ancestors, at rest.
+    pub fn pose_for(&self, needed: &[u32]) -> Pose {
+        let mut in_scope = vec![false; self.parents.len()];
+        for &n in needed {
+            let mut at = Some(n);
+            while let Some(i) = at.filter(|&i| !in_scope[i as usize]) {
+                in_scope[i as usize] = true;
+                at = self.parents[i as usize];
+            }
+        }
         let mut p = Pose {
+            scope: (0..in_scope.len() as u32).filter(|&i| in_scope[i as usize]).collect(),
+            in_scope,
             local: self.rest.clone(),
             touched: vec![false; self.rest.len()],
             global: vec![Mat4::IDENTITY; self.rest.len()],
@@ -128,9 +154,13 @@ impl Rig {
 
     /// Back to the authored (bind) pose.
     pub fn reset(&self, pose: &mut Pose) {
-        pose.local.copy_from_slice(&self.rest);
-        pose.touched.fill(false);
-        pose.weights.copy_from_slice(&self.rest_weights);
+        for &n in &pose.scope {
+            let n = n as usize;
+            pose.local[n] = self.rest[n];
+            pose.touched[n] = false;
+            let (start, len) = self.weight_range[n];
+            pose.weights[start..start + len].copy_from_slice(&self.rest_weights[start..start + len]);
+        }
     }
 
     /// The rest pose with clip `clip` applied at `time` seconds (wrapped or clamped to the clip).
@@ -142,6 +172,9 @@ impl Rig {
         let mut v = [0f32; 4];
         for track in &c.tracks {
             let n = track.node as usize;
+            if !pose.in_scope[n] {
+                continue;
+            }
             match track.path {
                 ChannelPath::Weights => {
                     let (start, len) = self.weight_range[n];
@@ -167,21 +200,27 @@ impl Rig {
 
     /// Cross-fade: `a` becomes (1 - w) a + w b, rotations by shortest-path nlerp. A node either
     /// pose animates counts as animated.
+    /// Both poses must have the same scope (an animator's pose and its scratch do).
     pub fn blend(&self, a: &mut Pose, b: &Pose, w: f32) {
-        for (i, (la, lb)) in a.local.iter_mut().zip(&b.local).enumerate() {
+        debug_assert_eq!(a.scope, b.scope);
+        for &n in &a.scope {
+            let i = n as usize;
+            let (la, lb) = (&mut a.local[i], &b.local[i]);
             la.translation = la.translation.lerp(lb.translation, w);
             la.scale = la.scale.lerp(lb.scale, w);
             la.rotation = nlerp(la.rotation, lb.rotation, w);
             a.touched[i] |= b.touched[i];
-        }
-        for (x, y) in a.weights.iter_mut().zip(&b.weights) {
-            *x += (y - *x) * w;
+            let (start, len) = self.weight_range[i];
+            for (x, y) in a.weights[start..start + len].iter_mut().zip(&b.weights[start..start + len]) {
+                *x += (y - *x) * w;
+            }
         }
     }
 
     /// Global matrices from local ones: parents precede children in a pack, so one pass works.
     pub fn update_globals(&self, pose: &mut Pose) {
-        for i in 0..pose.local.len() {
+        for &n in &pose.scope {
+            let i = n as usize;
             let local = if pose.touched[i] { pose.local[i].matrix() } else { self.rest_matrix[i] };
             pose.global[i] = match self.parents[i] {
                 Some(p) => pose.global[p as usize] * local,
@@ -218,15 +257,21 @@ pub struct Animator {
 }
 
 impl Animator {
+    /// An animator posing every node of the rig.
     pub fn new(rig: &Rig, clip: usize) -> Animator {
+        Animator::for_nodes(rig, clip, &(0..rig.parents.len() as u32).collect::<Vec<_>>())
+    }
+
+    /// An animator posing only `needed` and their ancestors (see `Rig::pose_for`).
+    pub fn for_nodes(rig: &Rig, clip: usize, needed: &[u32]) -> Animator {
         Animator {
             clip,
             time: 0.0,
             speed: 1.0,
             looping: true,
             fade: None,
-            pose: rig.new_pose(),
-            scratch: rig.new_pose(),
+            pose: rig.pose_for(needed),
+            scratch: rig.pose_for(needed),
         }
     }
 
@@ -302,6 +347,50 @@ mod tests {
         anim.fade = Some((1, 0.0, 0.25));
         anim.advance(&rig, 0.1);
         assert!((anim.pose.global[1].w_axis.x - (1.0 + 2.5)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_scoped_pose_evaluates_only_its_nodes_and_their_ancestors_and_agrees_with_the_full_pose() {
+        // Two characters under one level root: 0 root; 1 -> 2 (a); 3 -> 4 (b).
+        let rest = Trs {
+            translation: Vec3::X,
+            rotation: Quat::from_rotation_z(0.3),
+            scale: Vec3::ONE,
+        };
+        let track = |node: u32, x: f32| Track {
+            node,
+            path: ChannelPath::Translation,
+            interpolation: Interpolation::Linear,
+            components: 3,
+            times: vec![0.0, 1.0],
+            values: vec![0.0, 0.0, 0.0, x, 1.0, 0.0],
+        };
+        let rig = Rig {
+            names: (0..5).map(|i| format!("n{i}")).collect(),
+            parents: vec![None, Some(0), Some(1), Some(0), Some(3)],
+            rest_matrix: vec![rest.matrix(); 5],
+            rest: vec![rest; 5],
+            weight_range: vec![(0, 0); 5],
+            rest_weights: vec![],
+            skins: vec![],
+            clips: vec![ClipData {
+                name: "both".into(),
+                duration: 1.0,
+                tracks: vec![track(2, 2.0), track(4, -3.0), track(1, 0.5)],
+            }],
+        };
+        let mut full = Animator::new(&rig, 0);
+        let mut scoped = Animator::for_nodes(&rig, 0, &[2]);
+        assert_eq!(scoped.pose.scope, vec![0, 1, 2]);
+        full.advance(&rig, 0.4);
+        scoped.advance(&rig, 0.4);
+        for n in 0..3 {
+            assert_eq!(scoped.pose.global[n], full.pose.global[n], "node {n}");
+        }
+        // The other character's nodes were neither sampled nor updated.
+        assert!(!scoped.pose.touched[4]);
+        assert_eq!(scoped.pose.global[4], Mat4::IDENTITY);
+        assert_ne!(full.pose.global[4], Mat4::IDENTITY);
     }
 
     #[test]
