@@ -36,13 +36,7 @@ struct Args {
 }
 
 fn parse() -> Result<Args, String> {
-    let mut a = Args {
-        instances: 100_000,
-        frames: 5,
-        width: 640,
-        height: 360,
-        device: DevicePreference::from_env(),
-    };
+    let mut a = Args { instances: 100_000, frames: 5, width: 640, height: 360, device: DevicePreference::from_env() };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
@@ -78,13 +72,7 @@ fn instances_pack(n: usize) -> Pack {
                 p[axis] = 0.5 * sign;
                 p[u] = 0.5 * a;
                 p[v] = 0.5 * c * sign;
-                verts.push(Vertex {
-                    position: p,
-                    normal: nrm,
-                    tangent: [1.0, 0.0, 0.0, 1.0],
-                    color: [200, 200, 200, 255],
-                    ..Default::default()
-                });
+                verts.push(Vertex { position: p, normal: nrm, tangent: [1.0, 0.0, 0.0, 1.0], color: [200, 200, 200, 255], ..Default::default() });
             }
             idx.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
         }
@@ -95,19 +83,7 @@ fn instances_pack(n: usize) -> Pack {
     b.manifest.materials.push(Material::default());
     b.manifest.meshes.push(Mesh {
         name: "cube".into(),
-        lods: vec![MeshLod {
-            vertices,
-            vertex_count: 24,
-            indices,
-            index_count: 36,
-            submeshes: vec![Submesh {
-                first_index: 0,
-                index_count: 36,
-                material: 0,
-                lightmap_page: None,
-            }],
-            error: 0.0,
-        }],
+        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_page: None }], error: 0.0 }],
         bounds_min: [-0.5; 3],
         bounds_max: [0.5; 3],
         is_static: false,
@@ -116,28 +92,14 @@ fn instances_pack(n: usize) -> Pack {
     for i in 0..n {
         let (x, z) = ((i % side) as f32 * 3.0, (i / side) as f32 * 3.0);
         let m = Mat4::from_translation(Vec3::new(x, ((i * 7919) % 5) as f32 * 0.5, -z));
-        b.manifest.nodes.push(Node {
-            name: format!("c{i}"),
-            parent: None,
-            local: m.to_cols_array(),
-            mesh: Some(0),
-        });
+        b.manifest.nodes.push(Node { name: format!("c{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
     }
     b.finish()
 }
 
 fn run(args: &Args) -> anyhow::Result<usize> {
-    let gpu = Gpu::new(&GpuOptions {
-        validation: false,
-        device: args.device.clone(),
-        surface_extensions: vec![],
-    })?;
-    println!(
-        "device: {} ({:?}); {} cores",
-        gpu.caps.device_name,
-        gpu.caps.device_type,
-        std::thread::available_parallelism().map_or(1, |n| n.get())
-    );
+    let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![] })?;
+    println!("device: {} ({:?}); {} cores", gpu.caps.device_name, gpu.caps.device_type, std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pack = instances_pack(args.instances);
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1)?;
@@ -145,13 +107,7 @@ fn run(args: &Args) -> anyhow::Result<usize> {
     // From the middle of the grid, looking along +x a little above the cubes: about a quarter
     // of them in view, most far away.
     let side = (args.instances as f64).sqrt().ceil() as f32 * 3.0;
-    let camera = Camera {
-        position: Vec3::new(0.5 * side, 6.0, -0.5 * side),
-        yaw: -90f32.to_radians(),
-        pitch: -8f32.to_radians(),
-        fov_y: 60f32.to_radians(),
-        near: 0.1,
-    };
+    let camera = Camera { position: Vec3::new(0.5 * side, 6.0, -0.5 * side), yaw: -90f32.to_radians(), pitch: -8f32.to_radians(), fov_y: 60f32.to_radians(), near: 0.1 };
     let lighting = Lighting::default();
 
     // CPU: culling + LOD selection per frame.
@@ -163,10 +119,7 @@ fn run(args: &Args) -> anyhow::Result<usize> {
         cull_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let c = renderer.visibility.counts;
-    println!(
-        "scenario instances: {} cubes; culling tested {}, culled {}, drawn {}, triangles drawn {}",
-        args.instances, c.cull.tested, c.cull.culled, c.cull.visible, c.triangles
-    );
+    println!("scenario instances: {} cubes; culling tested {}, culled {}, drawn {}, triangles drawn {}", args.instances, c.cull.tested, c.cull.culled, c.cull.visible, c.triangles);
     println!("cull_ms (CPU, culling + LOD selection, median of {}): {:.3}", cull_ms.len(), median(&cull_ms).unwrap_or(0.0));
 
     // GPU: the four combinations, interleaved frame by frame.
@@ -261,17 +214,9 @@ mod sim_bench {
     const USAGE: &str = "usage: bench sim [--boids N,N,..] [--brute-max N] [--particles N,N,..] [--steps S]";
 
     fn parse(args: Vec<String>) -> Result<Args, String> {
-        let mut a = Args {
-            boids: vec![1_000, 10_000, 100_000],
-            brute_max: 10_000,
-            particles: vec![100_000, 1_000_000],
-            steps: 30,
-        };
+        let mut a = Args { boids: vec![1_000, 10_000, 100_000], brute_max: 10_000, particles: vec![100_000, 1_000_000], steps: 30 };
         let list = |name: &str, v: &str| -> Result<Vec<usize>, String> {
-            v.split(',')
-                .filter(|s| !s.is_empty())
-                .map(|s| s.trim().parse::<usize>().map_err(|_| format!("{name}: '{s}' is not a whole number")))
-                .collect()
+            v.split(',').filter(|s| !s.is_empty()).map(|s| s.trim().parse::<usize>().map_err(|_| format!("{name}: '{s}' is not a whole number"))).collect()
         };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
@@ -330,10 +275,7 @@ mod sim_bench {
 
     impl Timing {
         fn new() -> Timing {
-            Timing {
-                wall_ms: Vec::new(),
-                cpu_ms: Some(0.0),
-            }
+            Timing { wall_ms: Vec::new(), cpu_ms: Some(0.0) }
         }
 
         fn time(&mut self, f: impl FnOnce()) {
@@ -401,13 +343,7 @@ mod sim_bench {
     /// update (move, kill, spawn) and the billboard fill, sorted and unsorted.
     fn particles(n: usize, steps: usize) {
         let h = 1.0 / 120.0;
-        let params = EmitterParams {
-            rate_per_s: n as f32 / 2.0,
-            life_min_s: 1.5,
-            life_max_s: 2.5,
-            capacity: (n + n / 4) as u32,
-            ..EmitterParams::preset(Preset::Fountain)
-        };
+        let params = EmitterParams { rate_per_s: n as f32 / 2.0, life_min_s: 1.5, life_max_s: 2.5, capacity: (n + n / 4) as u32, ..EmitterParams::preset(Preset::Fountain) };
         let mut s = ParticleSystem::new(params);
         let t = Instant::now();
         for _ in 0..(2.5 / h) as usize {
@@ -433,11 +369,7 @@ mod sim_bench {
             }
         }
         let m = update.median();
-        println!(
-            "particles {n:>8} live {live:>8}: update_ms {} ({:.0} M particles/s at the median); warm-up {warm_s:.1} s",
-            update.describe(),
-            live as f64 / m / 1e3
-        );
+        println!("particles {n:>8} live {live:>8}: update_ms {} ({:.0} M particles/s at the median); warm-up {warm_s:.1} s", update.describe(), live as f64 / m / 1e3);
         println!("particles {n:>8} billboards_ms sorted (alpha): {}", fill[0].describe());
         println!("particles {n:>8} billboards_ms unsorted (additive): {}", fill[1].describe());
     }
@@ -460,14 +392,7 @@ mod skinned_bench {
     }
 
     fn parse(args: Vec<String>) -> Result<Args, String> {
-        let mut a = Args {
-            pack: None,
-            characters: 64,
-            frames: 60,
-            width: 640,
-            height: 360,
-            device: DevicePreference::from_env(),
-        };
+        let mut a = Args { pack: None, characters: 64, frames: 60, width: 640, height: 360, device: DevicePreference::from_env() };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
             let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
@@ -504,42 +429,19 @@ mod skinned_bench {
         for k in 0..n as u32 {
             let base = k * (nodes + 1);
             let at = Vec3::new((k as usize % side) as f32 * 2.0, 0.0, -((k as usize / side) as f32) * 2.0);
-            out.manifest.nodes.push(Node {
-                name: format!("copy{k}"),
-                parent: None,
-                local: Mat4::from_translation(at).to_cols_array(),
-                mesh: None,
-            });
+            out.manifest.nodes.push(Node { name: format!("copy{k}"), parent: None, local: Mat4::from_translation(at).to_cols_array(), mesh: None });
             for nd in &m.nodes {
-                out.manifest.nodes.push(Node {
-                    name: format!("copy{k}/{}", nd.name),
-                    parent: Some(nd.parent.map_or(base, |p| base + 1 + p)),
-                    ..nd.clone()
-                });
+                out.manifest.nodes.push(Node { name: format!("copy{k}/{}", nd.name), parent: Some(nd.parent.map_or(base, |p| base + 1 + p)), ..nd.clone() });
             }
             for sk in &m.animation.skins {
-                out.manifest.animation.skins.push(pack::Skin {
-                    joints: sk.joints.iter().map(|j| j + base + 1).collect(),
-                    ..sk.clone()
-                });
+                out.manifest.animation.skins.push(pack::Skin { joints: sk.joints.iter().map(|j| j + base + 1).collect(), ..sk.clone() });
             }
             for c in &m.animation.clips {
-                let channels = c
-                    .channels
-                    .iter()
-                    .map(|ch| pack::Channel {
-                        node: ch.node + base + 1,
-                        ..ch.clone()
-                    })
-                    .collect();
+                let channels = c.channels.iter().map(|ch| pack::Channel { node: ch.node + base + 1, ..ch.clone() }).collect();
                 out.manifest.animation.clips.push(pack::Clip { channels, ..c.clone() });
             }
             for b in &m.animation.nodes {
-                out.manifest.animation.nodes.push(pack::NodeBinding {
-                    node: b.node + base + 1,
-                    skin: b.skin.map(|s| s + k * skins),
-                    ..b.clone()
-                });
+                out.manifest.animation.nodes.push(pack::NodeBinding { node: b.node + base + 1, skin: b.skin.map(|s| s + k * skins), ..b.clone() });
             }
         }
         out
@@ -553,11 +455,7 @@ mod skinned_bench {
             anyhow::bail!("{} has no skin or no clip", path.display());
         }
         let pack = replicate(&single, args.characters);
-        let gpu = Gpu::new(&GpuOptions {
-            validation: false,
-            device: args.device.clone(),
-            surface_extensions: vec![],
-        })?;
+        let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![] })?;
         let mut target = Offscreen::new(&gpu, args.width, args.height)?;
         let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1)?;
         let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts())?;
@@ -599,19 +497,9 @@ mod skinned_bench {
             args.height
         );
         println!("skinning pass gpu_ms per frame: median {:.3}", median(&gpu_ms).unwrap_or(f64::NAN));
-        println!(
-            "skinning pass wall_ms per frame (its own fenced submit, less an empty one): median {:.3} ({:.1} M vertices/s)",
-            wall.gpu_ms,
-            a.skinned_vertices as f64 / wall.gpu_ms / 1e3
-        );
-        println!(
-            "CPU reference skinning (anim::skin_cpu, 1 thread), same vertices: median {:.3} ms; pass / reference = {:.2} (median of per-round ratios)",
-            wall.cpu_ms, wall.ratio
-        );
-        println!(
-            "animation cpu_ms per frame (sample + globals + joint matrices + bounds, all characters): median {:.3}",
-            median(&cpu_ms).unwrap_or(f64::NAN)
-        );
+        println!("skinning pass wall_ms per frame (its own fenced submit, less an empty one): median {:.3} ({:.1} M vertices/s)", wall.gpu_ms, a.skinned_vertices as f64 / wall.gpu_ms / 1e3);
+        println!("CPU reference skinning (anim::skin_cpu, 1 thread), same vertices: median {:.3} ms; pass / reference = {:.2} (median of per-round ratios)", wall.cpu_ms, wall.ratio);
+        println!("animation cpu_ms per frame (sample + globals + joint matrices + bounds, all characters): median {:.3}", median(&cpu_ms).unwrap_or(f64::NAN));
         scene.destroy(&gpu);
         renderer.destroy(&gpu);
         target.destroy(&gpu);
@@ -633,11 +521,7 @@ mod skinned_bench {
     fn skinning_wall_ms(gpu: &Gpu, pack: &Pack, anim: &mut AnimatedScene, rounds: usize) -> anyhow::Result<WallTimes> {
         use engine::anim::skin_cpu::{skin_cpu, DeformData};
         let draws: Vec<engine::visibility::Draw> = anim.instances.iter().map(|a| engine::visibility::Draw { instance: a.instance, lod: 0 }).collect();
-        let data: Vec<DeformData> = anim
-            .instances
-            .iter()
-            .map(|a| DeformData::for_node(pack, a.node as usize, 0).expect("an animated node has a mesh"))
-            .collect();
+        let data: Vec<DeformData> = anim.instances.iter().map(|a| DeformData::for_node(pack, a.node as usize, 0).expect("an animated node has a mesh")).collect();
         let mut out: Vec<Vec<Vertex>> = data.iter().map(|d| vec![Vertex::default(); d.vertices.len()]).collect();
         let (mut gpu_ms, mut cpu_ms, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
         for _ in 0..rounds.max(5) {
@@ -657,11 +541,7 @@ mod skinned_bench {
             cpu_ms.push(c);
             ratio.push(g / c);
         }
-        Ok(WallTimes {
-            gpu_ms: median(&gpu_ms).unwrap_or(f64::NAN),
-            cpu_ms: median(&cpu_ms).unwrap_or(f64::NAN),
-            ratio: median(&ratio).unwrap_or(f64::NAN),
-        })
+        Ok(WallTimes { gpu_ms: median(&gpu_ms).unwrap_or(f64::NAN), cpu_ms: median(&cpu_ms).unwrap_or(f64::NAN), ratio: median(&ratio).unwrap_or(f64::NAN) })
     }
 
     pub fn main(args: Vec<String>) -> ExitCode {

@@ -11,12 +11,8 @@ use std::path::{Path, PathBuf};
 /// The device tests render on: the validation layer always on; ENGINE_DEVICE can still point
 /// them at a real GPU.
 pub fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions {
-        validation: true,
-        device: DevicePreference::from_env(),
-        surface_extensions: vec![],
-    })
-    .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
+    Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![] })
+        .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
 }
 
 /// Any validation error fails the test that caused it.
@@ -52,13 +48,7 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
     let mut b = PackBuilder::new("generated", "test");
     let verts: Vec<Vertex> = [(-half, -half), (half, -half), (half, half), (-half, half)]
         .iter()
-        .map(|&(x, y)| Vertex {
-            position: [x, y, 0.0],
-            normal: [0.0, 0.0, 1.0],
-            tangent: [1.0, 0.0, 0.0, 1.0],
-            color: [255; 4],
-            ..Default::default()
-        })
+        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], color: [255; 4], ..Default::default() })
         .collect();
     let idx: Vec<u32> = vec![0, 1, 2, 0, 2, 3];
     let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
@@ -70,12 +60,7 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
             vertex_count: 4,
             indices,
             index_count: 6,
-            submeshes: vec![Submesh {
-                first_index: 0,
-                index_count: 6,
-                material: 0,
-                lightmap_page: None,
-            }],
+            submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: None }],
             error: 0.0,
         }],
         bounds_min: [-half, -half, 0.0],
@@ -83,11 +68,6 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
         is_static: false,
     });
     b.manifest.materials.push(material);
-    b.manifest.nodes.push(Node {
-        name: name.into(),
-        parent: None,
-        local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(),
-        mesh: Some(0),
-    });
+    b.manifest.nodes.push(Node { name: name.into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(), mesh: Some(0) });
     b.finish()
 }
