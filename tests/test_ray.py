@@ -5,8 +5,8 @@ stops: a head node and one extra worker node, one CPU each (two worker processes
   EXR pages), and the scene reached every worker once, not once per task;
 - a worker process killed mid-bake has its tile retried; the pack is still identical;
 - with every stage cached, a Ray cook submits no task;
-- Ctrl-C (an exception from the progress callback) cancels the submitted tasks and leaves the
-  previous pack as it was;
+- Ctrl-C (an exception from the progress callback, and SIGINT to a `cook` process) cancels the
+  submitted tasks and leaves the previous pack as it was;
 - bad --executor / unreachable --ray-address are one-line errors with status 2.
 """
 
@@ -193,6 +193,53 @@ def test_interrupt_cancels_tasks_and_leaves_the_previous_pack(cluster, room, tmp
     assert executor.cancelled > 0 and executor.cancelled < executor.submitted
     assert _files(out) == before
     assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp") or ".tmp" in p.name]
+
+
+def test_ctrl_c_to_the_cook_process_exits_130_and_leaves_the_previous_pack(cluster, room, tmp_path):
+    """The real thing: SIGINT to a `cook --executor ray` process in the middle of its bake."""
+    address, _ = cluster
+    out = tmp_path / "room.pack"
+    cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=tmp_path / "cache"))
+    before = _files(out)
+    # Enough paths per texel that the bake lasts several seconds on the two loopback workers.
+    proc = subprocess.Popen([str(COOK), str(room), "-o", str(out), "--no-lods", "--cache", str(tmp_path / "cache"), "--quality", "draft",
+                             "--samples", "2048", "--tile-texels", "256", "--executor", "ray", "--ray-address", address],
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        for line in proc.stderr:  # stage lines are printed as each stage ends; the bake follows uv2
+            lines.append(line)
+            if line.startswith("cook: uv2:"):
+                break
+        time.sleep(3.0)
+        assert proc.poll() is None, "the cook finished before it could be interrupted:\n" + "".join(lines)
+        proc.send_signal(signal.SIGINT)
+        rest = proc.stderr.read()
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert code == 130, "".join(lines) + rest
+    assert "cook: interrupted; nothing written" in rest
+    assert "Traceback" not in rest
+    assert _files(out) == before
+    assert not [p.name for p in tmp_path.iterdir() if ".tmp" in p.name]
+    # The cancelled tasks give the cluster's CPUs back.
+    deadline = time.monotonic() + 30
+    while ray.available_resources().get("CPU", 0) < ray.cluster_resources().get("CPU", 0) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert ray.available_resources().get("CPU", 0) == ray.cluster_resources().get("CPU", 0)
+
+
+def test_a_loopback_cluster_needs_no_environment_variable_from_the_user(cluster, room, tmp_path):
+    """The cook turns Ray's loopback-to-host-IP rewrite off itself for a 127.0.0.1 address."""
+    address, _ = cluster
+    assert address.startswith("127.0.0.1:"), address
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"}
+    r = subprocess.run([str(COOK), str(room), "-o", str(tmp_path / "room.pack"), "--no-lods", "--no-report", "--quality", "draft", "--samples", "4",
+                        "--probe-samples", "8", "--executor", "ray", "--ray-address", address], capture_output=True, text=True, timeout=180, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "Ray task" in r.stdout, r.stdout
 
 
 def dataclass_replace(obj, **kw):

@@ -21,6 +21,7 @@ This module imports ``ray`` only when a Ray executor connects.
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import socket
 import time
@@ -86,6 +87,14 @@ def texture_levels(level0, usage: str, normal: bool, job: dict):
         return "error", str(e)
 
 
+def _is_loopback(address: str) -> bool:
+    host = address.rpartition(":")[0].strip("[]")
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
 def _check_reachable(address: str) -> None:
     """A clear error now for an address nobody listens on, instead of Ray's long connect retries."""
     if address == "auto" or address.startswith("ray://"):
@@ -118,6 +127,13 @@ class RayExecutor:
     def connect(self):
         if self._ray is not None:
             return self._ray
+        if self.address and _is_loopback(self.address):
+            # Ray rewrites a loopback head address to this machine's IP before connecting
+            # (services.resolve_ip_for_localhost), where nothing listens when the cluster was
+            # started on 127.0.0.1: the cook would hang in Ray's connection retries. The switch
+            # is read when Ray is imported; its name says Windows/OSX, but on Linux it only turns
+            # that rewrite off.
+            os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
         try:
             import ray
         except ImportError:
