@@ -619,3 +619,19 @@ def test_error_character_without_the_named_clip_or_a_skin(tmp_path):
     with pytest.raises(CookError) as e:
         build_level(load_level(tmp_path / "level.toml"), import_gltf=lambda p: unskinned)
     assert "spawns[0].params.asset: character 'priest': 'golem.gltf' has no skin" in str(e.value)
+
+
+def test_character_route_is_read_as_waypoints_and_bad_routes_are_errors(tmp_path):
+    (tmp_path / "golem.gltf").write_text("{}")
+    routed = CHARACTERS.replace("speed = 1.2 }", "speed = 1.2, walk_speed = 1.5, route = [[-3, 0, 4], [3, 0.5, 4]] }")
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent(routed)))
+    pilgrim = spec.spawns[1].params
+    assert pilgrim["route"] == [[-3.0, 0.0, 4.0], [3.0, 0.5, 4.0]] and pilgrim["walk_speed"] == 1.5
+    for bad, where, reason in [
+        ("route = [[-3, 0]]", "spawns[1].params.route[0]", "expected an array of 3 numbers, got 2 values"),
+        ("route = []", "spawns[1].params.route", "expected an array of [x, y, z] waypoints, got an empty array"),
+        ("route = 4", "spawns[1].params.route", "expected an array of [x, y, z] waypoints, got"),
+        ("walk_speed = 0", "spawns[1].params.walk_speed", "must be > 0.0, got 0"),
+    ]:
+        msg = error_of(tmp_path, CHARACTERS.replace("speed = 1.2 }", f"speed = 1.2, {bad} }}"))
+        assert f"{where}: {reason}" in msg, msg

@@ -12,6 +12,7 @@
 
 use crate::anim::skin_cpu::DeformData;
 use crate::anim::skin_gpu::{SkinPipeline, SkinnedMesh};
+use crate::anim::route::Route;
 use crate::anim::{joint_count, Animator, Rig};
 use crate::cull::world_sphere;
 use crate::gpu::Gpu;
@@ -33,6 +34,9 @@ pub struct AnimatedInstance {
     pub animator: Animator,
     /// Extra world transform applied after the pose (a character walking its route).
     pub root: Mat4,
+    /// The route the character walks, and the inverse of its spawn placement (the pose already
+    /// holds the placement; `root` replaces it with the route's).
+    pub route: Option<(Route, Mat4)>,
     /// The skin the node is bound to (None: morph only, placed by the node's own matrix).
     skin: Option<usize>,
     joints: Vec<Mat4>,
@@ -66,6 +70,23 @@ pub struct AnimatedScene {
     /// Skinning jobs (instance LODs) the last recorded frame dispatched, and their vertices.
     pub dispatches: u32,
     pub skinned_vertices: u64,
+}
+
+/// The route of a character spawn from its params: `route` (a list of [x, y, z] waypoints in
+/// level space; the cooker validated it) and `walk_speed` (m/s, default 1.2).
+fn spawn_route(spawn: &pack::Spawn) -> Option<Route> {
+    let waypoints: Vec<Vec3> = spawn
+        .params
+        .get("route")?
+        .as_array()?
+        .iter()
+        .filter_map(|p| {
+            let p = p.as_array()?;
+            Some(Vec3::new(p.first()?.as_f64()? as f32, p.get(1)?.as_f64()? as f32, p.get(2)?.as_f64()? as f32))
+        })
+        .collect();
+    let speed = spawn.params.get("walk_speed").and_then(|v| v.as_f64()).unwrap_or(1.2) as f32;
+    Route::new(Vec3::from(spawn.position), &waypoints, speed)
 }
 
 /// Nodes whose mesh deforms: bound to a skin, or showing a mesh with morph targets.
@@ -113,8 +134,20 @@ impl AnimatedScene {
     /// One animator per character spawn: the instances under the spawn's root node (the level
     /// cooker names them "<spawn>/...") play "<spawn>/<animation>" at the spawn's `speed`, from a
     /// phase set by the spawn's index (golden-ratio steps through the clip), so two characters
-    /// playing one clip are not in lockstep.
+    /// playing one clip are not in lockstep. A spawn with a `route` (waypoints, level space)
+    /// walks it as a loop from its position at `walk_speed` m/s.
     fn start_characters(&mut self, pack: &Pack) {
+        for spawn in pack.manifest.spawns.iter().filter(|s| s.kind == "character") {
+            let Some(route) = spawn_route(spawn) else { continue };
+            let placement = Mat4::from_rotation_translation(glam::Quat::from_array(spawn.rotation).normalize(), Vec3::from(spawn.position));
+            let prefix = format!("{}/", spawn.name);
+            for a in &mut self.instances {
+                if pack.manifest.nodes[a.node as usize].name.starts_with(&prefix) {
+                    a.route = Some((route.clone(), placement.inverse()));
+                    a.root = route.placement() * placement.inverse();
+                }
+            }
+        }
         for (k, spawn) in pack.manifest.spawns.iter().enumerate().filter(|(_, s)| s.kind == "character") {
             let Some(animation) = spawn.params.get("animation").and_then(|a| a.as_str()) else { continue };
             let Some(clip) = self.rig.clip_index(&format!("{}/{animation}", spawn.name)) else { continue };
@@ -180,6 +213,7 @@ impl AnimatedScene {
             node: node as u32,
             animator,
             root: Mat4::IDENTITY,
+            route: None,
             skin: skin.map(|s| s as usize),
             joints,
             margin,
@@ -210,6 +244,10 @@ impl AnimatedScene {
         let start = Instant::now();
         let rig = &self.rig;
         for a in &mut self.instances {
+            if let Some((route, unplace)) = &mut a.route {
+                route.advance(dt);
+                a.root = route.placement() * *unplace;
+            }
             if rig.clips.is_empty() {
                 rig.update_globals(&mut a.animator.pose);
             } else {

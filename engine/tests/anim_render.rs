@@ -5,6 +5,7 @@
 //! image. Sample models are cooked in-process ($GLTF_SAMPLES_DIR, default ../shared/gltf-samples).
 
 use engine::anim::skin_cpu::{skin_cpu, DeformData};
+use engine::anim::route::Route;
 use engine::anim::{joint_count, node_joint_matrices, Rig};
 use engine::animated::AnimatedScene;
 use engine::camera::Camera;
@@ -235,5 +236,48 @@ fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
         scene.destroy(&gpu);
         r.destroy(&gpu);
     }
+    assert_clean(&gpu);
+}
+
+#[test]
+fn a_character_with_a_route_walks_it_facing_where_it_goes() {
+    // RiggedSimple as a level character: its nodes renamed "walker/..." (as the level cooker
+    // names a spawn's nodes) and a spawn with a route. The route replaces the spawn's placement:
+    // after 1 s at 2 m/s the character has moved 2 m towards the first waypoint (+X) and turned
+    // to face it, and the joint matrices (what the skinning pass uses) moved with it.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    let mut pack = cook(&dir, "RiggedSimple");
+    for n in &mut pack.manifest.nodes {
+        n.name = format!("walker/{}", n.name);
+    }
+    pack.manifest.spawns.push(pack::Spawn {
+        name: "walker".into(),
+        kind: "character".into(),
+        position: [0.0; 3],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        params: serde_json::json!({ "route": [[10.0, 0.0, 0.0], [10.0, 0.0, 10.0]], "walk_speed": 2.0 }),
+    });
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
+    let centre = |scene: &GpuScene, i: usize| Vec3::new(scene.spheres.x[i], scene.spheres.y[i], scene.spheres.z[i]);
+    let i = anim.instances[0].instance as usize;
+    anim.play(0, 0, 0.0, 0.0); // a frozen pose: only the route moves the character
+    anim.advance(&mut scene, 0.0);
+    let (c0, j0) = (centre(&scene, i), anim.instances[0].joint_matrices()[0]);
+    anim.advance(&mut scene, 1.0);
+    let (c1, j1) = (centre(&scene, i), anim.instances[0].joint_matrices()[0]);
+    // At its start the character stands on a corner of the loop (the last leg comes back to the
+    // spawn), facing halfway between the two legs; 2 m on, it faces along the first leg, +X:
+    // a quarter turn about +Y from +Z. So j1 = T(2, 0, 0) R_y(90 degrees) start^-1 j0.
+    let start = Route::new(Vec3::ZERO, &[Vec3::new(10.0, 0.0, 0.0), Vec3::new(10.0, 0.0, 10.0)], 2.0).unwrap().placement();
+    let expected = Mat4::from_translation(Vec3::new(2.0, 0.0, 0.0)) * Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2) * start.inverse() * j0;
+    assert!(j1.abs_diff_eq(expected, 1e-4), "joint 0 after 1 s:\n{j1}\nexpected\n{expected}");
+    let moved = c1 - (Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2) * start.inverse()).transform_point3(c0);
+    assert!((moved - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-3, "culling sphere moved by {moved}");
+    anim.destroy(&gpu);
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
     assert_clean(&gpu);
 }

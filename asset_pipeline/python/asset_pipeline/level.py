@@ -96,7 +96,7 @@ LIGHT_KINDS = ("sun", "point", "spot", "rect")
 # The parameters each spawn kind understands (the runtime's contract; extend here).
 SPAWN_PARAMS = {
     "player": {"speed"},
-    "character": {"asset", "animation", "speed"},
+    "character": {"asset", "animation", "speed", "route", "walk_speed"},
     "boids": {"count", "radius", "speed", "asset"},
     "particles": {"rate_per_s", "lifetime_s", "speed", "spread_deg", "size", "color", "gravity"},
 }
@@ -339,10 +339,25 @@ def params(c: _Checker, v, key):
     if not isinstance(v, dict):
         c.fail(key, f"expected a table, got {_tname(v)}")
     for k, x in v.items():
-        ok = _is_num(x) or isinstance(x, (str, bool)) or (isinstance(x, list) and all(_is_num(e) for e in x))
-        if not ok:
-            c.fail(key + (k,), f"expected a number, string, boolean or array of numbers, got {_tname(x)}")
+        flat = isinstance(x, list) and all(_is_num(e) for e in x)
+        nested = isinstance(x, list) and all(isinstance(e, list) and all(_is_num(y) for y in e) for e in x)
+        if not (_is_num(x) or isinstance(x, (str, bool)) or flat or nested):
+            c.fail(key + (k,), f"expected a number, string, boolean or array of numbers (or of arrays of numbers), got {_tname(x)}")
     return dict(v)
+
+
+def waypoints(c: _Checker, v, key):
+    """A character's route: one or more [x, y, z] points in level space."""
+    if not isinstance(v, list) or not v:
+        c.fail(key, f"expected an array of [x, y, z] waypoints, got {_tname(v) if v else 'an empty array'}")
+    return [list(vector(3)(c, p, key + (i,))) for i, p in enumerate(v)]
+
+
+# Spawn params whose values have a shape of their own; the others are kept as authored.
+SPAWN_PARAM_READERS = {
+    ("character", "route"): waypoints,
+    ("character", "walk_speed"): number(0.0, lo_open=True),
+}
 
 
 # ---- transforms -------------------------------------------------------------------------------
@@ -606,6 +621,8 @@ def load_level(path: str | Path) -> LevelSpec:
             if k not in SPAWN_PARAMS[kind]:
                 c.fail(key + ("params", k), f"unknown parameter '{k}' for a {kind} spawn "
                                             f"(expected one of: {', '.join(sorted(SPAWN_PARAMS[kind])) or 'none'})")
+            if (kind, k) in SPAWN_PARAM_READERS:
+                s["params"][k] = SPAWN_PARAM_READERS[(kind, k)](c, s["params"][k], key + ("params", k))
         spawns.append(s)
         spec.spawns.append(ir.Spawn(name=s["name"], kind=kind, position=s["position"],
                                     rotation=euler_quaternion(s["rotation"]), params=s["params"]))

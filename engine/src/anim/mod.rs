@@ -1,9 +1,10 @@
-//! Animation on the CPU side: clip sampling (`sample`), poses and skeletons (`pose`), the CPU
+//! Animation on the CPU side: clip sampling (`sample`), poses and skeletons (`pose`), characters walking routes (`route`), the CPU
 //! reference of skinning and morphing (`skin_cpu`), the GPU skinning pass (`skin_gpu`) and the
 //! pose dump for tools (`dump`). The renderer drives them through `crate::animated`.
 
 pub mod dump;
 pub mod pose;
+pub mod route;
 pub mod sample;
 pub mod skin_cpu;
 pub mod skin_gpu;
