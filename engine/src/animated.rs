@@ -25,8 +25,8 @@ use pack::Pack;
 use std::time::Instant;
 
 /// One animated instance: its animator, this frame's joint matrices, and per LOD one skinning
-/// job per frame slot (each slot has its own matrices and output, so a frame in flight never
-/// sees the next frame's writes).
+/// job with a slot per frame in flight (each slot has its own matrices and output, so a frame in
+/// flight never sees the next frame's writes; the inputs are shared).
 pub struct AnimatedInstance {
     /// Index into `GpuScene::instances`.
     pub instance: u32,
@@ -46,7 +46,7 @@ pub struct AnimatedInstance {
     morph_reach: Vec<f32>,
     /// Bind bounds of the mesh as a sphere (unskinned, morph-only instances).
     bind_sphere: (Vec3, f32),
-    lods: Vec<Vec<SkinnedMesh>>,
+    lods: Vec<SkinnedMesh>,
     /// This frame's (LOD) jobs wanted, reset every frame.
     wanted: Vec<bool>,
 }
@@ -169,8 +169,7 @@ impl AnimatedScene {
         let mut first: Option<DeformData> = None;
         for lod in 0..mesh.lods.len() {
             let data = DeformData::for_node(pack, node, lod).context("an animated node without a mesh")?;
-            let jobs = (0..slots).map(|_| SkinnedMesh::new(gpu, &self.pipe, &data, joints.len())).collect::<Result<Vec<_>>>()?;
-            lods.push(jobs);
+            lods.push(SkinnedMesh::with_slots(gpu, &self.pipe, &data, joints.len(), slots)?);
             first.get_or_insert(data);
         }
         let data = first.context("a mesh without LODs")?;
@@ -298,18 +297,17 @@ impl AnimatedScene {
         let dev = &gpu.device;
         for a in &mut self.instances {
             let weights = self.rig.node_weights(a.node as usize, &a.animator.pose);
-            for (lod, jobs) in a.lods.iter_mut().enumerate() {
+            for (lod, job) in a.lods.iter_mut().enumerate() {
                 if !a.wanted[lod] {
                     continue;
                 }
-                let job = &mut jobs[slot];
-                job.update(&a.joints, weights);
+                job.update_slot(slot, &a.joints, weights);
                 if self.dispatches == 0 {
                     unsafe { dev.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipe.pipeline) };
                 }
-                job.dispatch(gpu, &self.pipe, cb);
+                job.dispatch(gpu, &self.pipe, cb, slot);
                 self.dispatches += 1;
-                self.skinned_vertices += job.output.size / pack::VERTEX_STRIDE as u64;
+                self.skinned_vertices += job.output(slot).size / pack::VERTEX_STRIDE as u64;
             }
         }
         if self.dispatches > 0 {
@@ -326,12 +324,12 @@ impl AnimatedScene {
     /// (world space, indexed by the mesh's own indices from vertex 0), if it is animated.
     pub fn vertex_buffer(&self, instance: u32, lod: u8, slot: usize) -> Option<vk::Buffer> {
         let a = &self.instances[self.index_of(instance)?];
-        Some(a.lods[lod as usize][slot].output.buffer)
+        Some(a.lods[lod as usize].output(slot).buffer)
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
         for a in &mut self.instances {
-            for job in a.lods.iter_mut().flatten() {
+            for job in &mut a.lods {
                 job.destroy(gpu);
             }
         }

@@ -68,16 +68,22 @@ impl SkinPipeline {
     }
 }
 
-/// One deforming mesh instance on the GPU: its inputs, its per-frame parameters and its output.
+/// One deforming mesh instance on the GPU: its inputs (bind vertices, joints, weights, morph
+/// deltas: uploaded once), and per frame slot the parameters the CPU writes that frame and the
+/// output, so a frame in flight never sees the next frame's writes.
 pub struct SkinnedMesh {
     params: Params,
     joint_capacity: usize,
     inputs: Vec<Buffer>,
+    slots: Vec<Slot>,
+    pool: vk::DescriptorPool,
+}
+
+struct Slot {
     morph_weights: Buffer,
     joint_matrices: Buffer,
-    /// Skinned vertices (pack `Vertex` layout): bind as a vertex buffer after `record`.
-    pub output: Buffer,
-    pool: vk::DescriptorPool,
+    /// Skinned vertices (pack `Vertex` layout): bind as a vertex buffer after the dispatch.
+    output: Buffer,
     set: vk::DescriptorSet,
 }
 
@@ -94,12 +100,19 @@ fn input(gpu: &Gpu, name: &str, bytes: &[u8]) -> Result<Buffer> {
 }
 
 impl SkinnedMesh {
-    /// Upload `data`; `joint_count` joint matrices per frame (1 for a mesh that is not skinned).
+    /// Upload `data`, with one frame slot; `joint_count` joint matrices per frame (1 for a mesh
+    /// that is not skinned).
     pub fn new(gpu: &Gpu, pipe: &SkinPipeline, data: &DeformData, joint_count: usize) -> Result<SkinnedMesh> {
+        SkinnedMesh::with_slots(gpu, pipe, data, joint_count, 1)
+    }
+
+    /// Upload `data` once, with `slots` frame slots (the renderer's frames in flight).
+    pub fn with_slots(gpu: &Gpu, pipe: &SkinPipeline, data: &DeformData, joint_count: usize, slots: usize) -> Result<SkinnedMesh> {
         let n = data.vertices.len();
         if n == 0 {
             bail!("a deforming mesh needs at least one vertex");
         }
+        let slots = slots.max(1);
         let joint_capacity = joint_count.max(1);
         let joints: Vec<u16> = data.joints.iter().flatten().flatten().copied().collect();
         let weights: Vec<f32> = data.weights.iter().flatten().flatten().copied().collect();
@@ -110,11 +123,41 @@ impl SkinnedMesh {
             input(gpu, "morph positions", bytes_of(&data.morph_positions))?,
             input(gpu, "morph normals", bytes_of(&data.morph_normals))?,
         ];
+        let d = &gpu.device;
+        let sizes = [vk::DescriptorPoolSize {
+            ty: vk::DescriptorType::STORAGE_BUFFER,
+            descriptor_count: BINDINGS * slots as u32,
+        }];
+        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(slots as u32).pool_sizes(&sizes), None)? };
+        let mut mesh = SkinnedMesh {
+            params: Params {
+                vertex_count: n as u32,
+                target_count: data.targets as u32,
+                skinned: data.joints.is_some() as u32,
+                morph_normals: !data.morph_normals.is_empty() as u32,
+                joint_count: joint_capacity as u32,
+            },
+            joint_capacity,
+            inputs,
+            slots: Vec::with_capacity(slots),
+            pool,
+        };
+        for _ in 0..slots {
+            // On failure `mesh` is dropped without `destroy`: the device is unusable then anyway.
+            let slot = mesh.slot(gpu, pipe, data.targets)?;
+            mesh.slots.push(slot);
+        }
+        Ok(mesh)
+    }
+
+    /// One frame slot's parameter buffers, output and descriptor set (inputs shared).
+    fn slot(&self, gpu: &Gpu, pipe: &SkinPipeline, targets: usize) -> Result<Slot> {
+        let n = self.params.vertex_count as usize;
         let host = |name: &str, size: usize| Buffer::new(gpu, name, size.max(16) as u64, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::CpuToGpu);
-        let mut morph_weights = host("morph weights", data.targets * 4)?;
+        let mut morph_weights = host("morph weights", targets * 4)?;
         morph_weights.mapped().fill(0);
-        let mut joint_matrices = host("joint matrices", joint_capacity * 64)?;
-        joint_matrices.mapped().copy_from_slice(bytes_of(&vec![Mat4::IDENTITY; joint_capacity]));
+        let mut joint_matrices = host("joint matrices", self.joint_capacity * 64)?;
+        joint_matrices.mapped().copy_from_slice(bytes_of(&vec![Mat4::IDENTITY; self.joint_capacity]));
         let output = Buffer::new(
             gpu,
             "skinned vertices",
@@ -123,14 +166,9 @@ impl SkinnedMesh {
             MemoryLocation::GpuOnly,
         )?;
         let d = &gpu.device;
-        let sizes = [vk::DescriptorPoolSize {
-            ty: vk::DescriptorType::STORAGE_BUFFER,
-            descriptor_count: BINDINGS,
-        }];
-        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)? };
         let layouts = [pipe.set_layout];
-        let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
-        let all: Vec<vk::Buffer> = inputs.iter().map(|b| b.buffer).chain([morph_weights.buffer, joint_matrices.buffer, output.buffer]).collect();
+        let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(self.pool).set_layouts(&layouts))?[0] };
+        let all: Vec<vk::Buffer> = self.inputs.iter().map(|b| b.buffer).chain([morph_weights.buffer, joint_matrices.buffer, output.buffer]).collect();
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = all
             .iter()
             .map(|&b| {
@@ -153,41 +191,40 @@ impl SkinnedMesh {
             })
             .collect();
         unsafe { d.update_descriptor_sets(&writes, &[]) };
-        let params = Params {
-            vertex_count: n as u32,
-            target_count: data.targets as u32,
-            skinned: data.joints.is_some() as u32,
-            morph_normals: !data.morph_normals.is_empty() as u32,
-            joint_count: joint_capacity as u32,
-        };
-        Ok(SkinnedMesh {
-            params,
-            joint_capacity,
-            inputs,
+        Ok(Slot {
             morph_weights,
             joint_matrices,
             output,
-            pool,
             set,
         })
     }
 
-    /// This frame's joint matrices (global x inverse bind; for an unskinned mesh, its node's
-    /// world matrix) and morph weights, written straight into mapped memory.
-    pub fn update(&mut self, joint_matrices: &[Mat4], morph_weights: &[f32]) {
-        let j = joint_matrices.len().min(self.joint_capacity);
-        self.joint_matrices.mapped()[..j * 64].copy_from_slice(bytes_of(&joint_matrices[..j]));
-        let w = morph_weights.len().min(self.params.target_count as usize);
-        self.morph_weights.mapped()[..w * 4].copy_from_slice(bytes_of(&morph_weights[..w]));
+    /// The skinned vertices of frame slot `slot`.
+    pub fn output(&self, slot: usize) -> &Buffer {
+        &self.slots[slot].output
     }
 
-    /// Record the dispatch and a barrier that makes the output readable as vertices, by
-    /// compute shaders and by copies.
+    /// Joint matrices and morph weights for slot 0 (tests and tools; see `update_slot`).
+    pub fn update(&mut self, joint_matrices: &[Mat4], morph_weights: &[f32]) {
+        self.update_slot(0, joint_matrices, morph_weights);
+    }
+
+    /// This frame's joint matrices (global x inverse bind; for an unskinned mesh, its node's
+    /// world matrix) and morph weights for frame slot `slot`, written straight into mapped memory.
+    pub fn update_slot(&mut self, slot: usize, joint_matrices: &[Mat4], morph_weights: &[f32]) {
+        let (j, w) = (joint_matrices.len().min(self.joint_capacity), morph_weights.len().min(self.params.target_count as usize));
+        let s = &mut self.slots[slot];
+        s.joint_matrices.mapped()[..j * 64].copy_from_slice(bytes_of(&joint_matrices[..j]));
+        s.morph_weights.mapped()[..w * 4].copy_from_slice(bytes_of(&morph_weights[..w]));
+    }
+
+    /// Record slot 0's dispatch and a barrier that makes the output readable as vertices, by
+    /// compute shaders and by copies (tests and tools).
     pub fn record(&self, gpu: &Gpu, pipe: &SkinPipeline, cb: vk::CommandBuffer) {
         let d = &gpu.device;
         unsafe {
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, pipe.pipeline);
-            self.dispatch(gpu, pipe, cb);
+            self.dispatch(gpu, pipe, cb, 0);
             let barrier = [vk::MemoryBarrier2::default()
                 .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
                 .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
@@ -199,22 +236,23 @@ impl SkinnedMesh {
 
     /// Only the dispatch: the caller has bound `pipe.pipeline` and records one barrier after
     /// all of a frame's dispatches (`renderer` skins every character, then one barrier).
-    pub fn dispatch(&self, gpu: &Gpu, pipe: &SkinPipeline, cb: vk::CommandBuffer) {
+    pub fn dispatch(&self, gpu: &Gpu, pipe: &SkinPipeline, cb: vk::CommandBuffer, slot: usize) {
         let d = &gpu.device;
         unsafe {
-            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.set], &[]);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.slots[slot].set], &[]);
             d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytes_of(std::slice::from_ref(&self.params)));
             d.cmd_dispatch(cb, self.params.vertex_count.div_ceil(GROUP), 1, 1);
         }
     }
 
-    /// Run the pass once and copy the output back (tests and tools; waits for the GPU).
+    /// Run slot 0's pass once and copy its output back (tests and tools; waits for the GPU).
     pub fn run_and_read_back(&self, gpu: &Gpu, pipe: &SkinPipeline) -> Result<Vec<Vertex>> {
-        let size = self.output.size;
+        let output = &self.slots[0].output;
+        let size = output.size;
         let mut readback = Buffer::new(gpu, "skin readback", size, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
         let run = gpu.one_shot(|cb| unsafe {
             self.record(gpu, pipe, cb);
-            gpu.device.cmd_copy_buffer(cb, self.output.buffer, readback.buffer, &[vk::BufferCopy::default().size(size)]);
+            gpu.device.cmd_copy_buffer(cb, output.buffer, readback.buffer, &[vk::BufferCopy::default().size(size)]);
             let to_host = [vk::MemoryBarrier2::default()
                 .src_stage_mask(vk::PipelineStageFlags2::COPY)
                 .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
@@ -235,8 +273,13 @@ impl SkinnedMesh {
 
     pub fn destroy(&mut self, gpu: &Gpu) {
         unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
-        for b in self.inputs.iter_mut().chain([&mut self.morph_weights, &mut self.joint_matrices, &mut self.output]) {
+        for b in self.inputs.iter_mut() {
             b.destroy(gpu);
+        }
+        for s in &mut self.slots {
+            for b in [&mut s.morph_weights, &mut s.joint_matrices, &mut s.output] {
+                b.destroy(gpu);
+            }
         }
     }
 }
