@@ -137,6 +137,11 @@ def test_demo_reports_bad_packs_with_exit_2(tmp_path):
         assert str(path) in result.stderr and "panicked" not in result.stderr, result.stderr
     assert "not a pack" in run_demo([str(tmp_path / "not-a-pack.pack"), "--headless"]).stderr
     assert "truncated" in run_demo([str(tmp_path / "truncated.pack"), "--headless"]).stderr
+    # Missing, or cooked by an older cooker: the message says how to cook it.
+    assert "cook one with `.venv/bin/cook" in run_demo([str(tmp_path / "missing.pack"), "--headless"]).stderr
+    (tmp_path / "old.pack").write_bytes(b"GAMEPACK" + (2).to_bytes(4, "little") + bytes(52))
+    stderr = run_demo([str(tmp_path / "old.pack"), "--headless"]).stderr
+    assert "pack format version 2 is not supported" in stderr and "cook one with" in stderr, stderr
 
 
 def test_demo_rejects_bad_arguments():

@@ -157,13 +157,14 @@ fn main() -> ExitCode {
     let pack_path = resolve_pack(args.pack.clone());
     let pack = match pack::Pack::read_file(&pack_path) {
         Ok(p) => p,
-        Err(pack::PackError::Io(e)) => {
-            let hint = if args.pack.is_none() { " (run `make cook` to cook the project's content)" } else { "" };
-            eprintln!("demo: error: {}: {e}{hint}", pack_path.display());
-            return ExitCode::from(2);
-        }
         Err(e) => {
-            eprintln!("demo: error: {}: {e}", pack_path.display());
+            // Missing or from an older cooker: say how to make it, since that is the fix.
+            let hint = match (&e, args.pack.is_none()) {
+                (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, true) => " (run `make cook` to cook the project's content)",
+                (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, false) => " (cook one with `.venv/bin/cook LEVEL.toml|MODEL.gltf -o PACK`)",
+                _ => "",
+            };
+            eprintln!("demo: error: {}: {e}{hint}", pack_path.display());
             return ExitCode::from(2);
         }
     };
