@@ -17,6 +17,9 @@ pub fn perspective_reverse_z(fov_y: f32, aspect: f32, near: f32) -> Mat4 {
     )
 }
 
+/// A standing person's eye height above the ground (player spawns stand on the floor).
+pub const EYE_HEIGHT_M: f32 = 1.7;
+
 /// A fly camera: position plus yaw (about +Y, 0 looks down -Z) and pitch, in radians.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
@@ -67,7 +70,6 @@ impl Camera {
     /// The camera a pack asks for: at its `player` spawn point (eye height above it, looking
     /// along the spawn's rotation) when it has one, else framing the scene's bounds.
     pub fn for_pack(manifest: &pack::Manifest, min: Vec3, max: Vec3) -> Camera {
-        const EYE_HEIGHT_M: f32 = 1.7;
         let Some(spawn) = manifest.spawns.iter().find(|s| s.kind == "player") else {
             return Camera::framing(min, max);
         };
@@ -80,6 +82,15 @@ impl Camera {
             fov_y: 70f32.to_radians(),
             near: 0.05,
         }
+    }
+
+    /// Walking: move `local` (right, -, forward) metres in the ground plane, whatever the pitch,
+    /// with the eye at height `eye_y`.
+    pub fn walk(&mut self, local: Vec3, eye_y: f32) {
+        let forward = Vec3::new(self.forward().x, 0.0, self.forward().z).normalize_or_zero();
+        let right = Vec3::new(self.right().x, 0.0, self.right().z).normalize_or_zero();
+        self.position += right * local.x + forward * local.z;
+        self.position.y = eye_y;
     }
 
     /// Move relative to the view: `local` is (right, up, forward) in metres.
@@ -101,6 +112,16 @@ mod tests {
         let c = m * p.extend(1.0);
         assert!(c.w > 0.0, "clip w must be positive in front of the camera");
         c.truncate() / c.w
+    }
+
+    #[test]
+    fn walking_stays_at_eye_height_and_moves_level_whatever_the_pitch() {
+        let mut c = Camera { position: Vec3::new(0.0, 5.0, 0.0), yaw: 0.0, pitch: -1.2, fov_y: 1.0, near: 0.1 };
+        c.walk(Vec3::new(0.0, 7.0, 2.0), 1.7); // 2 m forward (-Z at yaw 0); the up component is ignored
+        assert!((c.position - Vec3::new(0.0, 1.7, -2.0)).length() < 1e-5, "{}", c.position);
+        c.yaw = std::f32::consts::FRAC_PI_2; // looking down -X
+        c.walk(Vec3::new(1.0, 0.0, 0.0), 1.7); // 1 m to the right: -Z
+        assert!((c.position - Vec3::new(0.0, 1.7, -3.0)).length() < 1e-5, "{}", c.position);
     }
 
     #[test]

@@ -124,6 +124,9 @@ pub struct Renderer {
     pub count_fragments: bool,
     /// Depth testing in the shading pass without a pre-pass (off only to count raw fragments).
     pub depth_test: bool,
+    /// Static geometry reads its baked lightmap (on by default); off, it is lit like dynamic
+    /// geometry, by the probes and the sun, to compare the two.
+    pub lightmaps: bool,
     counters: Vec<Buffer>,
     /// One uniform buffer and descriptor set per frame in flight.
     frame_ubos: Vec<Buffer>,
@@ -328,6 +331,7 @@ impl Renderer {
             shadow,
             shadow_casters: 0,
             prepass: true,
+            lightmaps: true,
             count_fragments: false,
             depth_test: true,
             counters,
@@ -591,7 +595,7 @@ impl Renderer {
                     let mat = &scene.materials[sm.material as usize];
                     let pipeline = pipeline_for(mat);
                     // Static geometry reads its lightmap page; the rest the probes and the sun.
-                    let page = sm.lightmap_page.filter(|_| mesh.is_static).and_then(|p| scene.lightmap_sets.get(p as usize));
+                    let page = sm.lightmap_page.filter(|_| mesh.is_static && self.lightmaps).and_then(|p| scene.lightmap_sets.get(p as usize));
                     if pipeline != bound {
                         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
                         bound = pipeline;

@@ -1,5 +1,6 @@
-//! The windowed front end: winit window, Vulkan surface and swapchain, fly camera input, and the
-//! debug overlay (egui-winit feeds it input; F1 shows or hides it).
+//! The windowed front end: winit window, Vulkan surface and swapchain, fly and walk camera
+//! input, feature switches on the function keys, scene switching, and the debug overlay
+//! (egui-winit feeds it input; F1 shows or hides it).
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
@@ -45,8 +46,16 @@ pub struct WindowRun {
     pub device_name: String,
 }
 
-/// Open a window and render `pack` until it is closed (or `max_frames` is reached).
-pub fn run(pack: &pack::Pack, opts: WindowOptions) -> Result<WindowRun> {
+/// The keys, as `demo --help` and the README list them.
+pub const KEYS: &str = "WASD move, Q/E down/up, Shift faster, drag with a mouse button to look, Esc quits;
+F1 overlay, F2 depth pre-pass, F3 frustum culling, F4 LOD selection, F5 lightmaps (off: probes
+and sun light the static geometry too), F6 walk mode (on the ground at eye height, at the player
+spawn's speed), Tab next scene (when several packs were given).";
+
+/// Open a window and render `packs[0]` until it is closed (or `max_frames` is reached); Tab
+/// switches to the next pack.
+pub fn run(packs: &[pack::Pack], opts: WindowOptions) -> Result<WindowRun> {
+    let pack = packs.first().ok_or_else(|| anyhow!("no pack to show"))?;
     // Ctrl-C / SIGTERM close the window like the close button does, so the run still ends with
     // its summary and a clean Vulkan teardown.
     let stop = Arc::new(AtomicBool::new(false));
@@ -55,7 +64,8 @@ pub fn run(pack: &pack::Pack, opts: WindowOptions) -> Result<WindowRun> {
         eprintln!("demo: cannot install the Ctrl-C handler ({e}); closing the window still works");
     }
     let event_loop = EventLoop::new().map_err(|e| anyhow!("cannot open a window: {e}"))?;
-    let mut app = App { pack, opts, state: None, error: None, result: None, stop };
+    let mut app = App { packs, current: 0, opts, state: None, error: None, result: None, stop };
+    let _ = pack;
     event_loop.run_app(&mut app).map_err(|e| anyhow!("event loop: {e}"))?;
     if let Some(e) = app.error {
         return Err(e);
@@ -64,7 +74,9 @@ pub fn run(pack: &pack::Pack, opts: WindowOptions) -> Result<WindowRun> {
 }
 
 struct App<'a> {
-    pack: &'a pack::Pack,
+    packs: &'a [pack::Pack],
+    /// The pack on screen.
+    current: usize,
     opts: WindowOptions,
     state: Option<State>,
     error: Option<anyhow::Error>,
@@ -86,6 +98,11 @@ struct State {
     camera: Camera,
     lighting: Lighting,
     keys: HashSet<KeyCode>,
+    /// Walk mode: the eye's height above the level's ground (None: flying).
+    walk: Option<f32>,
+    /// The ground's height and the walking speed, from the player spawn.
+    ground: f32,
+    walk_speed: f32,
     looking: bool,
     last_cursor: Option<(f64, f64)>,
     last_frame: Instant,
@@ -100,7 +117,7 @@ impl ApplicationHandler for App<'_> {
         if self.state.is_some() {
             return;
         }
-        match State::new(el, self.pack, &self.opts) {
+        match State::new(el, &self.packs[self.current], &self.opts) {
             Ok(s) => {
                 println!("window: {}x{} on {}", s.swapchain.extent.width, s.swapchain.extent.height, s.gpu.caps.device_name);
                 self.state = Some(s);
@@ -130,6 +147,20 @@ impl ApplicationHandler for App<'_> {
                             if let Some(o) = s.overlay.as_mut() {
                                 o.visible = !o.visible;
                             }
+                        }
+                        if !event.repeat {
+                            if let Some(what) = s.toggle(code) {
+                                println!("window: {what}");
+                            }
+                        }
+                        if code == KeyCode::Tab && !event.repeat && self.packs.len() > 1 {
+                            self.current = (self.current + 1) % self.packs.len();
+                            if let Err(e) = s.load_scene(&self.packs[self.current]) {
+                                self.error = Some(e);
+                                el.exit();
+                                return;
+                            }
+                            println!("window: scene {} of {}", self.current + 1, self.packs.len());
                         }
                         if !consumed {
                             s.keys.insert(code);
@@ -256,6 +287,9 @@ impl State {
             camera: Camera::for_pack(&pack.manifest, min, max),
             lighting: Lighting::for_pack(&pack.manifest),
             keys: HashSet::new(),
+            walk: None,
+            ground: ground_height(&pack.manifest, min),
+            walk_speed: walk_speed(&pack.manifest),
             looking: false,
             last_cursor: None,
             last_frame: Instant::now(),
@@ -265,16 +299,79 @@ impl State {
         })
     }
 
-    /// WASD to move, Q/E down/up, Shift to go faster; drag with a mouse button to look.
+    /// WASD to move, Q/E down/up, Shift to go faster; drag with a mouse button to look. Walking,
+    /// the camera moves in the ground plane at the eye's height and Q/E do nothing.
     fn update_camera(&mut self, dt: f32) {
         let (min, max) = self.scene.bounds();
-        let mut speed = ((max - min).length() * 0.4).max(1.0);
+        let mut speed = if self.walk.is_some() { self.walk_speed } else { ((max - min).length() * 0.4).max(1.0) };
         if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) {
-            speed *= 4.0;
+            speed *= if self.walk.is_some() { 2.0 } else { 4.0 };
         }
         let axis = |pos: KeyCode, neg: KeyCode| (self.keys.contains(&pos) as i32 - self.keys.contains(&neg) as i32) as f32;
         let local = Vec3::new(axis(KeyCode::KeyD, KeyCode::KeyA), axis(KeyCode::KeyE, KeyCode::KeyQ), axis(KeyCode::KeyW, KeyCode::KeyS));
-        self.camera.translate_local(local * speed * dt);
+        match self.walk {
+            Some(eye) => self.camera.walk(local * speed * dt, self.ground + eye),
+            None => self.camera.translate_local(local * speed * dt),
+        }
+    }
+
+    /// Flip the switch on function key `code`; what it is now, for the log.
+    fn toggle(&mut self, code: KeyCode) -> Option<String> {
+        let on_off = |b: bool| if b { "on" } else { "off" };
+        let r = &mut self.renderer;
+        Some(match code {
+            KeyCode::F2 => {
+                r.prepass = !r.prepass;
+                format!("depth pre-pass {}", on_off(r.prepass))
+            }
+            KeyCode::F3 => {
+                r.visibility.culling = !r.visibility.culling;
+                format!("frustum culling {}", on_off(r.visibility.culling))
+            }
+            KeyCode::F4 => {
+                r.visibility.lod_selection = !r.visibility.lod_selection;
+                format!("LOD selection {}", on_off(r.visibility.lod_selection))
+            }
+            KeyCode::F5 => {
+                r.lightmaps = !r.lightmaps;
+                format!("lightmaps {}", on_off(r.lightmaps))
+            }
+            KeyCode::F6 => {
+                self.walk = match self.walk {
+                    Some(_) => None,
+                    None => Some(crate::camera::EYE_HEIGHT_M),
+                };
+                if let Some(eye) = self.walk {
+                    self.camera.walk(Vec3::ZERO, self.ground + eye);
+                }
+                format!("walk mode {}", on_off(self.walk.is_some()))
+            }
+            _ => return None,
+        })
+    }
+
+    /// Replace the scene with `pack`'s: its meshes, characters, particles and flocks, and a
+    /// camera at its player spawn. The switches and the overlay stay as they are.
+    fn load_scene(&mut self, pack: &pack::Pack) -> Result<()> {
+        self.gpu.wait_idle();
+        if let Some(mut a) = self.renderer.animation.take() {
+            a.destroy(&self.gpu);
+        }
+        let scene = GpuScene::upload(&self.gpu, pack, self.renderer.layouts())?;
+        self.scene.destroy(&self.gpu);
+        self.scene = scene;
+        self.renderer.animation = engine_animated(&self.gpu, pack, &self.scene)?;
+        let (min, max) = self.scene.bounds();
+        self.world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        sim_level::warm_up(&mut self.world);
+        self.camera = Camera::for_pack(&pack.manifest, min, max);
+        self.lighting = Lighting::for_pack(&pack.manifest);
+        self.ground = ground_height(&pack.manifest, min);
+        self.walk_speed = walk_speed(&pack.manifest);
+        if let Some(eye) = self.walk {
+            self.camera.walk(Vec3::ZERO, self.ground + eye);
+        }
+        Ok(())
     }
 
     fn frame(&mut self) -> Result<()> {
@@ -548,6 +645,19 @@ impl Swapchain {
 }
 
 /// The scene's animated instances, one skinning job per frame in flight.
+/// The height walking keeps to: the player spawn's (it stands on the floor), else the bottom of
+/// the scene. One height for the whole level: the demo level's courtyard is flat; walking up
+/// steps would need the runtime to query the level's geometry, which it does not keep on the CPU.
+fn ground_height(manifest: &pack::Manifest, min: Vec3) -> f32 {
+    manifest.spawns.iter().find(|s| s.kind == "player").map_or(min.y, |s| s.position[1])
+}
+
+/// Metres per second walking: the player spawn's `speed`, else a brisk walk.
+fn walk_speed(manifest: &pack::Manifest) -> f32 {
+    let spawn = manifest.spawns.iter().find(|s| s.kind == "player");
+    spawn.and_then(|s| s.params.get("speed")).and_then(|v| v.as_f64()).map_or(1.5, |v| v as f32)
+}
+
 fn engine_animated(gpu: &Gpu, pack: &pack::Pack, scene: &GpuScene) -> Result<Option<crate::animated::AnimatedScene>> {
     crate::animated::AnimatedScene::new(gpu, pack, scene, FRAMES_IN_FLIGHT)
 }

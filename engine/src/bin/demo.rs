@@ -16,12 +16,13 @@ use engine::window::{self, WindowOptions};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [--height H]
+const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--overlay] [--device auto|cpu|gpu|NAME]
             [--validation] [--shadow-map-size N]
        demo --dump-pose PACK --clip NAME --time T
 
-  PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`)
+  PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`);
+                       in the window, Tab switches between several; headless shows the first
   --headless           render offscreen even if a display is available
   --frames N           headless: frames to render (default 100); window: close after N frames
   --width/--height     image or window size in pixels (default 1280x720)
@@ -36,17 +37,21 @@ const USAGE: &str = "usage: demo [PACK] [--headless] [--frames N] [--width W] [-
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
                        world matrices, joint matrices, morph weights, skinned LOD 0 vertices
 
-In the window: WASD move, Q/E down/up, Shift faster, drag with a mouse button to look, Esc quits.
-F1 shows or hides the debug overlay (hidden at start unless --overlay): frame-time graph (CPU
-frame and GPU ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass,
-and switches for the depth pre-pass, frustum culling, LOD selection and freezing, fragment
-counting and the LOD pixel error. While the pointer is over the overlay, the mouse works it,
-not the camera.";
+The debug overlay (F1; hidden at start unless --overlay): frame-time graph (CPU frame and GPU
+ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass, and switches
+for the depth pre-pass, frustum culling, LOD selection and freezing, fragment counting and the
+LOD pixel error. While the pointer is over the overlay, the mouse works it, not the camera.";
+
+fn usage() -> String {
+    format!("{USAGE}\n\nIn the window: {}", window::KEYS)
+}
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
 struct Args {
     pack: Option<PathBuf>,
+    /// More packs for the window's Tab.
+    more: Vec<PathBuf>,
     headless: bool,
     frames: Option<u64>,
     width: u32,
@@ -64,6 +69,7 @@ struct Args {
 fn parse_args() -> Result<Args, String> {
     let mut a = Args {
         pack: None,
+        more: Vec::new(),
         headless: false,
         frames: None,
         width: 1280,
@@ -84,7 +90,7 @@ fn parse_args() -> Result<Args, String> {
         }
         match arg.as_str() {
             "-h" | "--help" => {
-                println!("{USAGE}");
+                println!("{}", usage());
                 std::process::exit(0);
             }
             "--headless" => a.headless = true,
@@ -102,7 +108,7 @@ fn parse_args() -> Result<Args, String> {
             "--time" => a.dump_pose.as_mut().ok_or("--time goes with --dump-pose")?.2 = Some(number("--time", value("--time")?)?),
             s if s.starts_with('-') => return Err(format!("unknown option '{s}'")),
             s if a.pack.is_none() => a.pack = Some(PathBuf::from(s)),
-            s => return Err(format!("unexpected argument '{s}' (only one pack can be shown)")),
+            s => a.more.push(PathBuf::from(s)),
         }
     }
     if let Some((_, clip, time)) = &a.dump_pose {
@@ -147,7 +153,7 @@ fn main() -> ExitCode {
     let args = match parse_args() {
         Ok(a) => a,
         Err(e) => {
-            eprintln!("demo: error: {e}\n{USAGE}");
+            eprintln!("demo: error: {e}\n{}", usage());
             return ExitCode::from(2);
         }
     };
@@ -155,19 +161,23 @@ fn main() -> ExitCode {
         return engine::anim::dump::run(model, clip, *time);
     }
     let pack_path = resolve_pack(args.pack.clone());
-    let pack = match pack::Pack::read_file(&pack_path) {
-        Ok(p) => p,
-        Err(e) => {
-            // Missing or from an older cooker: say how to make it, since that is the fix.
-            let hint = match (&e, args.pack.is_none()) {
-                (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, true) => " (run `make cook` to cook the project's content)",
-                (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, false) => " (cook one with `.venv/bin/cook LEVEL.toml|MODEL.gltf -o PACK`)",
-                _ => "",
-            };
-            eprintln!("demo: error: {}: {e}{hint}", pack_path.display());
-            return ExitCode::from(2);
+    let mut packs = Vec::new();
+    for path in std::iter::once(&pack_path).chain(&args.more) {
+        match pack::Pack::read_file(path) {
+            Ok(p) => packs.push(p),
+            Err(e) => {
+                // Missing or from an older cooker: say how to make it, since that is the fix.
+                let hint = match (&e, args.pack.is_none()) {
+                    (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, true) => " (run `make cook` to cook the project's content)",
+                    (pack::PackError::Io(_) | pack::PackError::WrongVersion { .. }, false) => " (cook one with `.venv/bin/cook LEVEL.toml|MODEL.gltf -o PACK`)",
+                    _ => "",
+                };
+                eprintln!("demo: error: {}: {e}{hint}", path.display());
+                return ExitCode::from(2);
+            }
         }
-    };
+    }
+    let pack = &packs[0];
     let gpu_opts = GpuOptions { validation: args.validation, device: args.device.clone(), surface_extensions: vec![] };
 
     if !args.headless && has_display() {
@@ -180,7 +190,7 @@ fn main() -> ExitCode {
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
-        match window::run(&pack, opts) {
+        match window::run(&packs, opts) {
             Ok(run) => {
                 println!("window closed after {} frames on {}", run.frames, run.device_name);
                 return validation_verdict(args.validation, run.validation_errors);
@@ -188,7 +198,7 @@ fn main() -> ExitCode {
             Err(e) => eprintln!("demo: cannot use a window ({e:#}); rendering headless instead"),
         }
     }
-    match headless(&args, &pack, &gpu_opts) {
+    match headless(&args, pack, &gpu_opts) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("demo: error: {e:#}");
