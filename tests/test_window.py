@@ -218,3 +218,38 @@ def test_keys_and_mouse_drive_the_demo_window(xvfb, tmp_path):
     assert changed(lit, unlit) > 3 * changed(lit, relit)
     assert changed(relit, turned) > 0.5, "dragging with the mouse did not turn the view"
     assert changed(turned, other) > 0.5, "Tab did not switch the scene"
+
+
+def test_resizing_hiding_and_showing_the_window_keep_it_rendering(xvfb, tmp_path):
+    # A resize rebuilds the swapchain at the new size (the old one is out of date, which must not
+    # be fatal) and the scene fills the new size; an unmapped (hidden, as minimised) window and
+    # its return keep the demo running; validation stays clean throughout.
+    w = DemoWindow(xvfb, REPO / "build" / "temple.pack")
+    try:
+        w.wait_for("presented 10 frames")
+        w.focus()
+        window_id = subprocess.run(["xdotool", "getwindowfocus"], capture_output=True, text=True, timeout=30, env=w.env).stdout.strip()
+        w.xdotool("windowsize", "--sync", window_id, 400, 240)
+        w.wait_for("window: swapchain rebuilt at 400x240", timeout=60)
+        time.sleep(2.0)
+        small = w.screenshot(tmp_path / "small.png")
+        w.xdotool("windowunmap", "--sync", window_id)
+        time.sleep(1.0)
+        w.xdotool("windowmap", "--sync", window_id)
+        w.xdotool("windowsize", "--sync", window_id, WIDTH, HEIGHT)
+        w.wait_for(f"window: swapchain rebuilt at {WIDTH}x{HEIGHT}", timeout=60)
+        time.sleep(2.0)
+        full = w.screenshot(tmp_path / "full.png")
+        code, out, err = w.close()
+    finally:
+        if w.proc.poll() is None:
+            w.proc.kill()
+    assert code == 0, f"demo exit {code}:\n{out}\n{err}"
+    assert "validation errors: 0" in out and "[vulkan validation error]" not in err, out + err
+    colours = lambda img: len({tuple(p // 16) for p in img.reshape(-1, 3)})
+    # The small window shows the scene in its 400x240 corner of the screen; the rest is the bare root.
+    root = small[-1, -1]
+    assert colours(small[:240, :400]) > 20 and (small[:, 420:] == root).all() and (small[260:, :] == root).all()
+    # Back at full size, the scene covers the whole screen again.
+    uncovered = (full == root).all(axis=-1).mean()
+    assert uncovered < 0.01 and colours(full[:, 420:]) > 20, f"the window did not render again at full size ({uncovered:.1%} bare)"

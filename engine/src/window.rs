@@ -385,6 +385,7 @@ impl State {
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
+            println!("window: swapchain rebuilt at {}x{}", self.swapchain.extent.width, self.swapchain.extent.height);
         }
         if self.swapchain.extent.width == 0 || self.swapchain.extent.height == 0 {
             return Ok(()); // minimised
@@ -644,7 +645,6 @@ impl Swapchain {
     }
 }
 
-/// The scene's animated instances, one skinning job per frame in flight.
 /// The height walking keeps to: the player spawn's (it stands on the floor), else the bottom of
 /// the scene. One height for the whole level: the demo level's courtyard is flat; walking up
 /// steps would need the runtime to query the level's geometry, which it does not keep on the CPU.
@@ -658,6 +658,7 @@ fn walk_speed(manifest: &pack::Manifest) -> f32 {
     spawn.and_then(|s| s.params.get("speed")).and_then(|v| v.as_f64()).map_or(1.5, |v| v as f32)
 }
 
+/// The scene's animated instances, one skinning job per frame in flight.
 fn engine_animated(gpu: &Gpu, pack: &pack::Pack, scene: &GpuScene) -> Result<Option<crate::animated::AnimatedScene>> {
     crate::animated::AnimatedScene::new(gpu, pack, scene, FRAMES_IN_FLIGHT)
 }
