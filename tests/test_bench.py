@@ -13,6 +13,7 @@ import json
 import os
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -156,8 +157,11 @@ def test_report_writes_plots_and_summary(results):
     assert summary in r.stdout
     for name in SCENARIOS:
         assert f"| {name} |" in summary
-        svg = (out / f"{name}.svg").read_text()
-        assert svg.startswith("<svg") and "<polyline" in svg
+        svg = ET.fromstring((out / f"{name}.svg").read_text())  # well-formed, or it raises
+        lines = svg.findall("{http://www.w3.org/2000/svg}polyline")
+        # One point per measured frame; the overdraw plot has the pre-pass-off frames too.
+        assert len(lines) == (2 if name == "prepass-overdraw" else 1), name
+        assert all(len(line.get("points").split()) == FRAMES for line in lines), name
     assert "| prepass-overdraw (prepass off) |" in summary
 
 
