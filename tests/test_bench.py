@@ -39,22 +39,28 @@ def run_bench(*args, timeout=900) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory) -> tuple[Path, dict[str, dict]]:
-    """Every scenario, once, into a temporary directory: (directory, results by scenario)."""
+def results(tmp_path_factory) -> tuple[Path, dict[str, dict], str]:
+    """Every scenario, once, into a temporary directory: (directory, results by scenario, stdout)."""
     for pack in (LEVEL, CHARACTER):
         assert pack.exists(), f"{pack} is made by `make cook` (a prerequisite of `make test`)"
     out = tmp_path_factory.mktemp("bench")
     r = run_bench("--all", "--frames", FRAMES, "--warmup", WARMUP, "--width", WIDTH, "--height", HEIGHT, "--json-dir", out,
                   "--level", LEVEL, "--character", CHARACTER)
-    # The times, for the CI log.
-    sys.stdout.write(r.stdout)
     assert r.returncode == 0, f"bench failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
     assert "[vulkan validation error]" not in r.stderr, r.stderr
-    return out, {name: json.loads((out / f"{name}.json").read_text()) for name in SCENARIOS}
+    return out, {name: json.loads((out / f"{name}.json").read_text()) for name in SCENARIOS}, r.stdout
+
+
+def test_times_are_reported_not_gated(results, capsys):
+    """Print the short run's frame times into the CI log (past pytest's capture)."""
+    lines = [line for line in results[2].splitlines() if "cpu_frame_ms" in line or line.startswith(("bench:", "floor"))]
+    assert len(lines) == 2 + len(SCENARIOS) + 1  # header, floor, a line per scenario, pre-pass off
+    with capsys.disabled():
+        print("\nbench short run (times are not checked):\n" + "\n".join(lines))
 
 
 def test_every_scenario_writes_complete_results(results):
-    out, docs = results
+    out, docs, _ = results
     for name, doc in docs.items():
         assert doc["scenario"] == name and (doc["width"], doc["height"]) == (WIDTH, HEIGHT)
         assert (doc["frames"], doc["warmup_frames"]) == (FRAMES, WARMUP)
@@ -150,7 +156,7 @@ def run_report(*args) -> subprocess.CompletedProcess:
 
 
 def test_report_writes_plots_and_summary(results):
-    out, _ = results
+    out = results[0]
     r = run_report(out)
     assert r.returncode == 0, r.stderr
     summary = (out / "summary.md").read_text()
@@ -166,7 +172,7 @@ def test_report_writes_plots_and_summary(results):
 
 
 def test_compare_prints_ratios_and_rejects_bad_input(results, tmp_path):
-    out, _ = results
+    out = results[0]
     r = run_report("compare", out, out)
     assert r.returncode == 0, r.stderr
     for name in SCENARIOS:

@@ -158,7 +158,7 @@ def summary_markdown(results: dict[str, dict]) -> str:
         "",
         f"Floor (clear + wait for an empty {first['width']}x{first['height']} frame): p50 {fmt(floor.get('p50'), 3)} ms, "
         f"p95 {fmt(floor.get('p95'), 3)} ms. CPU times are the wall time of whole frames, fence wait included; "
-        "GPU timestamps (lavapipe) miss compute work.",
+        "GPU timestamps (lavapipe) understate compute work.",
         "",
         markdown_table(header, rows),
         "",
