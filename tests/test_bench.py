@@ -178,6 +178,18 @@ def test_compare_prints_ratios_and_rejects_bad_input(results, tmp_path):
     for name in SCENARIOS:
         assert f"| {name} |" in r.stdout
     assert "1.00x" in r.stdout and "same" in r.stdout
+    # A run that did different work is named as such, not passed off as noise.
+    changed = tmp_path / "changed"
+    changed.mkdir()
+    doc = json.loads((out / "culling-100k.json").read_text())
+    doc["counters"]["culled"] = 0
+    doc["cpu_frame_ms"]["p50"] *= 2
+    (changed / "culling-100k.json").write_text(json.dumps(doc))
+    r = run_report("compare", out, changed)
+    assert r.returncode == 0, r.stderr
+    row = next(line for line in r.stdout.splitlines() if line.startswith("| culling-100k |"))
+    assert "2.00x" in row and row.endswith("| culled |"), row
+    assert "in one set only (not compared): " in r.stdout and "demo-flythrough" in r.stdout
     r = run_report("compare", out, tmp_path / "missing")
     assert r.returncode == 2 and "missing: no such directory" in r.stderr, r.stderr
     (tmp_path / "broken.json").write_text("{")
