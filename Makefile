@@ -11,6 +11,8 @@ VENV := .venv
 PY := $(VENV)/bin/python
 LEVEL_PACK := build/temple.pack
 GLTF_PACK := build/demo.pack
+CHARACTER_PACK := build/golem.pack
+BENCH_DIR := build/bench
 GLTF_SAMPLES_DIR ?= $(abspath ../shared/gltf-samples)
 export GLTF_SAMPLES_DIR
 
@@ -40,6 +42,7 @@ cook: cooker
 	@mkdir -p build/content
 	$(PY) content/characters/make_creature.py content/characters/golem.gltf
 	$(VENV)/bin/cook content/levels/temple.toml -o $(LEVEL_PACK)
+	$(VENV)/bin/cook content/characters/golem.gltf -o $(CHARACTER_PACK)
 	$(PY) content/demo/make_scene.py build/content/demo.gltf
 	$(VENV)/bin/cook build/content/demo.gltf -o $(GLTF_PACK)
 
@@ -49,6 +52,12 @@ demo: build cook
 test: build cooker cook
 	ENGINE_VALIDATION=1 $(CARGO) test $(CARGO_FLAGS) --workspace --exclude asset_pipeline
 	ENGINE_VALIDATION=1 $(PY) -m pytest tests -q -rs
+
+# Every frame-time scenario at 1280x720 (`bench --help`; BENCH_ARGS adds options, e.g.
+# BENCH_ARGS="--frames 300"), then the plots and the summary table from build/bench/*.json.
+bench: build cook
+	target/release/bench --all --json-dir $(BENCH_DIR) $(BENCH_ARGS)
+	$(PY) tools/bench_report.py $(BENCH_DIR)
 
 clean:
 	rm -rf build target $(VENV)

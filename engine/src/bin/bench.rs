@@ -48,7 +48,7 @@ fn parse() -> Result<Args, String> {
             "--height" => a.height = number("--height", value("--height")?)?.max(1) as u32,
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
             "-h" | "--help" => {
-                return Err("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]\n       bench sim --help (particle and boid timings, CPU only)".into())
+                return Err(format!("usage: bench [--instances N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]\n       bench sim --help (particle and boid timings, CPU only)\n       bench skinned --help (the skinning pass against the CPU reference)\n\n{}", scenarios::USAGE))
             }
             other => return Err(format!("unknown argument '{other}' (try --help)")),
         }
@@ -58,6 +58,20 @@ fn parse() -> Result<Args, String> {
 
 /// A unit cube mesh placed `n` times on a square grid 3 m apart, heights varied.
 fn instances_pack(n: usize) -> Pack {
+    boxes_pack(cube_grid(n))
+}
+
+/// `n` placements on a square grid 3 m apart, heights varied (the culling scenes).
+fn cube_grid(n: usize) -> impl Iterator<Item = Mat4> {
+    let side = (n as f64).sqrt().ceil() as usize;
+    (0..n).map(move |i| {
+        let (x, z) = ((i % side) as f32 * 3.0, (i / side) as f32 * 3.0);
+        Mat4::from_translation(Vec3::new(x, ((i * 7919) % 5) as f32 * 0.5, -z))
+    })
+}
+
+/// A unit cube mesh, one instance per placement, in the order given (which is draw order).
+fn boxes_pack(placements: impl Iterator<Item = Mat4>) -> Pack {
     let mut b = PackBuilder::new("bench", "bench");
     let mut verts = Vec::new();
     let mut idx: Vec<u32> = Vec::new();
@@ -88,10 +102,7 @@ fn instances_pack(n: usize) -> Pack {
         bounds_max: [0.5; 3],
         is_static: false,
     });
-    let side = (n as f64).sqrt().ceil() as usize;
-    for i in 0..n {
-        let (x, z) = ((i % side) as f32 * 3.0, (i / side) as f32 * 3.0);
-        let m = Mat4::from_translation(Vec3::new(x, ((i * 7919) % 5) as f32 * 0.5, -z));
+    for (i, m) in placements.enumerate() {
         b.manifest.nodes.push(Node { name: format!("c{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
     }
     b.finish()
@@ -163,7 +174,15 @@ fn on(b: bool) -> &'static str {
     }
 }
 
+// The named scenarios live beside this file (a directory without main.rs is not a binary).
+#[path = "bench/scenarios.rs"]
+mod scenarios;
+
 fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if scenarios::wanted(&args) {
+        return exit_status(scenarios::parse(args), scenarios::run);
+    }
     if std::env::args().nth(1).as_deref() == Some("sim") {
         return sim_bench::main(std::env::args().skip(2).collect());
     }
@@ -173,10 +192,15 @@ fn main() -> ExitCode {
     exit_status(parse(), run)
 }
 
-/// Every scenario's exit status: 2 for bad arguments, 3 for validation errors, 1 for a failure.
+/// Every scenario's exit status: 0 for --help, 2 for bad arguments, 3 for validation errors, 1 for a failure.
 fn exit_status<A>(args: Result<A, String>, run: impl FnOnce(&A) -> anyhow::Result<usize>) -> ExitCode {
     let args = match args {
         Ok(a) => a,
+        // --help is not an error: the usage goes to stdout and the status is 0.
+        Err(e) if e.starts_with("usage:") => {
+            println!("{e}");
+            return ExitCode::SUCCESS;
+        }
         Err(e) => {
             eprintln!("bench: {e}");
             return ExitCode::from(2);
@@ -417,7 +441,7 @@ mod skinned_bench {
     /// `pack` with its whole node tree copied `n` times, copy k under a root node on a grid 2 m
     /// apart; meshes, vertex data and clip keys are shared, skins, clips and node bindings are
     /// repeated with node indices moved. Clip c of copy k becomes clip c + k * clips.
-    fn replicate(pack: &Pack, n: usize) -> Pack {
+    pub(super) fn replicate(pack: &Pack, n: usize) -> Pack {
         let mut out = pack.clone();
         let m = &pack.manifest;
         let (nodes, skins) = (m.nodes.len() as u32, m.animation.skins.len() as u32);

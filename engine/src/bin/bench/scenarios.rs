@@ -1,0 +1,655 @@
+//! Named frame-time scenarios (issue 9): `bench --scenario NAME[,NAME] | --all`.
+//!
+//! Every scenario renders headless at one resolution (default 1280x720) for a fixed number of
+//! warm-up frames, then a fixed number of measured frames. Each frame advances the simulation
+//! and animation by a fixed `FRAME_S` and the camera is a function of the frame number only, so
+//! every run does the same work and the counters of frame k are exact (the tests pin them).
+//!
+//! The CPU frame time is the wall time of a whole frame: simulation and animation update,
+//! culling and recording, submit, and the wait for the GPU's fence. On lavapipe the GPU is the
+//! CPU, so this is the number that matters; its GPU timestamps also miss compute work (the
+//! skinning pass), so the per-pass GPU times are reported beside it but never instead of it.
+//!
+//! A floor is measured in the same run: clear an image of the same size and wait for it. Each
+//! scenario's percentiles are also given as multiples of the floor's.
+
+use super::{boxes_pack, cube_grid, skinned_bench};
+use engine::animated::AnimatedScene;
+use engine::camera::Camera;
+use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
+use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::renderer::{Lighting, PassTimes, Renderer};
+use engine::scene::GpuScene;
+use engine::sim::boids::{Aabb, BoidParams, Flock, FlockState};
+use engine::sim::clock::{ClockParams, FixedClock};
+use engine::sim::particles::{EmitterParams, ParticleSystem, Preset};
+use engine::sim::World;
+use engine::sim_level;
+use engine::stats::percentile;
+use glam::{Mat4, Vec3};
+use pack::Pack;
+use serde_json::{json, Map, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Simulated time per frame: a 60 Hz display's frame, whatever the machine's speed.
+pub const FRAME_S: f64 = 1.0 / 60.0;
+
+pub const NAMES: [&str; 6] = ["demo-flythrough", "culling-100k", "boids-10k", "particles-100k", "skinned-64", "prepass-overdraw"];
+
+pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frames N] [--warmup N] [--width W] [--height H]
+             [--json-dir DIR] [--level PACK] [--character PACK] [--device auto|cpu|gpu|NAME] [--quiet]
+       bench --list
+
+  --scenario LIST   comma-separated scenario names (see --list)
+  --all             every scenario, in the order --list gives
+  --frames N        measured frames per scenario (default 60)
+  --warmup N        frames rendered first and not measured (default 5); they advance the
+                    simulation and the camera like any frame, so frame k is the same in every run
+  --width/--height  image size in pixels (default 1280x720)
+  --json-dir DIR    where <scenario>.json goes (default build/bench)
+  --level PACK      the cooked demo level for demo-flythrough (default build/temple.pack, `make cook`)
+  --character PACK  the skinned character for skinned-64 (default build/golem.pack, `make cook`)
+  --device D        pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
+  --quiet           only the one-line summary per scenario
+
+Scenarios:
+  demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
+                    animating at a fixed step
+  culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection
+  boids-10k         a flock of 10 000 boids stepped and drawn
+  particles-100k    a fountain holding about 100 000 live particles, stepped, sorted and drawn
+  skinned-64        64 skinned characters (the --character pack) all in view, skinned every frame
+  prepass-overdraw  16 overlapping opaque layers drawn back to front; frames alternate with the
+                    depth pre-pass on (the scenario's times) and off (its `variants.prepass_off`)
+
+Each scenario writes DIR/<scenario>.json: CPU frame time (wall time of the whole frame, fence
+wait included) and per-pass GPU time (p50/p95/p99/max), the floor (clear and wait for an empty
+frame of the same size) and each percentile as a multiple of it, and the last frame's counters.
+Exit status: 0 ok, 1 a scenario failed, 2 bad arguments, 3 Vulkan validation errors.";
+
+pub struct Options {
+    pub scenarios: Vec<&'static str>,
+    pub frames: usize,
+    pub warmup: usize,
+    pub width: u32,
+    pub height: u32,
+    pub json_dir: PathBuf,
+    pub level: PathBuf,
+    pub character: PathBuf,
+    pub device: DevicePreference,
+    pub quiet: bool,
+}
+
+/// Whether the command line asks for named scenarios (the other forms are the older benches).
+pub fn wanted(args: &[String]) -> bool {
+    args.iter().any(|a| matches!(a.as_str(), "--scenario" | "--all" | "--list"))
+}
+
+pub fn parse(args: Vec<String>) -> Result<Options, String> {
+    let mut o = Options {
+        scenarios: Vec::new(),
+        frames: 60,
+        warmup: 5,
+        width: 1280,
+        height: 720,
+        json_dir: PathBuf::from("build/bench"),
+        level: PathBuf::from("build/temple.pack"),
+        character: PathBuf::from("build/golem.pack"),
+        device: DevicePreference::from_env(),
+        quiet: false,
+    };
+    let mut it = args.into_iter();
+    while let Some(flag) = it.next() {
+        let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
+        let number = |name: &str, v: String| v.parse::<usize>().map_err(|_| format!("{name}: '{v}' is not a whole number"));
+        match flag.as_str() {
+            "--scenario" => o.scenarios.extend(scenario_list(&value("--scenario")?)?),
+            "--all" => o.scenarios.extend(NAMES),
+            "--list" => {
+                println!("{}", NAMES.join("\n"));
+                std::process::exit(0);
+            }
+            "--frames" => o.frames = number("--frames", value("--frames")?)?,
+            "--warmup" => o.warmup = number("--warmup", value("--warmup")?)?,
+            "--width" => o.width = number("--width", value("--width")?)? as u32,
+            "--height" => o.height = number("--height", value("--height")?)? as u32,
+            "--json-dir" => o.json_dir = value("--json-dir")?.into(),
+            "--level" => o.level = value("--level")?.into(),
+            "--character" => o.character = value("--character")?.into(),
+            "--device" => o.device = DevicePreference::parse(&value("--device")?),
+            "--quiet" => o.quiet = true,
+            "-h" | "--help" => return Err(USAGE.into()),
+            other => return Err(format!("unknown argument '{other}' (try --help)")),
+        }
+    }
+    if o.frames == 0 {
+        return Err("--frames must be at least 1".into());
+    }
+    if !(1..=16384).contains(&o.width) || !(1..=16384).contains(&o.height) {
+        return Err(format!("image size {}x{} is out of range (1..16384)", o.width, o.height));
+    }
+    // Each once, in the order asked.
+    let mut seen = Vec::new();
+    o.scenarios.retain(|s| {
+        if seen.contains(s) {
+            false
+        } else {
+            seen.push(*s);
+            true
+        }
+    });
+    Ok(o)
+}
+
+fn scenario_list(v: &str) -> Result<Vec<&'static str>, String> {
+    let names: Vec<&str> = v.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
+    if names.is_empty() {
+        return Err("--scenario needs at least one name (see --list)".into());
+    }
+    names
+        .into_iter()
+        .map(|n| NAMES.iter().copied().find(|k| *k == n).ok_or_else(|| format!("unknown scenario '{n}' (known: {})", NAMES.join(", "))))
+        .collect()
+}
+
+/// What one scenario renders and how its frames change.
+struct Setup {
+    scene: GpuScene,
+    /// Particles and flocks, stepped by `FRAME_S` each frame (empty for most scenarios).
+    world: World,
+    /// The camera of frame k (warm-up frames included).
+    camera: Box<dyn Fn(usize) -> Camera>,
+    lighting: Lighting,
+    /// Frames alternate pre-pass on and off (prepass-overdraw).
+    alternate_prepass: bool,
+    /// Facts about the scenario's content for the JSON (counts it was built with).
+    content: Map<String, Value>,
+}
+
+/// Samples of one series of frames.
+#[derive(Default)]
+struct Series {
+    cpu_ms: Vec<f64>,
+    gpu_ms: Vec<f64>,
+    passes: Vec<PassTimes>,
+    counters: Map<String, Value>,
+}
+
+pub fn run(o: &Options) -> anyhow::Result<usize> {
+    if o.scenarios.is_empty() {
+        anyhow::bail!("no scenario named: use --scenario NAME[,NAME..] or --all (see --list)");
+    }
+    let gpu = Gpu::new(&GpuOptions {
+        validation: engine::gpu::GpuOptions::validation_from_env(),
+        device: o.device.clone(),
+        surface_extensions: vec![],
+    })?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!(
+        "bench: {} ({:?}), {cores} cores, {}x{}, {} warm-up + {} measured frames, {:.4} s simulated per frame",
+        gpu.caps.device_name, gpu.caps.device_type, o.width, o.height, o.warmup, o.frames, FRAME_S
+    );
+    let floor = floor_ms(&gpu, o)?;
+    let floor_stats = summary(&floor);
+    println!(
+        "floor (clear + wait, empty frame): p50 {:.3} ms, p95 {:.3} ms",
+        floor_stats["p50"].as_f64().unwrap_or(0.0),
+        floor_stats["p95"].as_f64().unwrap_or(0.0)
+    );
+    std::fs::create_dir_all(&o.json_dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", o.json_dir.display()))?;
+    let mut failed = Vec::new();
+    for name in &o.scenarios {
+        match run_one(&gpu, o, name, &floor_stats) {
+            Ok(path) => println!("  wrote {}", path.display()),
+            Err(e) => {
+                eprintln!("bench: scenario {name} failed: {e:#}");
+                failed.push(*name);
+            }
+        }
+    }
+    if !failed.is_empty() {
+        anyhow::bail!("{} of {} scenarios failed: {}", failed.len(), o.scenarios.len(), failed.join(", "));
+    }
+    Ok(gpu.validation().error_count())
+}
+
+/// The floor: record a clear of a colour image of the frame's size, submit, wait. The command
+/// buffer and fence are made per frame by `one_shot` (microseconds), which errs on the high side.
+fn floor_ms(gpu: &Gpu, o: &Options) -> anyhow::Result<Vec<f64>> {
+    let extent = ash::vk::Extent2D { width: o.width, height: o.height };
+    let usage = ash::vk::ImageUsageFlags::COLOR_ATTACHMENT | ash::vk::ImageUsageFlags::TRANSFER_DST;
+    let mut image = Image::new(gpu, "bench floor", OFFSCREEN_FORMAT, extent, 1, usage, ash::vk::ImageAspectFlags::COLOR)?;
+    let range = full_range(ash::vk::ImageAspectFlags::COLOR, 1);
+    // At least 200 samples whatever --frames says: each takes well under a millisecond, and on a
+    // shared machine a few dozen give a p95 that is mostly scheduling noise.
+    let samples = o.frames.max(200);
+    let mut ms = Vec::with_capacity(samples);
+    for k in 0..o.warmup + samples {
+        let t = Instant::now();
+        gpu.one_shot(|cb| unsafe {
+            barrier(gpu, cb, image.image, range, Transition::UNDEFINED_TO_TRANSFER_DST);
+            let clear = ash::vk::ClearColorValue { float32: [0.1, 0.1, 0.1, 1.0] };
+            gpu.device.cmd_clear_color_image(cb, image.image, ash::vk::ImageLayout::TRANSFER_DST_OPTIMAL, &clear, &[range]);
+        })?;
+        if k >= o.warmup {
+            ms.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    image.destroy(gpu);
+    Ok(ms)
+}
+
+fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<PathBuf> {
+    let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1)?;
+    let mut target = Offscreen::new(gpu, o.width, o.height)?;
+    let result = setup(gpu, o, name, &mut renderer).and_then(|mut s| {
+        let r = measure(gpu, o, &mut renderer, &mut target, &mut s);
+        s.scene.destroy(gpu);
+        r.map(|series| (series, s.content, s.alternate_prepass))
+    });
+    renderer.destroy(gpu);
+    target.destroy(gpu);
+    let (series, content, alternated) = result?;
+    let main = &series[0];
+    let mut doc = json!({
+        "scenario": name,
+        "schema": 1,
+        "device": gpu.caps.device_name,
+        "cores": std::thread::available_parallelism().map_or(1, |n| n.get()),
+        "width": o.width,
+        "height": o.height,
+        "warmup_frames": o.warmup,
+        "frames": o.frames,
+        "frame_s": FRAME_S,
+        "content": content,
+        "floor_ms": floor,
+        "cpu_frame_ms": summary(&main.cpu_ms),
+        "floor_ratio": ratios(&main.cpu_ms, floor),
+        "gpu_frame_ms": summary(&main.gpu_ms),
+        "pass_gpu_ms": pass_summary(&main.passes),
+        "counters": main.counters,
+        "samples": { "cpu_frame_ms": main.cpu_ms, "gpu_frame_ms": main.gpu_ms },
+        "note": "cpu_frame_ms is the wall time of a whole frame including the wait for the GPU fence; GPU timestamps on lavapipe do not capture compute work reliably (skinning_ms understates the skinning pass)",
+    });
+    if alternated {
+        let off = &series[1];
+        doc["variants"] = json!({ "prepass_off": {
+            "cpu_frame_ms": summary(&off.cpu_ms),
+            "floor_ratio": ratios(&off.cpu_ms, floor),
+            "gpu_frame_ms": summary(&off.gpu_ms),
+            "pass_gpu_ms": pass_summary(&off.passes),
+            "counters": off.counters,
+            "samples": { "cpu_frame_ms": off.cpu_ms, "gpu_frame_ms": off.gpu_ms },
+        }});
+    }
+    print_summary(o, name, &doc);
+    let path = o.json_dir.join(format!("{name}.json"));
+    write_atomic(&path, &serde_json::to_vec_pretty(&doc)?)?;
+    Ok(path)
+}
+
+fn print_summary(o: &Options, name: &str, doc: &Value) {
+    let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let cpu = &doc["cpu_frame_ms"];
+    let ratio = &doc["floor_ratio"];
+    println!(
+        "{name:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} p99 {:8.3} max {:8.3}  (x floor: p50 {:6.1}, p95 {:6.1})",
+        f(&cpu["p50"]),
+        f(&cpu["p95"]),
+        f(&cpu["p99"]),
+        f(&cpu["max"]),
+        f(&ratio["p50"]),
+        f(&ratio["p95"])
+    );
+    if let Some(off) = doc.get("variants").and_then(|v| v.get("prepass_off")) {
+        let c = &off["cpu_frame_ms"];
+        println!("{:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} (pre-pass off)", "", f(&c["p50"]), f(&c["p95"]));
+    }
+    if !o.quiet {
+        println!("{:<17} counters {}", "", doc["counters"]);
+    }
+}
+
+/// Write through a temporary file and rename, so a reader never sees half a file.
+fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_extension(format!("json.tmp-{}", std::process::id()));
+    std::fs::write(&tmp, bytes).map_err(|e| anyhow::anyhow!("writing {}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    Ok(())
+}
+
+/// Warm-up frames, then measured ones; series 1 holds the pre-pass-off frames when alternating.
+fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscreen, s: &mut Setup) -> anyhow::Result<Vec<Series>> {
+    let mut series: Vec<Series> = (0..1 + s.alternate_prepass as usize).map(|_| Series::default()).collect();
+    let per_frame = series.len();
+    for k in 0..(o.warmup + o.frames) * per_frame {
+        // Alternating frames share a simulation step, so both variants see the same content.
+        let (frame, variant) = (k / per_frame, k % per_frame);
+        if s.alternate_prepass {
+            renderer.prepass = variant == 0;
+        }
+        let t = Instant::now();
+        if variant == 0 {
+            renderer.animate(&mut s.scene, FRAME_S as f32);
+            s.world.update(FRAME_S);
+        }
+        let camera = (s.camera)(frame);
+        sim_level::prepare_frame(&s.world, renderer, &camera);
+        let timing = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false)?;
+        let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
+        if frame < o.warmup {
+            continue;
+        }
+        let out = &mut series[variant];
+        out.cpu_ms.push(cpu_ms);
+        out.gpu_ms.extend(timing.gpu_ms);
+        out.passes.extend(renderer.pass_times_ms(gpu, 0));
+        out.counters = counters(gpu, renderer, &s.scene, &s.world);
+    }
+    for (variant, out) in series.iter_mut().enumerate() {
+        let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant == 0)?;
+        out.counters.insert("fragments_shaded".into(), json!(shaded));
+    }
+    Ok(series)
+}
+
+/// Fragments the shading pass shades in the last frame (same camera, no simulation step), from
+/// one more frame, not timed, with the shader's fragment counter on: the counter costs an atomic
+/// per fragment, and lavapipe's pipeline statistics count fragments the depth test then rejects,
+/// so they cannot show what the pre-pass saves.
+fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, prepass: bool) -> anyhow::Result<Option<u32>> {
+    let camera = (s.camera)(last);
+    renderer.prepass = prepass || !s.alternate_prepass;
+    renderer.count_fragments = true;
+    sim_level::prepare_frame(&s.world, renderer, &camera);
+    let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
+    let shaded = renderer.fragment_count(0);
+    renderer.count_fragments = false;
+    renderer.prepass = true;
+    frame?;
+    Ok(shaded)
+}
+
+/// The frame's exact counters (the last measured frame's end up in the JSON).
+fn counters(gpu: &Gpu, r: &Renderer, scene: &GpuScene, world: &World) -> Map<String, Value> {
+    let c = r.visibility.counts;
+    let mut m = Map::new();
+    let mut put = |k: &str, v: Value| {
+        m.insert(k.into(), v);
+    };
+    put("instances", json!(scene.instances.len()));
+    // The cull counts include the boids (culled with the scene), as in the overlay.
+    put("cull_tested", json!(c.cull.tested));
+    put("culled", json!(c.cull.culled));
+    put("drawn", json!(c.cull.visible));
+    put("triangles", json!(c.triangles));
+    put("lod_histogram", json!(c.lod_histogram));
+    put("particles", json!(c.particles));
+    put("particles_live", json!(world.emitters.iter().map(|e| e.particles.len()).sum::<usize>()));
+    put("boids", json!(r.boids.boids.len()));
+    put("boids_drawn", json!(c.boids));
+    put("shadow_casters", json!(r.shadow_casters));
+    put("sim_steps", json!(world.clock.steps));
+    if let Some(a) = &r.animation {
+        put("animated_instances", json!(a.instances.len()));
+        put("skinning_dispatches", json!(a.dispatches));
+        put("skinned_vertices", json!(a.skinned_vertices));
+    }
+    if let Some(st) = r.pass_stats(gpu, 0) {
+        put("prepass_fragment_invocations", json!(st.prepass.map(|p| p.fragment)));
+        put("shading_vertex_invocations", json!(st.shading.vertex));
+        put("shading_fragment_invocations", json!(st.shading.fragment));
+    }
+    m
+}
+
+/// p50/p95/p99/max/mean of samples (nearest rank, as everywhere in the engine); nulls when empty.
+fn summary(v: &[f64]) -> Value {
+    let p = |q: f64| percentile(v, q);
+    let max = v.iter().copied().reduce(f64::max);
+    let mean = (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    json!({ "p50": p(50.0), "p95": p(95.0), "p99": p(99.0), "max": max, "mean": mean, "count": v.len() })
+}
+
+/// The scenario's percentiles as multiples of the floor's.
+fn ratios(v: &[f64], floor: &Value) -> Value {
+    let s = summary(v);
+    let r = |k: &str| match (s[k].as_f64(), floor[k].as_f64()) {
+        (Some(a), Some(b)) if b > 0.0 => json!(a / b),
+        _ => Value::Null,
+    };
+    json!({ "p50": r("p50"), "p95": r("p95"), "p99": r("p99") })
+}
+
+fn pass_summary(p: &[PassTimes]) -> Value {
+    let col = |f: fn(&PassTimes) -> f64| summary(&p.iter().map(f).collect::<Vec<_>>());
+    json!({
+        "skinning": col(|t| t.skinning_ms),
+        "shadow": col(|t| t.shadow_ms),
+        "prepass": col(|t| t.prepass_ms),
+        "shading": col(|t| t.shading_ms),
+        "particles": col(|t| t.particles_ms),
+        "tonemap": col(|t| t.tonemap_ms),
+    })
+}
+
+fn setup(gpu: &Gpu, o: &Options, name: &str, renderer: &mut Renderer) -> anyhow::Result<Setup> {
+    match name {
+        "demo-flythrough" => demo_flythrough(gpu, o, renderer),
+        "culling-100k" => culling(gpu, renderer, 100_000),
+        "boids-10k" => boids(gpu, renderer, 10_000),
+        "particles-100k" => particles(gpu, renderer, 100_000),
+        "skinned-64" => skinned(gpu, o, renderer, 64),
+        "prepass-overdraw" => overdraw(gpu, renderer, 16),
+        other => anyhow::bail!("unknown scenario '{other}'"),
+    }
+}
+
+fn empty_world() -> World {
+    World::new(FixedClock::new(ClockParams::default()))
+}
+
+fn read_pack(path: &Path) -> anyhow::Result<Pack> {
+    Pack::read_file(path).map_err(|e| match e {
+        pack::PackError::Io(io) => anyhow::anyhow!("{}: {io} (run `make cook` to cook the project's content)", path.display()),
+        other => anyhow::anyhow!("{}: {other}", path.display()),
+    })
+}
+
+/// Seconds of the camera's orbit around the level: a full turn, so the path sees every side.
+const ORBIT_S: f32 = 12.0;
+
+/// The demo level as `demo` shows it headless (animation, spawned boids and particles warmed up),
+/// seen from a camera orbiting the level's centre above the roofs, looking down at it.
+fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::Result<Setup> {
+    let pack = read_pack(&o.level)?;
+    let scene = GpuScene::upload(gpu, &pack, renderer.layouts())?;
+    renderer.animation = AnimatedScene::new(gpu, &pack, &scene, 1)?;
+    let (min, max) = scene.bounds();
+    let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    sim_level::warm_up(&mut world);
+    let centre = (min + max) * 0.5;
+    let radius = 0.45 * (max - min).truncate().length().max(1.0);
+    let height = min.y + 0.6 * (max.y - min.y).max(4.0);
+    let camera = move |k: usize| {
+        let angle = std::f32::consts::TAU * (k as f64 * FRAME_S) as f32 / ORBIT_S;
+        let position = Vec3::new(centre.x + radius * angle.cos(), height, centre.z + radius * angle.sin());
+        looking_at(position, centre)
+    };
+    let mut content = Map::new();
+    content.insert("level".into(), json!(o.level.display().to_string()));
+    content.insert("spawns".into(), json!(pack.manifest.spawns.len()));
+    Ok(Setup {
+        scene,
+        world,
+        camera: Box::new(camera),
+        lighting: Lighting::for_pack(&pack.manifest),
+        alternate_prepass: false,
+        content,
+    })
+}
+
+fn looking_at(position: Vec3, target: Vec3) -> Camera {
+    let f = (target - position).normalize_or(Vec3::NEG_Z);
+    Camera {
+        position,
+        yaw: (-f.x).atan2(-f.z),
+        pitch: f.y.clamp(-1.0, 1.0).asin(),
+        fov_y: 60f32.to_radians(),
+        near: 0.1,
+    }
+}
+
+/// `n` cubes on a grid, the camera fixed in the middle looking along it (the older default
+/// bench's scene): about a quarter in view, most of them far away.
+fn culling(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> {
+    let scene = GpuScene::upload(gpu, &boxes_pack(cube_grid(n)), renderer.layouts())?;
+    let side = (n as f64).sqrt().ceil() as f32 * 3.0;
+    let camera = Camera {
+        position: Vec3::new(0.5 * side, 6.0, -0.5 * side),
+        yaw: -90f32.to_radians(),
+        pitch: -8f32.to_radians(),
+        fov_y: 60f32.to_radians(),
+        near: 0.1,
+    };
+    let mut content = Map::new();
+    content.insert("cubes".into(), json!(n));
+    Ok(Setup {
+        scene,
+        world: empty_world(),
+        camera: Box::new(move |_| camera),
+        lighting: Lighting::default(),
+        alternate_prepass: false,
+        content,
+    })
+}
+
+/// Half the size of the boids' box.
+const FLOCK_HALF_M: f32 = 40.0;
+
+/// A flock of `n` in a box, drawn to its centre, over one ground slab; the camera frames the box.
+fn boids(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> {
+    let h = Vec3::splat(FLOCK_HALF_M);
+    let mut world = empty_world();
+    let params = BoidParams {
+        goal: Some([0.0; 3]),
+        bounds: Some(Aabb {
+            min: (-h).to_array(),
+            max: h.to_array(),
+        }),
+        seed: 9,
+        ..BoidParams::default()
+    };
+    world.flocks.push(Flock::new(params, FlockState::random(n, -h * 0.5, h * 0.5, 5.0, 9)));
+    let scene = GpuScene::upload(gpu, &ground_pack(FLOCK_HALF_M), renderer.layouts())?;
+    let camera = Camera::framing(-h, h);
+    let mut content = Map::new();
+    content.insert("boids".into(), json!(n));
+    Ok(Setup {
+        scene,
+        world,
+        camera: Box::new(move |_| camera),
+        lighting: Lighting::default(),
+        alternate_prepass: false,
+        content,
+    })
+}
+
+/// One flat slab under everything (the mesh passes need something to draw).
+fn ground_pack(half: f32) -> Pack {
+    boxes_pack(std::iter::once(Mat4::from_scale_rotation_translation(
+        Vec3::new(2.0 * half, 0.2, 2.0 * half),
+        glam::Quat::IDENTITY,
+        Vec3::new(0.0, -half - 0.1, 0.0),
+    )))
+}
+
+/// A fountain in steady state with about `n` live particles (rate × mean life = n), warmed up
+/// for 2.5 s of simulated time at load, seen from the side.
+fn particles(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> {
+    let params = EmitterParams {
+        rate_per_s: n as f32 / 2.0,
+        life_min_s: 1.5,
+        life_max_s: 2.5,
+        capacity: (n + n / 4) as u32,
+        size: engine::sim::curve::Curve::constant(0.03),
+        ground_y: Some(0.0),
+        ..EmitterParams::preset(Preset::Fountain)
+    };
+    let mut world = empty_world();
+    world.emitters.push(ParticleSystem::new(params));
+    for _ in 0..(2.5 / FRAME_S).round() as usize {
+        world.update(FRAME_S);
+    }
+    let scene = GpuScene::upload(gpu, &ground_pack(10.0), renderer.layouts())?;
+    let camera = looking_at(Vec3::new(0.0, 3.0, 14.0), Vec3::new(0.0, 2.0, 0.0));
+    let mut content = Map::new();
+    content.insert("particles_target".into(), json!(n));
+    Ok(Setup {
+        scene,
+        world,
+        camera: Box::new(move |_| camera),
+        lighting: Lighting::default(),
+        alternate_prepass: false,
+        content,
+    })
+}
+
+/// `n` copies of the character pack on a grid, each playing its first clip at its own phase,
+/// every one at full detail and in view, so the skinning pass skins them all every frame.
+fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> {
+    let single = read_pack(&o.character)?;
+    if single.manifest.animation.skins.is_empty() || single.manifest.animation.clips.is_empty() {
+        anyhow::bail!("{} has no skin or no clip", o.character.display());
+    }
+    let pack = skinned_bench::replicate(&single, n);
+    let mut scene = GpuScene::upload(gpu, &pack, renderer.layouts())?;
+    let mut anim = AnimatedScene::new(gpu, &pack, &scene, 1)?.ok_or_else(|| anyhow::anyhow!("nothing in {} deforms", o.character.display()))?;
+    let per_copy = single.manifest.animation.clips.len();
+    for i in 0..anim.instances.len() {
+        let clip = (i % n) * per_copy;
+        let phase = (i as f32 * 0.618_034).fract() * anim.rig.clips[clip].duration;
+        anim.play(i, clip, phase, 1.0);
+    }
+    renderer.animation = Some(anim);
+    renderer.visibility.lod_selection = false;
+    renderer.animate(&mut scene, 0.0);
+    let (lo, hi) = scene.bounds();
+    let camera = Camera::framing(lo - Vec3::splat(1.0), hi + Vec3::splat(1.0));
+    let mut content = Map::new();
+    content.insert("characters".into(), json!(n));
+    content.insert("character".into(), json!(o.character.display().to_string()));
+    Ok(Setup {
+        scene,
+        world: empty_world(),
+        camera: Box::new(move |_| camera),
+        lighting: Lighting::default(),
+        alternate_prepass: false,
+        content,
+    })
+}
+
+/// `layers` thin slabs facing the camera, each covering about half the view, drawn farthest
+/// first (instance order is draw order): without the pre-pass every layer shades every pixel it
+/// covers; with it, only the nearest does. (Not more layers or a full screen: with the pre-pass
+/// off, lavapipe takes seconds a frame.)
+fn overdraw(gpu: &Gpu, renderer: &mut Renderer, layers: usize) -> anyhow::Result<Setup> {
+    let slabs = (0..layers).map(|i| {
+        let z = -0.25 * (layers - 1 - i) as f32;
+        Mat4::from_scale_rotation_translation(Vec3::new(14.0, 8.0, 0.05), glam::Quat::IDENTITY, Vec3::new(0.0, 0.0, z))
+    });
+    let scene = GpuScene::upload(gpu, &boxes_pack(slabs), renderer.layouts())?;
+    // No LOD to pick (one level) and nothing out of view: the work is the overdraw alone.
+    let camera = looking_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO);
+    let mut content = Map::new();
+    content.insert("layers".into(), json!(layers));
+    Ok(Setup {
+        scene,
+        world: empty_world(),
+        camera: Box::new(move |_| camera),
+        lighting: Lighting::default(),
+        alternate_prepass: true,
+        content,
+    })
+}
