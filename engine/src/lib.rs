@@ -5,6 +5,7 @@ pub mod animated;
 pub mod boids_draw;
 pub mod camera;
 pub mod cull;
+pub mod flight;
 pub mod gpu;
 pub mod headless;
 pub mod lod_select;
