@@ -7,7 +7,7 @@
 
 use crate::camera::Camera;
 use crate::renderer::Renderer;
-use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState};
+use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState, Pillar};
 use crate::sim::clock::{ClockParams, FixedClock};
 use crate::sim::curve::{Curve, Gradient};
 use crate::sim::particles::{Blend, EmitterParams, ParticleSystem};
@@ -79,9 +79,24 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
     }
 }
 
+/// The pack's pillars (the cooker reads them from the level's vertical cylinder brushes) as the
+/// flocks' obstacles.
+pub fn pillars_of(pillars: &[pack::Pillar]) -> Vec<Pillar> {
+    pillars
+        .iter()
+        .map(|p| Pillar {
+            centre: p.centre,
+            radius: p.radius,
+            y_min: p.y_min,
+            y_max: p.y_max,
+        })
+        .collect()
+}
+
 /// A boids spawn's flock: `count` birds at random in a cube of half-size `radius` around the
-/// spawn, flying at `speed`, drawn back to the spawn by the goal urge, kept inside `bounds`.
-pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
+/// spawn, flying at `speed`, drawn back to the spawn by the goal urge, kept inside `bounds` and
+/// out of `pillars`.
+pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb, pillars: Vec<Pillar>) -> Flock {
     let p = spawn;
     let count = spawn.params.get("count").and_then(|v| v.as_u64()).unwrap_or(16) as usize;
     let radius = num(p, "radius", 5.0);
@@ -97,6 +112,7 @@ pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
         separation_radius: (radius * 0.25).clamp(0.5, 3.0),
         neighbour_radius: (radius * 0.6).clamp(1.0, 5.0),
         bounds: Some(bounds),
+        pillars,
         seed,
         ..BoidParams::default()
     };
@@ -106,8 +122,9 @@ pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
 
 /// The level's world from its spawns. `level_min`/`level_max` are the scene's bounds: the
 /// flocks' obstacle box (raised to clear each flock's spawn volume, since birds fly above the
-/// roofs) and the particles' ground plane (its floor).
-pub fn world_from_spawns(spawns: &[pack::Spawn], level_min: Vec3, level_max: Vec3) -> World {
+/// roofs) and the particles' ground plane (its floor). Every flock avoids every pillar.
+pub fn world_from_spawns(spawns: &[pack::Spawn], pillars: &[pack::Pillar], level_min: Vec3, level_max: Vec3) -> World {
+    let pillars = pillars_of(pillars);
     let mut world = World::new(FixedClock::new(ClockParams::default()));
     for s in spawns {
         match s.kind.as_str() {
@@ -119,7 +136,7 @@ pub fn world_from_spawns(spawns: &[pack::Spawn], level_min: Vec3, level_max: Vec
                     min: level_min.to_array(),
                     max: [level_max.x, top, level_max.z],
                 };
-                world.flocks.push(flock_for(s, bounds));
+                world.flocks.push(flock_for(s, bounds, pillars.clone()));
             }
             _ => {}
         }

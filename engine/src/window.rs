@@ -241,7 +241,7 @@ impl State {
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
         let (min, max) = scene.bounds();
-        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
         sim_level::warm_up(&mut world);
         let frames = Frames::new(&gpu)?;
         Ok(State {

@@ -220,7 +220,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
     let lighting = Lighting::for_pack(&pack.manifest);
-    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     engine::sim_level::warm_up(&mut world);
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
