@@ -30,10 +30,29 @@ fn num(spawn: &pack::Spawn, key: &str, default: f32) -> f32 {
     spawn.params.get(key).and_then(|v| v.as_f64()).map_or(default, |v| v as f32)
 }
 
+/// A particles spawn's blend: its `blend` parameter ("alpha" or "additive", which the cooker
+/// validates), else a guess from the name: sparks, embers and fire add light, everything else
+/// (spray, smoke) is alpha-blended. A value the cooker would reject (a hand-edited pack) is
+/// treated as absent rather than failing the level.
+pub fn blend_of(spawn: &pack::Spawn) -> Blend {
+    match spawn.params.get("blend").and_then(|v| v.as_str()) {
+        Some("alpha") => Blend::Alpha,
+        Some("additive") => Blend::Additive,
+        _ => {
+            let name = spawn.name.to_ascii_lowercase();
+            let additive = ["spark", "ember", "fire", "flame"].iter().any(|k| name.contains(k));
+            if additive {
+                Blend::Additive
+            } else {
+                Blend::Alpha
+            }
+        }
+    }
+}
+
 /// A particles spawn's emitter. The level gives means; lifetimes and speeds vary ±20% around them
 /// so a stream does not pulse. Colour holds then fades out over the last 30% of a life; size
-/// shrinks to half. The level has no blend key: sparks, embers and fire (by name) add light,
-/// everything else (spray, smoke) is alpha-blended.
+/// shrinks to half.
 pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
     let p = spawn;
     let life = num(p, "lifetime_s", 1.0).max(0.05);
@@ -48,8 +67,6 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         _ => [1.0; 4],
     };
     let faded = [color[0], color[1], color[2], 0.0];
-    let name = spawn.name.to_ascii_lowercase();
-    let additive = ["spark", "ember", "fire", "flame"].iter().any(|k| name.contains(k));
     let rotation = Quat::from_array(spawn.rotation);
     let direction = if rotation.length_squared() > 0.0 { rotation.normalize() * Vec3::Y } else { Vec3::Y };
     let life_max = life * 1.2;
@@ -73,7 +90,7 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         color: Gradient {
             keys: vec![(0.0, color), (0.7, color), (1.0, faded)],
         },
-        blend: if additive { Blend::Additive } else { Blend::Alpha },
+        blend: blend_of(spawn),
         seed: seed_of(&spawn.name),
         ..EmitterParams::default()
     }

@@ -23,13 +23,13 @@ fn temple_spawns() -> Vec<Spawn> {
             "fountain_spray",
             "particles",
             [0.0, 1.95, 10.0],
-            r#"{ "rate_per_s": 200, "lifetime_s": 1.2, "speed": 2.5, "spread_deg": 15, "size": 0.04, "color": [0.7, 0.85, 1.0, 0.6], "gravity": -9.81 }"#,
+            r#"{ "rate_per_s": 200, "lifetime_s": 1.2, "speed": 2.5, "spread_deg": 15, "size": 0.04, "color": [0.7, 0.85, 1.0, 0.6], "gravity": -9.81, "blend": "alpha" }"#,
         ),
         spawn(
             "brazier_sparks_west",
             "particles",
             [-3.6, 1.6, -1.6],
-            r#"{ "rate_per_s": 30, "lifetime_s": 2.0, "speed": 0.8, "spread_deg": 25, "size": 0.02, "color": [1.0, 0.6, 0.2, 1.0], "gravity": 0.5 }"#,
+            r#"{ "rate_per_s": 30, "lifetime_s": 2.0, "speed": 0.8, "spread_deg": 25, "size": 0.02, "color": [1.0, 0.6, 0.2, 1.0], "gravity": 0.5, "blend": "additive" }"#,
         ),
     ]
 }
@@ -151,4 +151,24 @@ fn boids_aimed_at_a_pillar_never_enter_it() {
     assert!(closest < column().radius + range, "closest axis distance {closest} m");
     let (entered, _) = fly_at_column(false, 1.0);
     assert!(entered > 0, "without the pillar the flock flies through the column");
+}
+
+#[test]
+fn the_blend_key_overrides_the_name_and_its_absence_keeps_the_name_guess() {
+    let particles = |name: &str, params: &str| Spawn {
+        name: name.into(),
+        kind: "particles".into(),
+        position: [0.0; 3],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        params: serde_json::from_str(params).unwrap(),
+    };
+    let spawns = [
+        particles("sparks", r#"{ "blend": "alpha" }"#),
+        particles("mist", r#"{ "blend": "additive" }"#),
+        particles("sparks_unset", "{}"),
+        particles("mist_unset", "{}"),
+    ];
+    let w = world_from_spawns(&spawns, &[], LEVEL_MIN, LEVEL_MAX);
+    let blends: Vec<Blend> = w.emitters.iter().map(|e| e.params.blend).collect();
+    assert_eq!(blends, [Blend::Alpha, Blend::Additive, Blend::Additive, Blend::Alpha]);
 }
