@@ -10,7 +10,7 @@ use crate::renderer::Renderer;
 use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState, Pillar};
 use crate::sim::clock::{ClockParams, FixedClock};
 use crate::sim::curve::{Curve, Gradient};
-use crate::sim::particles::{Blend, EmitterParams, ParticleSystem};
+use crate::sim::particles::{steady_state_capacity, Blend, EmitterParams, ParticleSystem};
 use crate::sim::World;
 use glam::{Quat, Vec3};
 
@@ -80,8 +80,7 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         rate_per_s: rate,
         life_min_s: life * 0.8,
         life_max_s: life_max,
-        // Steady state holds rate × mean life; the margin covers the longest lives.
-        capacity: (rate * life_max * 1.25).ceil() as u32 + 16,
+        capacity: steady_state_capacity(rate, life_max),
         gravity: [0.0, num(p, "gravity", -9.81), 0.0],
         ground_y: Some(ground_y),
         restitution: 0.2,
@@ -145,7 +144,10 @@ pub fn world_from_spawns(spawns: &[pack::Spawn], pillars: &[pack::Pillar], level
     let mut world = World::new(FixedClock::new(ClockParams::default()));
     for s in spawns {
         match s.kind.as_str() {
-            "particles" => world.emitters.push(ParticleSystem::new(emitter_for(s, level_min.y))),
+            "particles" => {
+                world.emitters.push(ParticleSystem::new(emitter_for(s, level_min.y)));
+                world.emitter_names.push(s.name.clone());
+            }
             "boids" => {
                 let r = num(s, "radius", 5.0);
                 let top = level_max.y.max(s.position[1] + 2.0 * r);
@@ -154,6 +156,7 @@ pub fn world_from_spawns(spawns: &[pack::Spawn], pillars: &[pack::Pillar], level
                     max: [level_max.x, top, level_max.z],
                 };
                 world.flocks.push(flock_for(s, bounds, pillars.clone()));
+                world.flock_names.push(s.name.clone());
             }
             _ => {}
         }

@@ -3,7 +3,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
-use crate::overlay::{FrameStats, Overlay};
+use crate::overlay::{FrameStats, Overlay, SimPanel};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::sim::World;
 use crate::sim_level;
@@ -329,7 +329,8 @@ impl State {
         // Taken every frame, shown or not, so input does not pile up while the overlay is hidden.
         let input = self.egui.take_egui_input(&self.window);
         if let Some(o) = self.overlay.as_mut().filter(|o| o.visible) {
-            let platform = o.build(input, &mut self.renderer, &mut []);
+            // Slider edits land in the world now and take effect from its next step.
+            let platform = o.build(input, &mut self.renderer, &mut [&mut SimPanel::new(&mut self.world)]);
             self.egui.handle_platform_output(&self.window, platform);
             o.record(&self.gpu, cb, &target)?;
         }

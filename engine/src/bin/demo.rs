@@ -240,7 +240,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
-                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut []);
+                let mut sim = overlay::SimPanel::new(&mut world);
+                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
                 o.record(&gpu, cb, frame)
             })?,
             None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
