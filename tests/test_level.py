@@ -160,6 +160,30 @@ def test_temple_pillars_are_its_columns_braziers_and_fountain(temple):
     assert back.pillars == temple.pillars
 
 
+def test_cooked_pack_carries_the_pillars(run_cook, tmp_path):
+    import json
+
+    from asset_pipeline import _core
+
+    path = write(tmp_path, HEADER + textwrap.dedent(ONE_BOX.replace('operands = ["b"]', 'operands = ["b", "col"]')) + textwrap.dedent("""
+        [[brushes]]
+        name = "col"
+        kind = "cylinder"
+        radius = 0.25
+        height = 3
+        translation = [0, 1.5, 0]
+        material = "stone"
+        repeat = { count = 2, step = [0, 0, 2] }
+    """))
+    out = tmp_path / "level.pack"
+    r = run_cook(path, "-o", out, "-q", "--no-bake", "--no-lightmap-uvs", "--no-lods", "--no-report")
+    assert r.returncode == 0, r.stderr
+    pillars = json.loads(_core.read_pack_manifest(out))["pillars"]
+    assert [p["name"] for p in pillars] == ["col[0]", "col[1]"]
+    assert pillars[1]["centre"] == pytest.approx([0.0, 2.0]) and pillars[1]["radius"] == pytest.approx(0.25)
+    assert (pillars[1]["y_min"], pillars[1]["y_max"]) == pytest.approx((0.0, 3.0))
+
+
 def test_pillars_follow_scale_and_skip_tilted_and_cut_cylinders(tmp_path):
     scene = build(tmp_path, """
         [[brushes]]
