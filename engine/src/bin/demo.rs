@@ -40,8 +40,9 @@ In the window: WASD move, Q/E down/up, Shift faster, drag with a mouse button to
 F1 shows or hides the debug overlay (hidden at start unless --overlay): frame-time graph (CPU
 frame and GPU ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass,
 and switches for the depth pre-pass, frustum culling, LOD selection and freezing, fragment
-counting and the LOD pixel error. While the pointer is over the overlay, the mouse works it,
-not the camera.";
+counting and the LOD pixel error; its \"simulation\" section has sliders for every flock's and
+particle emitter's parameters, applied to the running simulation at once. While the pointer is
+over the overlay, the mouse works it, not the camera.";
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
