@@ -41,6 +41,8 @@ const LEVEL_MAX: Vec3 = Vec3::new(20.0, 12.0, 22.0);
 fn spawns_become_emitters_and_flocks_with_their_authored_parameters() {
     let w = world_from_spawns(&temple_spawns(), &[], LEVEL_MIN, LEVEL_MAX);
     assert_eq!((w.emitters.len(), w.flocks.len()), (2, 1));
+    // The spawn names label the overlay's sections.
+    assert_eq!((w.emitter_names.as_slice(), w.flock_names.as_slice()), (["fountain_spray", "brazier_sparks_west"].map(String::from).as_slice(), ["doves".to_string()].as_slice()));
     let spray = &w.emitters[0].params;
     assert_eq!(spray.position, [0.0, 1.95, 10.0]);
     assert_eq!((spray.rate_per_s, spray.cone_half_angle_deg, spray.gravity), (200.0, 15.0, [0.0, -9.81, 0.0]));
