@@ -144,6 +144,106 @@ def test_temple_contents(temple):
     assert over.any() and p[over][:, :, 1].max() <= 0.6 + 1e-5
 
 
+def test_temple_pillars_are_its_columns_braziers_and_fountain(temple):
+    # 6 portico and 2 x 4 hall columns, the 2 braziers, the fountain's basin and column. Not the
+    # arches and the oculus (cutters, and the arches lie on their side), nor the water in the
+    # basin and the coals in the braziers (each inside a larger pillar).
+    names = [p.name for p in temple.pillars]
+    assert len(names) == 18, names
+    assert names == [f"portico_columns[{k}]" for k in range(6)] + [f"hall_columns_west[{k}]" for k in range(4)] \
+        + [f"hall_columns_east[{k}]" for k in range(4)] + ["brazier_outer[0]", "brazier_outer[1]", "basin_outer", "fountain_column"]
+    col = temple.pillars[2]  # portico_columns copy 2: translation [-10, 3.9, 3.6] + 2 * [4, 0, 0]
+    assert col.centre == pytest.approx((-2.0, 3.6)) and col.radius == pytest.approx(0.45)
+    assert (col.y_min, col.y_max) == pytest.approx((0.5, 7.3))
+    assert temple.pillars[14].radius == pytest.approx(0.6)  # a tapered brazier: its larger radius
+    back = ir.from_wire(*ir.to_wire(temple))
+    assert back.pillars == temple.pillars
+
+
+def test_cooked_pack_carries_the_pillars(run_cook, tmp_path):
+    import json
+
+    from asset_pipeline import _core
+
+    path = write(tmp_path, HEADER + textwrap.dedent(ONE_BOX.replace('operands = ["b"]', 'operands = ["b", "col"]')) + textwrap.dedent("""
+        [[brushes]]
+        name = "col"
+        kind = "cylinder"
+        radius = 0.25
+        height = 3
+        translation = [0, 1.5, 0]
+        material = "stone"
+        repeat = { count = 2, step = [0, 0, 2] }
+    """))
+    out = tmp_path / "level.pack"
+    r = run_cook(path, "-o", out, "-q", "--no-bake", "--no-lightmap-uvs", "--no-lods", "--no-report")
+    assert r.returncode == 0, r.stderr
+    pillars = json.loads(_core.read_pack_manifest(out))["pillars"]
+    assert [p["name"] for p in pillars] == ["col[0]", "col[1]"]
+    assert pillars[1]["centre"] == pytest.approx([0.0, 2.0]) and pillars[1]["radius"] == pytest.approx(0.25)
+    assert (pillars[1]["y_min"], pillars[1]["y_max"]) == pytest.approx((0.0, 3.0))
+
+
+def test_pillars_follow_scale_and_skip_tilted_and_cut_cylinders(tmp_path):
+    scene = build(tmp_path, """
+        [[brushes]]
+        name = "floor"
+        kind = "box"
+        size = [20, 1, 20]
+        material = "stone"
+
+        [[brushes]]
+        name = "fat"                 # scaled: radius 0.5 * 2, height 2 * 1.5, turned about Y
+        kind = "cylinder"
+        radius = 0.5
+        height = 2
+        scale = [2, 1.5, 2]
+        rotation = [0, 30, 0]
+        translation = [3, 1, 4]
+        material = "stone"
+
+        [[brushes]]
+        name = "oval"                # not round in plan: no pillar
+        kind = "cylinder"
+        radius = 0.5
+        height = 2
+        scale = [1, 1, 2]
+        translation = [-3, 1, 0]
+        material = "stone"
+
+        [[brushes]]
+        name = "log"                 # lying down: no pillar
+        kind = "cylinder"
+        radius = 0.3
+        height = 4
+        rotation = [0, 0, 90]
+        translation = [0, 1, -4]
+        material = "stone"
+
+        [[brushes]]
+        name = "well"                # cut out of the floor: no pillar
+        kind = "cylinder"
+        radius = 1
+        height = 2
+        translation = [-5, 0, -5]
+        material = "plaster"
+
+        [[objects]]
+        name = "holed"
+        op = "difference"
+        operands = ["floor", "well"]
+
+        [[objects]]
+        name = "all"
+        op = "union"
+        operands = ["holed", "fat", "oval", "log"]
+    """)
+    assert [p.name for p in scene.pillars] == ["fat"]
+    p = scene.pillars[0]
+    assert p.centre == pytest.approx((3.0, 4.0)) and p.radius == pytest.approx(1.0)
+    assert (p.y_min, p.y_max) == pytest.approx((-0.5, 2.5))
+
+
 # ---- small specs: shapes and booleans --------------------------------------------------------
 
 
@@ -510,6 +610,35 @@ def test_error_duplicate_name_and_spawn_param(tmp_path):
     assert "objects[0].name: 'b' is already the name of brushes[0]" in msg
     msg = error_of(tmp_path, ONE_BOX + '\n[[spawns]]\nname = "p"\nkind = "boids"\nparams = { count = 3, colour = 1 }\n')
     assert f":{line_of(tmp_path, 'colour')}: spawns[0].params.colour: unknown parameter 'colour' for a boids spawn" in msg
+
+
+def test_particle_blend_key_is_kept_for_the_runtime(tmp_path):
+    scene = build(tmp_path, ONE_BOX + """
+        [[spawns]]
+        name = "mist"
+        kind = "particles"
+        params = { rate_per_s = 10, blend = "additive" }
+    """)
+    assert scene.spawns[0].params["blend"] == "additive"
+
+
+BAD_BLEND = ONE_BOX + '\n[[spawns]]\nname = "torch_fire"\nkind = "particles"\nparams = { rate_per_s = 10, blend = "glow" }\n'
+
+
+def test_error_unknown_particle_blend(tmp_path):
+    msg = error_of(tmp_path, BAD_BLEND)
+    assert (f":{line_of(tmp_path, 'glow')}: spawns[0].params.blend: spawn 'torch_fire': unknown blend 'glow' "
+            "(expected one of: alpha, additive)") in msg
+    msg = error_of(tmp_path, BAD_BLEND.replace('"glow"', "1"))
+    assert "spawns[0].params.blend: spawn 'torch_fire': unknown blend 1" in msg
+
+
+def test_cook_rejects_an_unknown_particle_blend_with_status_2(run_cook, tmp_path):
+    path = write(tmp_path, HEADER + textwrap.dedent(BAD_BLEND))
+    r = run_cook(path, "-o", tmp_path / "out.pack")
+    assert r.returncode == 2, r.stderr
+    assert f"{path}:" in r.stderr and "spawn 'torch_fire': unknown blend 'glow'" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "out.pack").exists()
 
 
 def test_png_texture(tmp_path):

@@ -7,10 +7,10 @@
 
 use crate::camera::Camera;
 use crate::renderer::Renderer;
-use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState};
+use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState, Pillar};
 use crate::sim::clock::{ClockParams, FixedClock};
 use crate::sim::curve::{Curve, Gradient};
-use crate::sim::particles::{Blend, EmitterParams, ParticleSystem};
+use crate::sim::particles::{steady_state_capacity, Blend, EmitterParams, ParticleSystem};
 use crate::sim::World;
 use glam::{Quat, Vec3};
 
@@ -30,10 +30,29 @@ fn num(spawn: &pack::Spawn, key: &str, default: f32) -> f32 {
     spawn.params.get(key).and_then(|v| v.as_f64()).map_or(default, |v| v as f32)
 }
 
+/// A particles spawn's blend: its `blend` parameter ("alpha" or "additive", which the cooker
+/// validates), else a guess from the name: sparks, embers and fire add light, everything else
+/// (spray, smoke) is alpha-blended. A value the cooker would reject (a hand-edited pack) is
+/// treated as absent rather than failing the level.
+pub fn blend_of(spawn: &pack::Spawn) -> Blend {
+    match spawn.params.get("blend").and_then(|v| v.as_str()) {
+        Some("alpha") => Blend::Alpha,
+        Some("additive") => Blend::Additive,
+        _ => {
+            let name = spawn.name.to_ascii_lowercase();
+            let additive = ["spark", "ember", "fire", "flame"].iter().any(|k| name.contains(k));
+            if additive {
+                Blend::Additive
+            } else {
+                Blend::Alpha
+            }
+        }
+    }
+}
+
 /// A particles spawn's emitter. The level gives means; lifetimes and speeds vary ±20% around them
 /// so a stream does not pulse. Colour holds then fades out over the last 30% of a life; size
-/// shrinks to half. The level has no blend key: sparks, embers and fire (by name) add light,
-/// everything else (spray, smoke) is alpha-blended.
+/// shrinks to half.
 pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
     let p = spawn;
     let life = num(p, "lifetime_s", 1.0).max(0.05);
@@ -48,8 +67,6 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         _ => [1.0; 4],
     };
     let faded = [color[0], color[1], color[2], 0.0];
-    let name = spawn.name.to_ascii_lowercase();
-    let additive = ["spark", "ember", "fire", "flame"].iter().any(|k| name.contains(k));
     let rotation = Quat::from_array(spawn.rotation);
     let direction = if rotation.length_squared() > 0.0 { rotation.normalize() * Vec3::Y } else { Vec3::Y };
     let life_max = life * 1.2;
@@ -63,8 +80,7 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         rate_per_s: rate,
         life_min_s: life * 0.8,
         life_max_s: life_max,
-        // Steady state holds rate × mean life; the margin covers the longest lives.
-        capacity: (rate * life_max * 1.25).ceil() as u32 + 16,
+        capacity: steady_state_capacity(rate, life_max),
         gravity: [0.0, num(p, "gravity", -9.81), 0.0],
         ground_y: Some(ground_y),
         restitution: 0.2,
@@ -73,15 +89,30 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
         color: Gradient {
             keys: vec![(0.0, color), (0.7, color), (1.0, faded)],
         },
-        blend: if additive { Blend::Additive } else { Blend::Alpha },
+        blend: blend_of(spawn),
         seed: seed_of(&spawn.name),
         ..EmitterParams::default()
     }
 }
 
+/// The pack's pillars (the cooker reads them from the level's vertical cylinder brushes) as the
+/// flocks' obstacles.
+pub fn pillars_of(pillars: &[pack::Pillar]) -> Vec<Pillar> {
+    pillars
+        .iter()
+        .map(|p| Pillar {
+            centre: p.centre,
+            radius: p.radius,
+            y_min: p.y_min,
+            y_max: p.y_max,
+        })
+        .collect()
+}
+
 /// A boids spawn's flock: `count` birds at random in a cube of half-size `radius` around the
-/// spawn, flying at `speed`, drawn back to the spawn by the goal urge, kept inside `bounds`.
-pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
+/// spawn, flying at `speed`, drawn back to the spawn by the goal urge, kept inside `bounds` and
+/// out of `pillars`.
+pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb, pillars: Vec<Pillar>) -> Flock {
     let p = spawn;
     let count = spawn.params.get("count").and_then(|v| v.as_u64()).unwrap_or(16) as usize;
     let radius = num(p, "radius", 5.0);
@@ -97,6 +128,7 @@ pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
         separation_radius: (radius * 0.25).clamp(0.5, 3.0),
         neighbour_radius: (radius * 0.6).clamp(1.0, 5.0),
         bounds: Some(bounds),
+        pillars,
         seed,
         ..BoidParams::default()
     };
@@ -106,12 +138,16 @@ pub fn flock_for(spawn: &pack::Spawn, bounds: Aabb) -> Flock {
 
 /// The level's world from its spawns. `level_min`/`level_max` are the scene's bounds: the
 /// flocks' obstacle box (raised to clear each flock's spawn volume, since birds fly above the
-/// roofs) and the particles' ground plane (its floor).
-pub fn world_from_spawns(spawns: &[pack::Spawn], level_min: Vec3, level_max: Vec3) -> World {
+/// roofs) and the particles' ground plane (its floor). Every flock avoids every pillar.
+pub fn world_from_spawns(spawns: &[pack::Spawn], pillars: &[pack::Pillar], level_min: Vec3, level_max: Vec3) -> World {
+    let pillars = pillars_of(pillars);
     let mut world = World::new(FixedClock::new(ClockParams::default()));
     for s in spawns {
         match s.kind.as_str() {
-            "particles" => world.emitters.push(ParticleSystem::new(emitter_for(s, level_min.y))),
+            "particles" => {
+                world.emitters.push(ParticleSystem::new(emitter_for(s, level_min.y)));
+                world.emitter_names.push(s.name.clone());
+            }
             "boids" => {
                 let r = num(s, "radius", 5.0);
                 let top = level_max.y.max(s.position[1] + 2.0 * r);
@@ -119,7 +155,8 @@ pub fn world_from_spawns(spawns: &[pack::Spawn], level_min: Vec3, level_max: Vec
                     min: level_min.to_array(),
                     max: [level_max.x, top, level_max.z],
                 };
-                world.flocks.push(flock_for(s, bounds));
+                world.flocks.push(flock_for(s, bounds, pillars.clone()));
+                world.flock_names.push(s.name.clone());
             }
             _ => {}
         }

@@ -4,7 +4,7 @@
 
 use crate::camera::Camera;
 use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
-use crate::overlay::{FrameStats, Overlay};
+use crate::overlay::{FrameStats, Overlay, SimPanel};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::sim::World;
 use crate::sim_level;
@@ -272,7 +272,7 @@ impl State {
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
         let (min, max) = scene.bounds();
-        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
         sim_level::warm_up(&mut world);
         let frames = Frames::new(&gpu)?;
         Ok(State {
@@ -362,7 +362,7 @@ impl State {
         self.scene = scene;
         self.renderer.animation = engine_animated(&self.gpu, pack, &self.scene)?;
         let (min, max) = self.scene.bounds();
-        self.world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+        self.world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
         sim_level::warm_up(&mut self.world);
         self.camera = Camera::for_pack(&pack.manifest, min, max);
         self.lighting = Lighting::for_pack(&pack.manifest);
@@ -427,7 +427,8 @@ impl State {
         // Taken every frame, shown or not, so input does not pile up while the overlay is hidden.
         let input = self.egui.take_egui_input(&self.window);
         if let Some(o) = self.overlay.as_mut().filter(|o| o.visible) {
-            let platform = o.build(input, &mut self.renderer, &mut []);
+            // Slider edits land in the world now and take effect from its next step.
+            let platform = o.build(input, &mut self.renderer, &mut [&mut SimPanel::new(&mut self.world)]);
             self.egui.handle_platform_output(&self.window, platform);
             o.record(&self.gpu, cb, &target)?;
         }

@@ -86,6 +86,8 @@ pub struct SceneIr {
     pub nodes: Vec<Node>,
     pub lights: Vec<pack::Light>,
     pub spawns: Vec<Spawn>,
+    /// Vertical cylinders of the solid geometry (levels only), for the flocks to avoid.
+    pub pillars: Vec<pack::Pillar>,
     pub sky: Option<Sky>,
     pub lightmap: Option<LightmapLayout>,
     pub probes: Option<ProbesIr>,

@@ -30,6 +30,7 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
     b.manifest.nodes = scene.nodes.clone();
     b.manifest.lights = scene.lights.clone();
     b.manifest.spawns = scene.spawns.clone();
+    b.manifest.pillars = scene.pillars.clone();
     b.manifest.sky = scene.sky;
     b.manifest.lightmap = scene.lightmap.clone();
     if let Some(p) = &scene.probes {

@@ -29,6 +29,8 @@ struct WireScene {
     #[serde(default)]
     spawns: Vec<Spawn>,
     #[serde(default)]
+    pillars: Vec<pack::Pillar>,
+    #[serde(default)]
     sky: Option<Sky>,
     #[serde(default)]
     lightmap: Option<LightmapLayout>,
@@ -317,6 +319,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         nodes,
         lights: w.lights,
         spawns: w.spawns,
+        pillars: w.pillars,
         sky: w.sky,
         lightmap: w.lightmap,
         probes,
@@ -449,6 +452,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
             .collect(),
         lights: scene.lights.clone(),
         spawns: scene.spawns.clone(),
+        pillars: scene.pillars.clone(),
         sky: scene.sky,
         lightmap: scene.lightmap.clone(),
         probes,

@@ -22,7 +22,7 @@ from pathlib import Path
 import manifold3d as m3
 import numpy as np
 
-from asset_pipeline import gltf_import, ir
+from asset_pipeline import gltf_import, ir, obstacles
 from asset_pipeline.level import BrushSpec, LevelSpec
 from asset_pipeline.procedural_textures import procedural_texture
 
@@ -278,6 +278,7 @@ def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_g
     for i, sp in enumerate(spec.spawns):
         if sp.kind == "character" and "asset" in sp.params:
             merge_character(scene, spec, i, base_dir, import_gltf or gltf_import.import_gltf)
+    scene.pillars = obstacles.pillars(spec)
 
     scene.validate()
     return scene

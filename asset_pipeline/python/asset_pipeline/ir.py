@@ -209,6 +209,17 @@ class Spawn:
 
 
 @dataclass
+class Pillar:
+    """A vertical cylinder of a level's solid geometry, world space (pack::Pillar)."""
+
+    name: str  # the brush's, with the copy's number for a repeated brush: "columns[2]"
+    centre: tuple[float, float]  # the axis at (x, z)
+    radius: float
+    y_min: float
+    y_max: float
+
+
+@dataclass
 class Sky:
     color: tuple[float, float, float] = (0.5, 0.7, 1.0)  # linear
     intensity: float = 1.0  # luminance scale in nits
@@ -245,6 +256,7 @@ class Scene:
     nodes: list[Node] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)
     spawns: list[Spawn] = field(default_factory=list)
+    pillars: list[Pillar] = field(default_factory=list)  # levels: columns for the flocks to avoid
     sky: Sky | None = None
     lightmap: LightmapLayout | None = None
     probes: ProbeGrid | None = None
@@ -334,6 +346,7 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
         "nodes": [dataclasses.asdict(n) for n in scene.nodes],
         "lights": [dataclasses.asdict(l) for l in scene.lights],
         "spawns": [dataclasses.asdict(s) for s in scene.spawns],
+        "pillars": [dataclasses.asdict(p) for p in scene.pillars],
         "sky": None if scene.sky is None else dataclasses.asdict(scene.sky),
         "lightmap": None if scene.lightmap is None else dataclasses.asdict(scene.lightmap),
         "probes": None if scene.probes is None else {
@@ -371,6 +384,7 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
         nodes=[tup(n, Node) for n in doc["nodes"]],
         lights=[tup(l, Light) for l in doc.get("lights", [])],
         spawns=[tup(s, Spawn) for s in doc.get("spawns", [])],
+        pillars=[tup(p, Pillar) for p in doc.get("pillars", [])],
         sky=None if doc.get("sky") is None else tup(doc["sky"], Sky),
         skins=[Skin(s["name"], list(s["joints"]), arrays[s["inverse_bind"]]) for s in doc.get("skins", [])],
         clips=[Clip(c["name"], [Channel(ch["node"], ch["path"], ch["interpolation"], arrays[ch["times"]], arrays[ch["values"]]) for ch in c["channels"]])

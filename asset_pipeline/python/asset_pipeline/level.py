@@ -73,7 +73,8 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
     kind = "player"                 # player | character | boids | particles
     position = [0, 0, 0]
     rotation = [0, 0, 0]            # Euler degrees as brushes
-    params = { }                    # kind-specific, see SPAWN_PARAMS
+    params = { }                    # kind-specific, see SPAWN_PARAMS; particles may set
+                                    # blend = "alpha" | "additive" (default: from the name)
 """
 
 from __future__ import annotations
@@ -98,8 +99,11 @@ SPAWN_PARAMS = {
     "player": {"speed"},
     "character": {"asset", "animation", "speed", "route", "walk_speed"},
     "boids": {"count", "radius", "speed", "asset"},
-    "particles": {"rate_per_s", "lifetime_s", "speed", "spread_deg", "size", "color", "gravity"},
+    "particles": {"rate_per_s", "lifetime_s", "speed", "spread_deg", "size", "color", "gravity", "blend"},
 }
+# Particle blend modes: "alpha" (soft, sorted back to front: spray, smoke) or "additive" (adds
+# light, order-free: sparks, fire). Absent: the runtime guesses from the emitter's name.
+PARTICLE_BLENDS = ("alpha", "additive")
 
 
 @dataclass
@@ -623,6 +627,10 @@ def load_level(path: str | Path) -> LevelSpec:
                                             f"(expected one of: {', '.join(sorted(SPAWN_PARAMS[kind])) or 'none'})")
             if (kind, k) in SPAWN_PARAM_READERS:
                 s["params"][k] = SPAWN_PARAM_READERS[(kind, k)](c, s["params"][k], key + ("params", k))
+        blend = s["params"].get("blend")
+        if blend is not None and blend not in PARTICLE_BLENDS:
+            c.fail(key + ("params", "blend"), f"spawn '{s['name']}': unknown blend {blend!r} "
+                                               f"(expected one of: {', '.join(PARTICLE_BLENDS)})")
         spawns.append(s)
         spec.spawns.append(ir.Spawn(name=s["name"], kind=kind, position=s["position"],
                                     rotation=euler_quaternion(s["rotation"]), params=s["params"]))

@@ -71,6 +71,11 @@ pub struct Manifest {
     pub lights: Vec<Light>,
     #[serde(default)]
     pub spawns: Vec<Spawn>,
+    /// Vertical cylinders of the level's solid geometry (columns, basins): the CSG merges them
+    /// into one mesh, so the cooker records them from the authored brushes for the flocks to
+    /// steer around. Absent in packs cooked before they were recorded.
+    #[serde(default)]
+    pub pillars: Vec<Pillar>,
     #[serde(default)]
     pub sky: Option<Sky>,
     /// The lightmap atlas the static meshes' uv1 refer to (pages and density); `None` when the
@@ -126,6 +131,34 @@ pub struct Spawn {
     /// Kind-specific parameters (asset, count, radius, rate, ...), kept as authored.
     #[serde(default)]
     pub params: serde_json::Value,
+}
+
+/// A vertical cylinder in world space: axis at (x, z) = `centre`, from `y_min` to `y_max`.
+/// `name` is the brush's, with the copy's number for a repeated brush (`columns[2]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Pillar {
+    pub name: String,
+    pub centre: [f32; 2],
+    pub radius: f32,
+    pub y_min: f32,
+    pub y_max: f32,
+}
+
+impl Pillar {
+    /// Why the pillar cannot be used, if it cannot (non-finite numbers, no radius or height).
+    fn problem(&self) -> Option<String> {
+        let numbers = [self.centre[0], self.centre[1], self.radius, self.y_min, self.y_max];
+        if !numbers.iter().all(|x| x.is_finite()) {
+            return Some(format!("non-finite numbers (centre {:?}, radius {}, y {}..{})", self.centre, self.radius, self.y_min, self.y_max));
+        }
+        if !(self.radius > 0.0) {
+            return Some(format!("radius {} is not positive", self.radius));
+        }
+        if !(self.y_min < self.y_max) {
+            return Some(format!("y range {}..{} is empty", self.y_min, self.y_max));
+        }
+        None
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -409,6 +442,11 @@ impl Manifest {
             }
             in_data("probes sh", g.sh, n * 27 * 4)?;
             in_data("probes sun_visibility", g.sun_visibility, n * 4)?;
+        }
+        for (i, p) in self.pillars.iter().enumerate() {
+            if let Some(problem) = p.problem() {
+                return bad(format!("pillar {i} '{}': {problem}", p.name));
+            }
         }
         self.animation.validate(self, &in_data)?;
         for (i, n) in self.nodes.iter().enumerate() {

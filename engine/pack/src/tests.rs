@@ -71,6 +71,7 @@ fn sample() -> Pack {
         rotation: [0.0, 0.0, 0.0, 1.0],
         params: serde_json::json!({"speed": 4.0}),
     });
+    b.manifest.pillars.push(Pillar { name: "columns[1]".into(), centre: [-6.0, 3.6], radius: 0.45, y_min: 0.5, y_max: 7.3 });
     b.manifest.sky = Some(Sky { color: [0.5, 0.7, 1.0], intensity: 8000.0 });
     // A baked 4x4 lightmap page (half floats) and a 2x1x1 probe grid.
     let lm = b.push_bytes(&[0x3cu8; 4 * 4 * 8]);
@@ -216,6 +217,25 @@ fn dangling_references_are_rejected_before_writing() {
     p.manifest.probes.as_mut().unwrap().spacing[1] = 0.0;
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("probes: bad grid"), "{e}");
+}
+
+#[test]
+fn bad_pillars_are_rejected_by_name_and_old_manifests_have_none() {
+    for (edit, want) in [
+        ((|p: &mut Pillar| p.radius = 0.0) as fn(&mut Pillar), "pillar 0 'columns[1]': radius 0 is not positive"),
+        (|p: &mut Pillar| p.y_max = p.y_min, "pillar 0 'columns[1]': y range 0.5..0.5 is empty"),
+        (|p: &mut Pillar| p.centre[1] = f32::NAN, "pillar 0 'columns[1]': non-finite numbers"),
+    ] {
+        let mut p = sample();
+        edit(&mut p.manifest.pillars[0]);
+        let e = p.to_bytes().unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+    // A manifest written before pillars were recorded has no `pillars` key: it reads as none.
+    let mut json = serde_json::to_value(&sample().manifest).unwrap();
+    json.as_object_mut().unwrap().remove("pillars").expect("the sample has pillars");
+    let m: Manifest = serde_json::from_value(json).unwrap();
+    assert!(m.pillars.is_empty());
 }
 
 #[test]

@@ -40,7 +40,9 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
 The debug overlay (F1; hidden at start unless --overlay): frame-time graph (CPU frame and GPU
 ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass, and switches
 for the depth pre-pass, frustum culling, LOD selection and freezing, fragment counting and the
-LOD pixel error. While the pointer is over the overlay, the mouse works it, not the camera.";
+LOD pixel error; its \"simulation\" section has sliders for every flock's and particle
+emitter's parameters, applied to the running simulation at once. While the pointer is over the
+overlay, the mouse works it, not the camera.";
 
 fn usage() -> String {
     format!("{USAGE}\n\nIn the window: {}", window::KEYS)
@@ -231,7 +233,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let (min, max) = scene.bounds();
     let camera = Camera::for_pack(&pack.manifest, min, max);
     let lighting = Lighting::for_pack(&pack.manifest);
-    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     engine::sim_level::warm_up(&mut world);
     let frames = args.frames.unwrap_or(100);
     let mut frame_ms = Vec::with_capacity(frames as usize);
@@ -251,7 +253,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
-                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut []);
+                let mut sim = overlay::SimPanel::new(&mut world);
+                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
                 o.record(&gpu, cb, frame)
             })?,
             None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,

@@ -8,9 +8,11 @@
 
 pub mod history;
 pub mod panels;
+pub mod sim_panel;
 
 pub use history::{FrameHistory, Ring, HISTORY_FRAMES};
 pub use panels::{ControlRects, Panel, RendererPanel};
+pub use sim_panel::SimPanel;
 
 use crate::gpu::{barrier, full_range, Gpu, Transition};
 use crate::renderer::{FrameTarget, PassStats, PassTimes, Renderer};
@@ -249,7 +251,7 @@ pub fn headless_input(width: u32, height: u32, time_s: f64, events: Vec<egui::Ev
 
 fn show_panel(ui: &mut egui::Ui, panel: &mut dyn Panel, open: bool) {
     let title = panel.title().to_string();
-    egui::CollapsingHeader::new(title).default_open(open).show(ui, |ui| panel.ui(ui));
+    egui::CollapsingHeader::new(title).default_open(open || panel.default_open()).show(ui, |ui| panel.ui(ui));
 }
 
 /// Dark and without shadows, so nothing is drawn outside the window's rectangle.

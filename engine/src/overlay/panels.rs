@@ -12,6 +12,10 @@ use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 pub trait Panel {
     fn title(&self) -> &str;
     fn ui(&mut self, ui: &mut egui::Ui);
+    /// Whether the section starts open (egui remembers the user's choice after that).
+    fn default_open(&self) -> bool {
+        false
+    }
 }
 
 /// Where each labelled control was laid out last frame (points), so scripted input (tests, the

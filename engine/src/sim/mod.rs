@@ -31,6 +31,9 @@ pub struct World {
     pub clock: FixedClock,
     pub emitters: Vec<ParticleSystem>,
     pub flocks: Vec<Flock>,
+    /// The spawn each emitter and flock came from, by index, where known (the overlay's labels).
+    pub emitter_names: Vec<String>,
+    pub flock_names: Vec<String>,
 }
 
 impl World {
@@ -39,6 +42,8 @@ impl World {
             clock,
             emitters: Vec::new(),
             flocks: Vec::new(),
+            emitter_names: Vec::new(),
+            flock_names: Vec::new(),
         }
     }
 

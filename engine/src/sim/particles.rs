@@ -202,6 +202,12 @@ impl EmitterParams {
     }
 }
 
+/// A capacity that holds an emitter's steady state: rate × the longest life particles are alive
+/// at once, with a quarter more and a few extra for the spawn rounding, so none is dropped.
+pub fn steady_state_capacity(rate_per_s: f32, life_max_s: f32) -> u32 {
+    (rate_per_s.max(0.0) * life_max_s.max(0.0) * 1.25).ceil() as u32 + 16
+}
+
 /// Live particles, one array per component, each allocated at capacity once.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Particles {

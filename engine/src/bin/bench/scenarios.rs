@@ -467,7 +467,7 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
     let scene = GpuScene::upload(gpu, &pack, renderer.layouts())?;
     renderer.animation = AnimatedScene::new(gpu, &pack, &scene, 1)?;
     let (min, max) = scene.bounds();
-    let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, min, max);
+    let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     sim_level::warm_up(&mut world);
     let centre = (min + max) * 0.5;
     let radius = 0.45 * (max - min).truncate().length().max(1.0);
