@@ -25,7 +25,9 @@ OUTLIER_FRACTION = 0.002
 
 
 def render_headless(pack: Path, out: Path, width: int, height: int, frames: int = 1) -> subprocess.CompletedProcess:
-    result = run_demo([str(pack), "--headless", "--validation", "--frames", str(frames), "--width", str(width), "--height", str(height), "--screenshot", str(out)])
+    # A still camera at the player's view (`--flight 0`): these tests are about the rendering.
+    result = run_demo([str(pack), "--headless", "--validation", "--flight", "0", "--frames", str(frames), "--width", str(width), "--height", str(height),
+                       "--screenshot", str(out)])
     assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
     assert "validation errors: 0" in result.stdout, result.stdout
     assert "[vulkan validation error]" not in result.stderr, result.stderr
@@ -110,6 +112,28 @@ def test_cooked_demo_level_matches_its_reference_image(tmp_path):
         reference.parent.mkdir(exist_ok=True)
         reference.write_bytes(out.read_bytes())
     compare_to_reference(out, reference)
+
+
+def test_headless_demo_flies_over_the_level_and_its_screens_match_references(tmp_path):
+    # The headless demo's camera flight (from the player's view, in at eye height, up and around
+    # above the roofs) with screens at set times; the simulation and animation step 1/60 s per
+    # frame, so each screen shows the same moment on every run and machine.
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
+    times = ("0", "3", "6")
+    result = run_demo([str(pack), "--headless", "--validation", "--width", "160", "--height", "90", "--shadow-map-size", "512",
+                       "--screens", ",".join(times), "--screens-dir", str(tmp_path / "screens"), "--screenshot", str(tmp_path / "last.png")])
+    assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
+    assert "validation errors: 0" in result.stdout and "frame_ms: median" in result.stdout, result.stdout
+    shots = [load_rgb(tmp_path / "screens" / f"t{t}s.png") for t in times]
+    # The camera moves: every screen is a different view.
+    for a, b in zip(shots, shots[1:]):
+        assert (np.abs(a - b).max(axis=-1) > TOLERANCE).mean() > 0.3
+    for t in times:
+        reference = REFERENCE_DIR / f"flight_t{t}s_160x90.png"
+        if os.environ.get("UPDATE_REFERENCE") == "1":
+            reference.write_bytes((tmp_path / "screens" / f"t{t}s.png").read_bytes())
+        compare_to_reference(tmp_path / "screens" / f"t{t}s.png", reference)
 
 
 def test_project_demo_content_renders(tmp_path):

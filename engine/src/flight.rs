@@ -1,12 +1,12 @@
 //! The scripted camera flight of the headless demo and of the `demo-flythrough` benchmark: from
-//! the player's view, forward into the level at eye height, up over it, once around it above the
-//! roofs looking down, and back down to where it started, as a closed Catmull-Rom spline through
-//! those keys (positions and look-at points), so it loops without a jolt.
+//! the player's view straight up, once around the level above its roofs looking down at it, and
+//! back down onto the player's view, as a closed Catmull-Rom spline through those keys
+//! (positions and look-at points), so it loops without a jolt.
 //!
 //! Derived from the pack's player spawn and bounds, so any level gets a flight that starts where
-//! the player stands (at t = 0 it is exactly `Camera::for_pack`) and sees every side of it; half
-//! of it is at ground level, where most of the level is behind the camera or hidden and frustum
-//! culling has work to do.
+//! the player stands (at t = 0 it is exactly `Camera::for_pack`) and sees every side of it. It
+//! leaves the ground only vertically and flies above the level's bounds, so it never passes
+//! through a wall: the runtime keeps no collision geometry to steer around.
 
 use crate::camera::Camera;
 use glam::Vec3;
@@ -29,29 +29,28 @@ impl Flight {
         let centre = (min + max) * 0.5;
         let ground = Vec3::new(centre.x, eye.y, centre.z);
         let size = (max - min).truncate().length().max(1.0);
-        // Forward along the player's view (level), up to 40% of the way to the centre.
-        let mut ahead = Vec3::new(start.forward().x, 0.0, start.forward().z).normalize_or(Vec3::NEG_Z);
-        if !ahead.is_finite() {
-            ahead = Vec3::NEG_Z;
-        }
-        let walk = eye + ahead * 0.4 * (ground - eye).length().max(2.0);
-        let high = min.y + 0.75 * (max.y - min.y).max(4.0) + 0.15 * size;
+        let ahead = Vec3::new(start.forward().x, 0.0, start.forward().z).normalize_or(Vec3::NEG_Z);
+        // Above everything: the flight never needs to know where the walls are.
+        let high = (max.y + 0.1 * size).max(min.y + 0.75 * (max.y - min.y).max(4.0) + 0.15 * size);
         let radius = 0.45 * size;
         // Round the level, starting from the side the player is on.
-        let from = (eye - ground).truncate();
-        let a0 = if from.length() > 1e-3 { from.y.atan2(from.x) } else { 0.0 };
+        let (dx, dz) = (eye.x - centre.x, eye.z - centre.z);
+        let a0 = if dx * dx + dz * dz > 1e-6 { dz.atan2(dx) } else { 0.0 };
         let around = |k: f32| {
             let a = a0 + k * std::f32::consts::FRAC_PI_2;
             Vec3::new(centre.x + radius * a.cos(), high, centre.z + radius * a.sin())
         };
+        let above_eye = Vec3::new(eye.x, high, eye.z);
         let keys = vec![
             (eye, eye + start.forward() * 10.0),
-            (walk, walk + ahead * 10.0),
-            (walk.lerp(ground, 0.5) + Vec3::Y * 0.5 * (high - eye.y), ground),
+            // Straight up from where the player stands, tilting down towards the level's centre.
+            (eye.lerp(above_eye, 0.5), ground),
+            (around(0.0), centre),
             (around(1.0), centre),
             (around(2.0), centre),
             (around(3.0), centre),
-            (around(4.0) + (eye - around(4.0)) * 0.5, ground),
+            // Back over the player, then straight down into the first view.
+            (above_eye, eye + ahead * 10.0),
         ];
         Flight {
             keys,

@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W] [--height H]
-            [--screenshot PATH] [--screenshot-every K] [--overlay] [--device auto|cpu|gpu|NAME]
+            [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
+            [--overlay] [--device auto|cpu|gpu|NAME]
             [--validation] [--shadow-map-size N]
        demo --dump-pose PACK --clip NAME --time T
 
@@ -28,6 +29,11 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
   --width/--height     image or window size in pixels (default 1280x720)
   --screenshot PATH    headless: write the last frame here (default build/screenshots/demo.png)
   --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
+  --screens T,T,...    headless: also write the frames at these times (seconds of the flight,
+                       each frame 1/60 s) as t<T>s.png in --screens-dir (default build/screens)
+  --flight SECONDS     headless: the camera flies a loop of this length over the level (from the
+                       player's view, in at eye height, up and around above the roofs, back down;
+                       default 24); 0 keeps it at the player's view
   --overlay            show the debug overlay (frame-time graph, counters, switches) from the
                        start; headless, it is drawn into the frames, so screenshots show it
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
@@ -60,6 +66,10 @@ struct Args {
     height: u32,
     screenshot: PathBuf,
     screenshot_every: Option<u64>,
+    /// Frame numbers (from 0) to write to build/screens/, with the time they show.
+    screens: Vec<(u64, f64)>,
+    flight: f32,
+    screens_dir: PathBuf,
     overlay: bool,
     device: DevicePreference,
     validation: bool,
@@ -78,6 +88,9 @@ fn parse_args() -> Result<Args, String> {
         height: 720,
         screenshot: PathBuf::from("build/screenshots/demo.png"),
         screenshot_every: None,
+        screens: Vec::new(),
+        flight: engine::flight::DEFAULT_SECONDS,
+        screens_dir: PathBuf::from("build/screens"),
         overlay: false,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
@@ -103,6 +116,17 @@ fn parse_args() -> Result<Args, String> {
             "--height" => a.height = number("--height", value("--height")?)?,
             "--screenshot" => a.screenshot = PathBuf::from(value("--screenshot")?),
             "--screenshot-every" => a.screenshot_every = Some(number("--screenshot-every", value("--screenshot-every")?)?),
+            "--screens" => {
+                for t in value("--screens")?.split(',') {
+                    let secs: f64 = t.trim().parse().ok().filter(|s: &f64| s.is_finite() && *s >= 0.0).ok_or(format!("--screens: '{t}' is not a time in seconds"))?;
+                    a.screens.push(((secs * 60.0).round() as u64, secs));
+                }
+            }
+            "--screens-dir" => a.screens_dir = PathBuf::from(value("--screens-dir")?),
+            "--flight" => {
+                let v = value("--flight")?;
+                a.flight = v.parse().ok().filter(|s: &f32| s.is_finite() && *s >= 0.0).ok_or(format!("--flight: '{v}' is not a length in seconds"))?;
+            }
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
             "--shadow-map-size" => a.shadow_map_size = number("--shadow-map-size", value("--shadow-map-size")?)?,
             "--dump-pose" => a.dump_pose = Some((PathBuf::from(value("--dump-pose")?), None, None)),
@@ -231,11 +255,19 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     renderer.animation = engine::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
     let (min, max) = scene.bounds();
-    let camera = Camera::for_pack(&pack.manifest, min, max);
+    let still = Camera::for_pack(&pack.manifest, min, max);
+    let flight = (args.flight > 0.0).then(|| engine::flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
     let lighting = Lighting::for_pack(&pack.manifest);
+    if !args.screens.is_empty() {
+        std::fs::create_dir_all(&args.screens_dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", args.screens_dir.display()))?;
+    }
     let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     engine::sim_level::warm_up(&mut world);
-    let frames = args.frames.unwrap_or(100);
+    // Long enough for every requested screen unless the frame count was given.
+    let frames = args.frames.unwrap_or_else(|| args.screens.iter().map(|&(k, _)| k + 1).max().unwrap_or(0).max(100));
+    if let Some(&(_, secs)) = args.screens.iter().find(|&&(k, _)| k >= frames) {
+        anyhow::bail!("--screens {secs}: past the last frame ({frames} frames are {:.2} s)", frames as f64 / 60.0);
+    }
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut gpu_ms = Vec::with_capacity(frames as usize);
     let mut pass_ms: [Vec<f64>; 5] = Default::default();
@@ -248,8 +280,11 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         // Headless frames advance the simulation by a fixed 1/60 s: the same frames give the
         // same image whatever the machine's speed.
         world.update(1.0 / 60.0);
+        // Frame f shows the flight at f/60 s (frame 0: the player's view).
+        let camera = flight.as_ref().map_or(still, |fl| fl.camera(f as f32 / 60.0));
+        let screen = args.screens.iter().find(|(k, _)| *k == f).map(|&(_, secs)| secs);
         engine::sim_level::prepare_frame(&world, &mut renderer, &camera);
-        let capture = last || every;
+        let capture = last || every || screen.is_some();
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
@@ -273,6 +308,11 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));
             target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
+        }
+        if let Some(secs) = screen {
+            let path = args.screens_dir.join(format!("t{secs}s.png"));
+            target.save_png(&path)?;
+            println!("wrote {}", path.display());
         }
     }
     target.save_png(&args.screenshot)?;

@@ -16,6 +16,7 @@
 use super::{boxes_pack, cube_grid, skinned_bench};
 use engine::animated::AnimatedScene;
 use engine::camera::Camera;
+use engine::flight::{self, Flight};
 use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, PassTimes, Renderer};
@@ -457,11 +458,10 @@ fn read_pack(path: &Path) -> anyhow::Result<Pack> {
     })
 }
 
-/// Seconds of the camera's orbit around the level: a full turn, so the path sees every side.
-const ORBIT_S: f32 = 12.0;
-
 /// The demo level as `demo` shows it headless (animation, spawned boids and particles warmed up),
-/// seen from a camera orbiting the level's centre above the roofs, looking down at it.
+/// seen along the headless demo's camera flight (`engine::flight`): the measured frames are
+/// spread over the whole loop (a time-lapse of the camera; the simulation still steps 1/60 s per
+/// frame), so the percentiles cover every view, ground level and above the roofs.
 fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::Result<Setup> {
     let pack = read_pack(&o.level)?;
     let scene = GpuScene::upload(gpu, &pack, renderer.layouts())?;
@@ -469,14 +469,9 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
     let (min, max) = scene.bounds();
     let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     sim_level::warm_up(&mut world);
-    let centre = (min + max) * 0.5;
-    let radius = 0.45 * (max - min).truncate().length().max(1.0);
-    let height = min.y + 0.6 * (max.y - min.y).max(4.0);
-    let camera = move |k: usize| {
-        let angle = std::f32::consts::TAU * (k as f64 * FRAME_S) as f32 / ORBIT_S;
-        let position = Vec3::new(centre.x + radius * angle.cos(), height, centre.z + radius * angle.sin());
-        looking_at(position, centre)
-    };
+    let flight = Flight::for_pack(&pack.manifest, min, max, flight::DEFAULT_SECONDS);
+    let (warmup, frames) = (o.warmup, o.frames.max(1));
+    let camera = move |k: usize| flight.camera(k.saturating_sub(warmup) as f32 / frames as f32 * flight.seconds);
     let mut content = Map::new();
     content.insert("level".into(), json!(o.level.display().to_string()));
     content.insert("spawns".into(), json!(pack.manifest.spawns.len()));
