@@ -16,9 +16,12 @@ layout(push_constant) uniform Draw {
 } draw;
 
 layout(location = 0) out vec3 out_normal;
-// The depth pre-pass and the shading pass run this same shader; invariance makes their depths
-// bit-identical, so the shading pass's EQUAL test passes exactly the pre-pass's winners.
-invariant gl_Position;
+// The depth pre-pass and the shading pass run this same shader, and the shading pass's EQUAL
+// test must pass exactly the pre-pass's winners: `precise` forbids the compiler to fuse or
+// reorder the position's arithmetic differently in the two pipelines. (`invariant gl_Position`
+// says the same but glslang puts it on a member of the gl_PerVertex block, which the validation
+// layer's SPIR-V checker flags with a warning on every pipeline.)
+precise gl_Position;
 layout(location = 1) out vec2 out_uv0;
 layout(location = 2) out vec4 out_color;
 layout(location = 3) out vec3 out_world;

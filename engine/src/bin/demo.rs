@@ -31,6 +31,8 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
   --screenshot-every K headless: also write every K-th frame next to it as frame_NNNNN.png
   --screens T,T,...    headless: also write the frames at these times (seconds of the flight,
                        each frame 1/60 s) as t<T>s.png in --screens-dir (default build/screens)
+  --rss-at N,N,...     headless: print the process's resident memory after these frames (the
+                       soak test, `make soak`, compares them)
   --flight SECONDS     headless: the camera flies a loop of this length over the level (from the
                        player's view, in at eye height, up and around above the roofs, back down;
                        default 24); 0 keeps it at the player's view
@@ -70,6 +72,7 @@ struct Args {
     screens: Vec<(u64, f64)>,
     flight: f32,
     screens_dir: PathBuf,
+    rss_at: Vec<u64>,
     overlay: bool,
     device: DevicePreference,
     validation: bool,
@@ -91,6 +94,7 @@ fn parse_args() -> Result<Args, String> {
         screens: Vec::new(),
         flight: engine::flight::DEFAULT_SECONDS,
         screens_dir: PathBuf::from("build/screens"),
+        rss_at: Vec::new(),
         overlay: false,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
@@ -123,6 +127,11 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "--screens-dir" => a.screens_dir = PathBuf::from(value("--screens-dir")?),
+            "--rss-at" => {
+                for n in value("--rss-at")?.split(',') {
+                    a.rss_at.push(n.trim().parse().ok().filter(|&n: &u64| n > 0).ok_or(format!("--rss-at: '{n}' is not a frame count"))?);
+                }
+            }
             "--flight" => {
                 let v = value("--flight")?;
                 a.flight = v.parse().ok().filter(|s: &f32| s.is_finite() && *s >= 0.0).ok_or(format!("--flight: '{v}' is not a length in seconds"))?;
@@ -233,6 +242,13 @@ fn main() -> ExitCode {
     }
 }
 
+/// The process's resident set size (Linux: /proc/self/statm, in pages of 4 KiB).
+fn resident_kib() -> Option<u64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * 4)
+}
+
 fn validation_verdict(enabled: bool, errors: usize) -> ExitCode {
     if enabled {
         println!("validation errors: {errors}");
@@ -308,6 +324,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));
             target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
+        }
+        if args.rss_at.contains(&(f + 1)) {
+            println!("rss after frame {}: {} KiB", f + 1, resident_kib().unwrap_or(0));
         }
         if let Some(secs) = screen {
             let path = args.screens_dir.join(format!("t{secs}s.png"));
