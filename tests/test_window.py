@@ -157,11 +157,23 @@ class DemoWindow:
         subprocess.run(["import", "-display", self.display, "-window", "root", str(path)], check=True, timeout=60)
         return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
 
-    def close(self) -> tuple[int, str, str]:
+    def close(self):
+        """Close the window (SIGTERM, unless it is already closing) and check a clean exit with no
+        validation message."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
         out, err = self.proc.communicate(timeout=60)
-        return self.proc.returncode, "".join(self.log) + out, err
+        out = "".join(self.log) + out
+        assert self.proc.returncode == 0, f"demo exit {self.proc.returncode}:\n{out}\n{err}"
+        assert "validation errors: 0" in out and "[vulkan validation" not in err, out + err
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=60)
 
 
 def changed(a: np.ndarray, b: np.ndarray) -> float:
@@ -176,8 +188,7 @@ def test_keys_and_mouse_drive_the_demo_window(xvfb, tmp_path):
     # view; Tab switches to the second pack; Escape quits cleanly with validation clean.
     temple, second = REPO / "build" / "temple.pack", REPO / "build" / "demo.pack"
     assert temple.exists() and second.exists(), "build/temple.pack and build/demo.pack are made by `make cook`"
-    w = DemoWindow(xvfb, temple, second)
-    try:
+    with DemoWindow(xvfb, temple, second) as w:
         w.wait_for("presented 10 frames")
         time.sleep(1.0)
         lit = w.screenshot(tmp_path / "lit.png")
@@ -202,12 +213,7 @@ def test_keys_and_mouse_drive_the_demo_window(xvfb, tmp_path):
             w.key(key, f"window: {switch} {second}", settle=0.5)
         w.focus()
         w.xdotool("key", "Escape")
-        code, out, err = w.close()
-    finally:
-        if w.proc.poll() is None:
-            w.proc.kill()
-    assert code == 0, f"demo exit {code}:\n{out}\n{err}"
-    assert "validation errors: 0" in out and "[vulkan validation error]" not in err, out + err
+        w.close()
     print(f"changed: lightmaps off {changed(lit, unlit):.1%}, on again {changed(lit, relit):.1%}, "
           f"turned {changed(relit, turned):.1%}, next scene {changed(turned, other):.1%}")
     # Without lightmaps the static level loses its baked shadows and bounce light (the probes'
@@ -224,8 +230,7 @@ def test_resizing_hiding_and_showing_the_window_keep_it_rendering(xvfb, tmp_path
     # A resize rebuilds the swapchain at the new size (the old one is out of date, which must not
     # be fatal) and the scene fills the new size; an unmapped (hidden, as minimised) window and
     # its return keep the demo running; validation stays clean throughout.
-    w = DemoWindow(xvfb, REPO / "build" / "temple.pack")
-    try:
+    with DemoWindow(xvfb, REPO / "build" / "temple.pack") as w:
         w.wait_for("presented 10 frames")
         w.focus()
         window_id = subprocess.run(["xdotool", "getwindowfocus"], capture_output=True, text=True, timeout=30, env=w.env).stdout.strip()
@@ -240,12 +245,7 @@ def test_resizing_hiding_and_showing_the_window_keep_it_rendering(xvfb, tmp_path
         w.wait_for(f"window: swapchain rebuilt at {WIDTH}x{HEIGHT}", timeout=60)
         time.sleep(2.0)
         full = w.screenshot(tmp_path / "full.png")
-        code, out, err = w.close()
-    finally:
-        if w.proc.poll() is None:
-            w.proc.kill()
-    assert code == 0, f"demo exit {code}:\n{out}\n{err}"
-    assert "validation errors: 0" in out and "[vulkan validation error]" not in err, out + err
+        w.close()
     colours = lambda img: len({tuple(p // 16) for p in img.reshape(-1, 3)})
     # The small window shows the scene in its 400x240 corner of the screen; the rest is the bare root.
     root = small[-1, -1]
