@@ -303,12 +303,12 @@ GLB = lambda: glb_bytes(quad_doc(texture=False))  # noqa: E731
 GLTF_CASES = [
     # binary container
     glb_case("truncated-header", lambda: GLB()[:10], "not a glTF 2.0 file"),
-    glb_case("truncated-in-json", lambda: GLB()[:40], "not a glTF 2.0 file"),
-    glb_case("truncated-in-bin", lambda: GLB()[:-40], "not a glTF 2.0 file"),
-    glb_case("length-past-end", lambda: patch(GLB(), 8, "<I", len(GLB()) + 4096), "not a glTF 2.0 file"),
+    glb_case("truncated-in-json", lambda: GLB()[:40], "not a glTF 2.0 file: GLB header declares a length of", "bytes but the file has 40 (cut short?)"),
+    glb_case("truncated-in-bin", lambda: GLB()[:-40], "not a glTF 2.0 file: GLB header declares a length of", "(cut short?)"),
+    glb_case("length-past-end", lambda: patch(GLB(), 8, "<I", len(GLB()) + 4096), f"not a glTF 2.0 file: GLB header declares a length of {len(GLB()) + 4096} bytes but the file has {len(GLB())}"),
     glb_case("length-under-header", lambda: patch(GLB(), 8, "<I", 8), "not a glTF 2.0 file", "GLB header declares a length of 8 bytes"),
-    glb_case("json-chunk-length-huge", lambda: patch(GLB(), 12, "<I", 0xFFFFFFF0), "not a glTF 2.0 file"),
-    glb_case("bin-chunk-length-huge", lambda: patch(GLB(), 20 + glb_json_len(GLB()), "<I", 0x7FFFFFF0), "not a glTF 2.0 file"),
+    glb_case("json-chunk-length-huge", lambda: patch(GLB(), 12, "<I", 0xFFFFFFF0), "not a glTF 2.0 file: GLB chunk 0 (JSON) declares 4294967280 bytes but only"),
+    glb_case("bin-chunk-length-huge", lambda: patch(GLB(), 20 + glb_json_len(GLB()), "<I", 0x7FFFFFF0), "not a glTF 2.0 file: GLB chunk 1 (BIN) declares 2147483632 bytes but only"),
     glb_case("container-version-1", lambda: patch(GLB(), 4, "<I", 1), "not a glTF 2.0 file", "GLB container version 1"),
     glb_case("first-chunk-not-json", lambda: patch(GLB(), 16, "<I", 0x004E4942), "not a glTF 2.0 file"),
     glb_case("json-chunk-garbage", lambda: GLB()[:20] + b"\xff" * glb_json_len(GLB()) + GLB()[20 + glb_json_len(GLB()):], "not a glTF 2.0 file"),
