@@ -25,7 +25,7 @@ import numpy as np
 
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
-from asset_pipeline.cache import Hasher, StageCache
+from asset_pipeline.cache import Hasher, StageCache, process_running
 from asset_pipeline.gltf_import import import_gltf, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
@@ -223,6 +223,7 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     rec = StageRecord("write", items=1)
     t0 = time.perf_counter()
     _remove_stale_temporaries(out)
+    cache.remove_stale_temporaries()
     with progress.stage("write", 1) as bar:
         # Lightmap files first, then the pack: each is written whole and renamed into place.
         exrs = _write_exrs(scene, out)
@@ -258,22 +259,12 @@ def _remove_stale_temporaries(out: Path) -> None:
         if m is None or not (m["name"] in mine or (m["name"].startswith(f"{out.stem}.lightmap") and m["name"].endswith(".exr"))):
             continue
         pid = m["pid"] or m["pid2"]
-        if pid is not None and int(pid) != os.getpid() and _running(int(pid)):
+        if pid is not None and int(pid) != os.getpid() and process_running(int(pid)):
             continue
         try:
             f.unlink()
         except OSError:
             pass
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def _unchanged(path: Path, size: int, mtime_ns: int) -> bool:
