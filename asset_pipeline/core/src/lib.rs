@@ -83,9 +83,10 @@ pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result
     };
     scene.materials = material::cook_materials(&src, &mut scene.textures, &mut step).map_err(invalid)?;
     let default_material = scene.materials.len() as u32;
+    let mut budget = mesh::MAX_VERTICES;
     for m in doc.meshes() {
         step(&label("mesh", m.index(), m.name()));
-        scene.meshes.push(mesh::cook_mesh(&m, &src.buffers, default_material, &mut scene.warnings).map_err(invalid)?);
+        scene.meshes.push(mesh::cook_mesh(&m, &src.buffers, default_material, &mut scene.warnings, &mut budget).map_err(invalid)?);
     }
     let uses_default = scene.meshes.iter().flat_map(|m| &m.lods[0].materials).any(|&m| m == default_material);
     if uses_default {
@@ -111,6 +112,10 @@ pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result
     Ok(scene)
 }
 
+/// The largest texture side the cooker accepts: what Vulkan devices commonly support for 2D
+/// images (lavapipe's `maxImageDimension2D`); a bigger image would cook but never load.
+pub const MAX_TEXTURE_SIZE: u32 = 16384;
+
 /// Decode a PNG or JPEG file to RGBA8: (width, height, texels).
 pub fn decode_image(path: &Path) -> Result<(u32, u32, Vec<u8>), CookError> {
     let file = path.display().to_string();
@@ -120,6 +125,9 @@ pub fn decode_image(path: &Path) -> Result<(u32, u32, Vec<u8>), CookError> {
     })?;
     let rgba = image::load_from_memory(&bytes).map_err(|e| CookError::invalid(&file, format!("cannot decode image: {e}")))?.to_rgba8();
     let (w, h) = rgba.dimensions();
+    if w.max(h) > MAX_TEXTURE_SIZE {
+        return Err(CookError::invalid(&file, format!("{w} x {h} texels, larger than the {MAX_TEXTURE_SIZE} per side a texture may have")));
+    }
     Ok((w, h, rgba.into_raw()))
 }
 

@@ -74,11 +74,36 @@ fn check_position_indices(json: &gltf::json::Root) -> Result<(), String> {
 }
 
 /// The gltf crate subtracts before it compares on a GLB header; reject what would underflow.
+/// Lengths that run past the end of the file are reported here too, with the numbers (the
+/// crate's own message for them is "could not completely read the object").
 fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
-    let word = |at: usize| bytes.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let word = |at: u64| bytes.get(at as usize..at as usize + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
     match (word(4), word(8)) {
-        (Some(2), Some(len)) if len >= 12 => Ok(()),
-        (Some(2), Some(len)) => Err(format!("GLB header declares a length of {len} bytes")),
+        (Some(2), Some(len)) if len < 12 => Err(format!("GLB header declares a length of {len} bytes")),
+        (Some(2), Some(len)) if len as usize > bytes.len() => {
+            Err(format!("GLB header declares a length of {len} bytes but the file has {} (cut short?)", bytes.len()))
+        }
+        (Some(2), Some(len)) => {
+            let (len, mut at) = (len as u64, 12u64);
+            for chunk in 0.. {
+                if at >= len {
+                    break;
+                }
+                let (Some(size), Some(kind)) = (word(at).filter(|_| at + 8 <= len), word(at + 4)) else {
+                    return Err(format!("GLB chunk {chunk} header at byte {at} is cut short"));
+                };
+                let name = match kind {
+                    0x4E4F_534A => "JSON".to_string(),
+                    0x004E_4942 => "BIN".to_string(),
+                    k => format!("type {k:#010x}"),
+                };
+                if at + 8 + size as u64 > len {
+                    return Err(format!("GLB chunk {chunk} ({name}) declares {size} bytes but only {} follow", len - at - 8));
+                }
+                at += 8 + size as u64;
+            }
+            Ok(())
+        }
         (Some(v), Some(_)) => Err(format!("GLB container version {v}, expected 2")),
         _ => Err("GLB header is cut short".into()),
     }

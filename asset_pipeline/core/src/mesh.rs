@@ -18,7 +18,7 @@ struct Deform {
 
 /// Import one glTF mesh. Primitives without a material use `default_material`. Fixes the import
 /// made on its own (influences reduced to four) are pushed to `warnings`.
-pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32, warnings: &mut Vec<String>) -> Result<MeshIr, String> {
+pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material: u32, warnings: &mut Vec<String>, budget: &mut u64) -> Result<MeshIr, String> {
     let what = label("mesh", mesh.index(), mesh.name());
     let mut vertices: Vec<Vertex> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
@@ -26,7 +26,7 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
     let mut has_uv1 = false;
     let mut deform: Option<Deform> = None;
     for p in mesh.primitives() {
-        let (v, i, d) = primitive(&p, buffers).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
+        let (v, i, d) = primitive(&p, buffers, budget).map_err(|e| format!("{what} primitive {}: {e}", p.index()))?;
         let all = deform.get_or_insert_with(|| Deform {
             influences: d.influences.as_ref().map(|_| (Vec::new(), Vec::new())),
             morph_positions: vec![Vec::new(); d.morph_positions.len()],
@@ -89,8 +89,16 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
     Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), is_static: false, lods: vec![lod], morph_weights })
 }
 
+/// An upper bound on the vertices one import may produce (counting each morph target's deltas as
+/// vertices too). Accessors are bounded one by one (`accessor::MAX_ELEMENTS`), but a small file
+/// can refer to one big accessor from thousands of primitives or morph targets, and a sparse
+/// accessor declares its count freely; this keeps such a file from becoming a multi-gigabyte
+/// allocation. 16M vertices are 1 GB as pack vertices. `cook_mesh` draws on it per primitive,
+/// after the primitive's accessors are checked and before any of them is read.
+pub(crate) const MAX_VERTICES: u64 = 1 << 24;
+
 /// One primitive as vertices and a triangle list indexing them.
-fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, Vec<u32>, Deform), String> {
+fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>], budget: &mut u64) -> Result<(Vec<Vertex>, Vec<u32>, Deform), String> {
     let mode = p.mode();
     if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
         return Err(format!("mode {mode:?} is not supported (only triangles, triangle strips and fans)"));
@@ -119,6 +127,22 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, V
             return Err(format!("has only one of JOINTS_{set} and WEIGHTS_{set}"));
         }
     }
+    let index_acc = p.indices();
+    let checked_indices = match &index_acc {
+        Some(acc) => Some(check(acc, buffers, "indices", &accessor::INDICES)?),
+        None => None,
+    };
+    // Without normals the primitive is unwelded, a vertex per index.
+    let corners = checked_indices.as_ref().map_or(n, |c| c.count).max(n) as u64;
+    let need = corners.saturating_mul(1 + p.morph_targets().len() as u64);
+    if need > *budget {
+        let used = MAX_VERTICES - *budget;
+        return Err(format!(
+            "the meshes so far need {} vertices (each morph target's deltas counted as vertices), more than the cooker's limit of {MAX_VERTICES}",
+            used.saturating_add(need)
+        ));
+    }
+    *budget -= need;
     let mut morph_checked = Vec::new();
     for (t, target) in p.morph_targets().enumerate() {
         let get = |acc: Option<gltf::Accessor>, role: &str| -> Result<Option<Vec<[f32; 3]>>, String> {
@@ -135,11 +159,6 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, V
         };
         morph_checked.push((get(target.positions(), "POSITION")?, get(target.normals(), "NORMAL")?));
     }
-    let index_acc = p.indices();
-    let checked_indices = match &index_acc {
-        Some(acc) => Some(check(acc, buffers, "indices", &accessor::INDICES)?),
-        None => None,
-    };
 
     let positions = pos.vecs::<3>(0.0);
     if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
@@ -164,6 +183,18 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>]) -> Result<(Vec<Vertex>, V
     let read = |c: &Option<Checked>, pad| c.as_ref().map(|c| c.vecs::<4>(pad));
     let (nrm, tan, col) = (normals.as_ref().map(|c| c.vecs::<3>(0.0)), read(&tangents, 0.0), read(&colors, 1.0));
     let (t0, t1) = (uv0.as_ref().map(|c| c.vecs::<2>(0.0)), uv1.as_ref().map(|c| c.vecs::<2>(0.0)));
+    // NaN or infinity in any attribute would reach the LOD, lightmap UV and bake stages and the GPU.
+    let finite = |role: &str, sem: Semantic, values: Option<Vec<&[f32]>>| -> Result<(), String> {
+        let Some(values) = values else { return Ok(()) };
+        match values.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
+            Some(i) => Err(format!("accessor {} ({role}) element {i} is not a finite number", p.get(&sem).map_or(0, |a| a.index()))),
+            None => Ok(()),
+        }
+    };
+    finite("NORMAL", Semantic::Normals, nrm.as_ref().map(|v| v.iter().map(|x| &x[..]).collect()))?;
+    finite("TANGENT", Semantic::Tangents, tan.as_ref().map(|v| v.iter().map(|x| &x[..]).collect()))?;
+    finite("TEXCOORD_0", Semantic::TexCoords(0), t0.as_ref().map(|v| v.iter().map(|x| &x[..]).collect()))?;
+    finite("TEXCOORD_1", Semantic::TexCoords(1), t1.as_ref().map(|v| v.iter().map(|x| &x[..]).collect()))?;
     let mut vertices: Vec<Vertex> = (0..n)
         .map(|i| Vertex {
             position: positions[i],

@@ -71,6 +71,17 @@ class Hasher:
         return self._h.hexdigest()
 
 
+def process_running(pid: int) -> bool:
+    """Whether process `pid` exists (the writer of a temporary file named after it)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 class StageCache:
     def __init__(self, root: Path, enabled: bool = True):
         self.root = Path(root)
@@ -96,6 +107,18 @@ class StageCache:
             return None
         self.hits += 1
         return meta, arrays
+
+    def remove_stale_temporaries(self) -> None:
+        """Remove entries' temporary files (`.<entry>.<pid>.tmp`) whose writer is no longer
+        running: what a cook killed in the middle of `store` leaves behind."""
+        for f in self.root.glob("*/.*.tmp"):
+            pid = f.name.rsplit(".", 2)[-2]
+            if pid.isdigit() and (int(pid) == os.getpid() or process_running(int(pid))):
+                continue
+            try:
+                f.unlink()
+            except OSError:
+                pass
 
     def store(self, stage: str, key: str, meta: dict, arrays: list[np.ndarray]) -> None:
         path = self._path(stage, key)

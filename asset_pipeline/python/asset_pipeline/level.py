@@ -497,6 +497,34 @@ def _kinded(c: _Checker, raw: dict, key: tuple, kinds: tuple) -> str:
     return choice(kinds)(c, raw["kind"], key + ("kind",))
 
 
+# The most triangles the brushes may make before CSG (an estimate per kind, times repeats): a
+# typing slip such as `segments = 1000000000` or a huge repeat count gets a message instead of
+# exhausting memory in manifold3d. The demo level uses well under 1% of it.
+MAX_BRUSH_TRIANGLES = 1 << 22
+
+
+def brush_triangles(kind: str, shape: dict) -> int:
+    """About how many triangles manifold3d makes for one copy of a brush."""
+    if kind == "cylinder":
+        return 4 * shape["segments"]
+    if kind == "sphere":
+        return shape["segments"] ** 2
+    if kind == "extrude":
+        return 4 * len(shape["points"])
+    return 12
+
+
+def _check_brush_budget(c: "_Checker", spec: "LevelSpec") -> None:
+    total = 0
+    for i, b in enumerate(spec.brushes):
+        count = b.repeat[0]
+        total += brush_triangles(b.kind, b.shape) * count
+        if total > MAX_BRUSH_TRIANGLES:
+            key = ("brushes", i) + (("repeat", "count") if count > 1 else ("segments",) if "segments" in b.shape else ())
+            c.fail(key, f"the brushes up to '{b.name}' make about {total} triangles, more than the cooker's limit of "
+                        f"{MAX_BRUSH_TRIANGLES} (lower segments or repeat counts)")
+
+
 def load_level(path: str | Path) -> LevelSpec:
     """Parse and validate the level spec at `path`. Raises CookError naming file, line and key."""
     path = Path(path)
@@ -550,6 +578,7 @@ def load_level(path: str | Path) -> LevelSpec:
             name=b["name"], kind=kind, shape=shape, transform=trs(b["translation"], b["rotation"], b["scale"]),
             material=mat_index[b["material"]], repeat=(1, (0.0, 0.0, 0.0)) if rep is None else (rep["count"], rep["step"])))
 
+    _check_brush_budget(c, spec)
     brush_names = {b.name for b in spec.brushes}
     for i, raw in enumerate(top["objects"]):
         key = ("objects", i)

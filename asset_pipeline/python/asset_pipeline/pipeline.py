@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ import numpy as np
 
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
-from asset_pipeline.cache import Hasher, StageCache
+from asset_pipeline.cache import Hasher, StageCache, process_running
 from asset_pipeline.gltf_import import import_gltf, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
@@ -135,6 +136,16 @@ def _world_scales(scene: ir.Scene) -> list[float]:
 def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None, progress: Progress | None = None) -> CookResult:
     """Cook `source` (.gltf, .glb or a level .toml) into the pack `out` (written atomically) and
     a report beside it. Raises CookError on bad input, naming the file and the problem."""
+    try:
+        return _cook(source, out, settings, progress)
+    except CookError as e:
+        # Later stages (uv2, bake, textures) name the mesh or texture; say which file it came from.
+        if os.fspath(source) not in str(e):
+            raise CookError(f"{os.fspath(source)}: {e}") from None
+        raise
+
+
+def _cook(source, out, settings: CookSettings | None, progress: Progress | None) -> CookResult:
     settings = settings or CookSettings()
     progress = progress or Progress(enabled=False)
     source, out = Path(source), Path(out)
@@ -211,6 +222,8 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
 
     rec = StageRecord("write", items=1)
     t0 = time.perf_counter()
+    _remove_stale_temporaries(out)
+    cache.remove_stale_temporaries()
     with progress.stage("write", 1) as bar:
         # Lightmap files first, then the pack: each is written whole and renamed into place.
         exrs = _write_exrs(scene, out)
@@ -229,6 +242,29 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
     os.replace(tmp, stamp)
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0)
+
+
+# Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
+# `.<name>.tmp-<pid>-<n>`; exr_io: `.<name>.<pid>.tmp`; report: `.<name>.tmp`).
+_TEMPORARY = re.compile(r"^\.(?P<name>.+?)(\.tmp-(?P<pid>\d+)-\d+|\.(?P<pid2>\d+)\.tmp|\.tmp)$")
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """A cook killed while writing (SIGKILL, power loss) leaves its temporary files beside the
+    output; they are hidden and never read, but would pile up. Remove those of this output whose
+    writer is no longer running."""
+    mine = (out.name, out.with_suffix(".report.md").name)
+    for f in out.parent.glob(f".{out.stem}*"):
+        m = _TEMPORARY.match(f.name)
+        if m is None or not (m["name"] in mine or (m["name"].startswith(f"{out.stem}.lightmap") and m["name"].endswith(".exr"))):
+            continue
+        pid = m["pid"] or m["pid2"]
+        if pid is not None and int(pid) != os.getpid() and process_running(int(pid)):
+            continue
+        try:
+            f.unlink()
+        except OSError:
+            pass
 
 
 def _unchanged(path: Path, size: int, mtime_ns: int) -> bool:

@@ -81,6 +81,10 @@ class Uv2Settings:
     # Rasterise every page and check overlaps and padding (raises CookError on failure) and
     # measure utilisation. Off only saves the rasterising time.
     verify: bool = True
+    # The most lightmap texels a cook may ask for (surface area x density^2 over the static
+    # meshes): 64M is 16 full 2048^2 pages, about ten times a detailed level. A density typed
+    # wrong (1e6 instead of 16) fails here, with a message, instead of in xatlas or the baker.
+    max_texels: int = 1 << 26
 
     def validate(self) -> None:
         if not (math.isfinite(self.texels_per_metre) and self.texels_per_metre > 0):
@@ -439,11 +443,17 @@ def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, names: Sequence
     inputs = _inputs(meshes)
     names = list(names) if names is not None else [f"static mesh {i}" for i in range(len(inputs))]
     jobs = []
+    texels = 0.0
     for i, (lod, scale, tpm) in enumerate(inputs):
         lod.validate(names[i])
         if not np.isfinite(lod.attributes["position"]).all():
             raise CookError(f"uv2: {names[i]}: a vertex position is not finite")
         density = (tpm or settings.texels_per_metre) * scale
+        texels += float(_world_areas(lod, 1.0).sum()) * density * density
+        if texels > settings.max_texels:
+            raise CookError(f"uv2: {names[i]}: the static meshes so far need about {texels:.3g} lightmap texels at "
+                            f"{tpm or settings.texels_per_metre:g} texels per metre, more than the cooker's limit of "
+                            f"{settings.max_texels}; lower texels_per_metre")
         normals = lod.attributes.get("normal")
         jobs.append((_texel_positions(lod, density), np.ascontiguousarray(lod.triangles, np.uint32),
                      None if normals is None else np.ascontiguousarray(normals, np.float32)))

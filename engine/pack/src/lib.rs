@@ -154,12 +154,14 @@ impl Pack {
         let manifest: Manifest = serde_json::from_slice(meta)
             .map_err(|e| PackError::Malformed(format!("metadata: {e}")))?;
         manifest.validate(data.len() as u64)?;
+        manifest.validate_indices(data)?;
         Ok(Pack { manifest, data: data.to_vec() })
     }
 
     /// Encode to bytes (header, metadata, data). `Pack::from_bytes` inverts this exactly.
     pub fn to_bytes(&self) -> Result<Vec<u8>, PackError> {
         self.manifest.validate(self.data.len() as u64)?;
+        self.manifest.validate_indices(&self.data)?;
         let meta = serde_json::to_vec(&self.manifest)
             .map_err(|e| PackError::Malformed(format!("metadata: {e}")))?;
         let meta_off = HEADER_LEN as u64;

@@ -356,6 +356,29 @@ pub struct Node {
 }
 
 impl Manifest {
+    /// Every vertex index in the data must name a vertex of its LOD: the GPU reads vertices by
+    /// these without a bounds check. Call after `validate` (which proves the ranges lie in `data`).
+    pub fn validate_indices(&self, data: &[u8]) -> Result<(), PackError> {
+        for (i, m) in self.meshes.iter().enumerate() {
+            for (l, lod) in m.lods.iter().enumerate() {
+                let (at, len) = (lod.indices.offset as usize, lod.indices.len as usize);
+                let bytes = data.get(at..at.saturating_add(len)).unwrap_or_default();
+                if let Some((k, v)) = bytes
+                    .chunks_exact(4)
+                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .enumerate()
+                    .find(|&(_, v)| v >= lod.vertex_count)
+                {
+                    return Err(PackError::Malformed(format!(
+                        "mesh {i} '{}' LOD {l}: index {k} is {v}, but the LOD has {} vertices",
+                        m.name, lod.vertex_count
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Every index and range must point at something that exists; a reader that passes this can
     /// index without bounds checks failing.
     pub fn validate(&self, data_len: u64) -> Result<(), PackError> {

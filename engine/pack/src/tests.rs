@@ -239,6 +239,24 @@ fn bad_pillars_are_rejected_by_name_and_old_manifests_have_none() {
 }
 
 #[test]
+fn an_index_past_the_vertices_is_rejected_on_write_and_on_read() {
+    let mut p = sample();
+    let at = p.manifest.meshes[0].lods[0].indices.offset as usize + 8;
+    p.data[at..at + 4].copy_from_slice(&4u32.to_le_bytes());
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("mesh 0 'quad' LOD 0: index 2 is 4, but the LOD has 4 vertices"), "{e}");
+    // A pack written without the check (as by an older or foreign writer) is refused on read.
+    let mut bytes = sample().to_bytes().unwrap();
+    let data_off = u64_at(&bytes, 40) as usize;
+    bytes[data_off + at..data_off + at + 4].copy_from_slice(&4u32.to_le_bytes());
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&[0; 4]);
+    let crc = checksum(&bytes);
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
+    let e = Pack::from_bytes(&bytes).unwrap_err().to_string();
+    assert!(e.starts_with("malformed pack: mesh 0 'quad' LOD 0: index 2 is 4"), "{e}");
+}
+
+#[test]
 fn atomic_write_leaves_no_temporary_and_replaces_whole() {
     let dir = std::env::temp_dir().join(format!("pack-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

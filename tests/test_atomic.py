@@ -1,0 +1,160 @@
+"""Atomic outputs: a cook killed with SIGKILL at any point leaves the previous pack whole.
+
+A small level (CSG, lightmap UVs, a draft bake, procedural textures with mips) is cooked once to
+time a full cook; then, 20 times, a forced cook that would write different bytes (another bake
+seed) is killed at a point spread over that duration by a seeded RNG. Every time the pack on disk
+must be either the previous pack, byte for byte, or the complete new one (the kill landed after
+the rename), and must load; anything else left beside it must be a hidden temporary file that no
+one would take for a pack; and the next cook must succeed with exactly the expected bytes (so a
+half-written cache entry cannot leak into it) and clear the dead cook's temporary files, beside
+the pack and in the stage cache.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+import asset_pipeline
+from conftest import COOK
+
+LEVEL = """
+[level]
+name = "atomic"
+texels_per_metre = 6
+
+[[materials]]
+name = "stone"
+texture = { procedural = "bricks", size = 64, seed = 3 }
+
+[[materials]]
+name = "plaster"
+base_color = [0.8, 0.78, 0.7]
+
+[[brushes]]
+name = "floor"
+kind = "box"
+size = [8, 0.5, 8]
+material = "stone"
+
+[[brushes]]
+name = "hut"
+kind = "box"
+size = [3, 3, 3]
+translation = [0, 1.7, 0]
+material = "stone"
+
+[[brushes]]
+name = "room"
+kind = "box"
+size = [2.4, 2.4, 2.4]
+translation = [0, 1.7, 0]
+material = "plaster"
+
+[[brushes]]
+name = "door"
+kind = "box"
+size = [0.8, 1.6, 1]
+translation = [0, 1.2, 1.3]
+material = "plaster"
+
+[[objects]]
+name = "ground"
+op = "union"
+operands = ["floor"]
+
+[[objects]]
+name = "house"
+op = "difference"
+operands = ["hut", "room", "door"]
+
+[[lights]]
+name = "sun"
+kind = "sun"
+intensity = 50000
+direction = [-0.4, -1, -0.3]
+"""
+
+KILLS = 20
+ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+
+def cook(src: Path, out: Path, seed: int, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([str(COOK), str(src), "-o", str(out), "-q", "--quality", "draft", "--seed", str(seed), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def finish(p: subprocess.Popen) -> None:
+    stdout, stderr = p.communicate(timeout=300)
+    assert p.returncode == 0, stderr
+
+
+def loads(pack: Path) -> None:
+    asset_pipeline._core.read_pack_manifest(pack)  # raises CookError on any damage
+    assert asset_pipeline.read_pack_summary(pack)["meshes"] == 2
+
+
+def test_sigkill_during_cook_keeps_the_previous_pack(tmp_path):
+    src = tmp_path / "atomic.toml"
+    src.write_text(LEVEL)
+    # The two packs a cook here can produce: bake seed 0 and bake seed 1 (in a separate
+    # directory, with its own cache). The second cook is forced, to time a cook that does all
+    # the work.
+    ref = tmp_path / "ref"
+    ref.mkdir()
+    finish(cook(src, ref / "one.pack", 1))
+    t0 = time.perf_counter()
+    finish(cook(src, ref / "one.pack", 1, "--force"))
+    duration = time.perf_counter() - t0
+    packs = {0: None, 1: (ref / "one.pack").read_bytes()}
+
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    out = out_dir / "atomic.pack"
+    finish(cook(src, out, 0))
+    packs[0] = out.read_bytes()
+    assert packs[0] != packs[1], "the seed does not change the bake; the test could not tell the packs apart"
+    expected_files = {"atomic.pack", "atomic.report.md", "atomic.lightmap0.exr", ".cook-cache"}
+    settled = {p.name for p in out_dir.iterdir()}
+    assert expected_files <= settled, settled
+
+    rng = random.Random(20261123)
+    current, outcomes = 0, {"old": 0, "new": 0}
+    for k in range(KILLS):
+        seed = 1 - current  # a cook whose pack differs from the one on disk
+        # Stratified over the measured duration (a little past it: a cook's time varies with the
+        # machine's load, and the last moments hold the rename): each kill in its own slice.
+        delay = 1.1 * duration * (k + rng.random()) / KILLS
+        p = cook(src, out, seed, "--force")
+        time.sleep(delay)
+        p.send_signal(signal.SIGKILL)
+        p.communicate(timeout=60)
+        assert p.returncode in (-signal.SIGKILL, 0), (k, p.returncode)
+
+        got = out.read_bytes()
+        assert got in (packs[current], packs[seed]), f"kill {k} after {delay:.2f} s: the pack is neither the previous one nor the new one"
+        outcomes["old" if got == packs[current] else "new"] += 1
+        loads(out)
+        # Whatever else the killed cook left is a hidden temporary, not something to load.
+        for f in out_dir.iterdir():
+            if f.name not in expected_files and f.name not in settled:
+                assert f.name.startswith(".") and (f.name.endswith(".tmp") or ".tmp-" in f.name), f"kill {k}: stray file {f.name}"
+                assert not f.name.endswith(".pack"), f.name
+        assert sorted(out_dir.glob("*.pack")) == [out]
+
+        # The next cook succeeds, with exactly the bytes that seed gives, and clears the dead
+        # cook's temporaries.
+        finish(cook(src, out, seed))
+        assert out.read_bytes() == packs[seed], f"the cook after kill {k} gave different bytes"
+        loads(out)
+        left = sorted(f.name for f in out_dir.iterdir() if f.name.startswith(".") and f.name != ".cook-cache")
+        left += sorted(str(f.relative_to(out_dir)) for f in (out_dir / ".cook-cache").rglob("*.tmp"))
+        assert left == [], f"after kill {k}: temporary files left: {left}"
+        current = seed
+    print(f"full cook {duration:.2f} s; {KILLS} kills: {outcomes}")
