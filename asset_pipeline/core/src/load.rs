@@ -16,16 +16,22 @@ pub(crate) struct Source {
     pub base: PathBuf,
 }
 
-pub(crate) fn open(path: &Path, file: &str) -> Result<Source, CookError> {
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+/// The bytes of a .gltf or .glb file.
+pub(crate) fn read(path: &Path, file: &str) -> Result<Vec<u8>, CookError> {
+    std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => CookError::NotFound { file: file.into() },
         _ => CookError::io(file, format!("cannot read: {e}")),
-    })?;
+    })
+}
+
+/// Parse the bytes of the .gltf or .glb file at `path` (which resolves relative URIs; `file`
+/// names it in messages) and load its buffers.
+pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, CookError> {
     let not_gltf = |reason: String| CookError::NotGltf { file: file.into(), reason: one_line(&reason) };
     if bytes.starts_with(b"glTF") {
-        check_glb_header(&bytes).map_err(not_gltf)?;
+        check_glb_header(bytes).map_err(not_gltf)?;
     }
-    let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| not_gltf(e.to_string()))?;
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
     let json = gltf.document.into_json();
     if !json.asset.version.starts_with("2.") {
         return Err(not_gltf(format!("asset version is {:?}", json.asset.version)));
