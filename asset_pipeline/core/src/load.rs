@@ -63,8 +63,9 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, Coo
     Ok(Source { document, buffers, base })
 }
 
-/// gltf-json 1.4 validates a primitive by indexing `accessors` with its POSITION index before
-/// that index is checked, and panics when it is out of range; check it first.
+/// What gltf-json 1.4 does not validate but the gltf crate relies on. It validates a primitive by
+/// indexing `accessors` with its POSITION index before that index is checked, and panics when it
+/// is out of range; check it first.
 fn check_position_indices(json: &gltf::json::Root) -> Result<(), String> {
     use gltf::json::{mesh::Semantic, validation::Checked};
     for (m, mesh) in json.meshes.iter().enumerate() {
@@ -73,6 +74,19 @@ fn check_position_indices(json: &gltf::json::Root) -> Result<(), String> {
                 if i.value() >= json.accessors.len() {
                     return Err(format!("invalid glTF: meshes[{m}].primitives[{p}].attributes.POSITION: Index out of bounds"));
                 }
+            }
+        }
+    }
+    // Its validation of an animation checks samplers but not channel targets, and the gltf
+    // crate unwraps both the target node and the target path.
+    for (a, anim) in json.animations.iter().enumerate() {
+        for (c, ch) in anim.channels.iter().enumerate() {
+            let at = format!("invalid glTF: animations[{a}].channels[{c}].target");
+            if ch.target.node.value() >= json.nodes.len() {
+                return Err(format!("{at}.node: Index out of bounds"));
+            }
+            if !matches!(ch.target.path, Checked::Valid(_)) {
+                return Err(format!("{at}.path: Invalid value"));
             }
         }
     }
