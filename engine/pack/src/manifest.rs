@@ -385,9 +385,18 @@ impl Manifest {
             if t.width == 0 || t.height == 0 || t.mips.is_empty() {
                 return bad(format!("texture {i} '{}': empty ({}x{}, {} mips)", t.name, t.width, t.height, t.mips.len()));
             }
+            // A full chain ends at 1x1; more levels would shift the size by 32 bits or more.
+            let full_chain = 32 - t.width.max(t.height).leading_zeros() as usize;
+            if t.mips.len() > full_chain {
+                return bad(format!("texture {i} '{}': {} mips, more than the {full_chain} of a full chain for {}x{}", t.name, t.mips.len(), t.width, t.height));
+            }
             for (l, r) in t.mips.iter().enumerate() {
                 let (w, h) = ((t.width >> l).max(1) as u64, (t.height >> l).max(1) as u64);
-                in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, w * h * t.format.bytes_per_texel())?;
+                // u32 x u32 fits in u64, times the texel size need not.
+                let Some(bytes) = (w * h).checked_mul(t.format.bytes_per_texel()) else {
+                    return bad(format!("texture {i} '{}': {}x{} is too large", t.name, t.width, t.height));
+                };
+                in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, bytes)?;
             }
         }
         if let Some(l) = &self.lightmap {

@@ -306,3 +306,22 @@ fn animation_section_round_trips_and_bad_references_are_rejected() {
     bad(&|p| p.manifest.animation.meshes[0].lods[1].skin = None, "node 0 'root': skin 0 does not exist or the node's mesh has no joints and weights");
     bad(&|p| p.manifest.animation.meshes[0].lods[0].skin.as_mut().unwrap().weights.len = 48, "mesh 0 'quad' LOD 0 weights");
 }
+
+#[test]
+fn texture_sizes_that_overflow_are_malformed_not_a_panic() {
+    // Seen beside the fuzz targets: mip level 32 shifted the u32 width by 32 bits (a panic with
+    // overflow checks, a wrapped size without), and a 2^32-1 square texture's byte count
+    // overflowed u64.
+    let mut p = sample();
+    let one_texel = p.manifest.textures[0].mips[1];
+    p.manifest.textures[0].mips = vec![one_texel; 40];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("40 mips, more than the 2 of a full chain for 2x2"), "{e}");
+    let mut p = sample();
+    p.manifest.textures[0].width = u32::MAX;
+    p.manifest.textures[0].height = u32::MAX;
+    p.manifest.textures[0].format = TextureFormat::Rgba16Unorm;
+    p.manifest.materials[0].base_color_texture = None;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("4294967295x4294967295 is too large"), "{e}");
+}
