@@ -325,3 +325,25 @@ fn texture_sizes_that_overflow_are_malformed_not_a_panic() {
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("4294967295x4294967295 is too large"), "{e}");
 }
+
+#[test]
+fn non_finite_numbers_in_the_manifest_are_malformed() {
+    // Infinity was written as JSON null, so the pack did not read back; and a number beyond f32
+    // (1e39) read as infinity.
+    let mut p = sample();
+    p.manifest.lights[0].intensity = f32::INFINITY;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("light 0 'sun': ") && e.contains("inf"), "{e}");
+    let mut p = sample();
+    p.manifest.materials[0].emissive[1] = f32::NAN;
+    assert!(p.to_bytes().unwrap_err().to_string().contains("material 0 'default'"));
+
+    let mut bytes = sample().to_bytes().unwrap();
+    let at = bytes.windows(8).position(|w| w == b"100000.0").expect("the sun's intensity in the JSON");
+    bytes[at..at + 8].copy_from_slice(b"1.000e39");
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].fill(0);
+    let crc = checksum(&bytes);
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
+    let e = Pack::from_bytes(&bytes).unwrap_err().to_string();
+    assert!(e.starts_with("malformed pack: light 0 'sun': ") && e.contains("inf"), "{e}");
+}
