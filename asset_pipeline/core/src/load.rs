@@ -119,6 +119,11 @@ pub(crate) fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, String> {
     } else {
         base.join(percent_decode(uri))
     };
+    // Only regular files: a device (/dev/zero, /dev/stdin) or a pipe never ends or blocks.
+    match std::fs::metadata(&path) {
+        Ok(m) if !m.is_file() => return Err(format!("cannot read '{}': not a regular file", path.display())),
+        _ => {}
+    }
     std::fs::read(&path).map_err(|e| format!("cannot read '{}': {e}", path.display()))
 }
 

@@ -32,3 +32,11 @@ fn fuzz_animation_channel_target_path_invalid() {
     let e = import_err("channel_target_path_invalid.gltf");
     assert!(e.ends_with("invalid glTF: animations[0].channels[0].target.path: Invalid value"), "{e}");
 }
+
+#[test]
+fn buffer_uri_naming_a_device_is_refused_not_read_forever() {
+    // Found by review beside the fuzz target (which resolves URIs against a missing directory):
+    // an absolute URI such as /dev/zero was read until memory ran out.
+    let e = import_err("buffer_uri_is_a_device.gltf");
+    assert!(e.ends_with("buffer 0: cannot read '/dev/zero': not a regular file"), "{e}");
+}
