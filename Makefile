@@ -76,7 +76,7 @@ fuzz: fuzz-build
 	  echo "== fuzz $$t for $(FUZZ_SECONDS) s"; \
 	  $(FUZZ) run --fuzz-dir fuzz -O $$t -- -max_total_time=$(FUZZ_SECONDS) -timeout=10 \
 	    -rss_limit_mb=2048 -malloc_limit_mb=1024 -print_final_stats=1 2>&1 | tee build/fuzz-$$t.log \
-	    | grep -E '^(==|#[0-9]+ +DONE|stat::number_of_executed_units|stat::peak_rss_mb|Done|SUMMARY|Test unit written)'; \
+	    | grep -E '^(==|#[0-9]+[[:space:]]+DONE|stat::number_of_executed_units|stat::peak_rss_mb|Done|SUMMARY|Test unit written)'; \
 	  [ $${PIPESTATUS[0]} -eq 0 ] || { echo "fuzz $$t: crash, see build/fuzz-$$t.log"; exit 1; }; \
 	done
 
