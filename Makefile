@@ -19,7 +19,7 @@ export GLTF_SAMPLES_DIR
 # The cooker extension is rebuilt when any Rust or Python source it is made of changes.
 COOKER_SOURCES := $(shell find asset_pipeline engine/pack -name '*.rs' -o -name '*.toml' -o -name '*.py' 2>/dev/null | grep -v __pycache__) Cargo.lock
 
-.PHONY: all setup build cooker demo test test-rust test-python cook bench soak clean
+.PHONY: all setup build cooker demo test test-rust test-python cook bench soak clean fuzz fuzz-build
 
 all: build
 
@@ -63,6 +63,36 @@ bench: build cook
 # messages and resident memory after frame 10,000 within 1% of frame 1,000. Outside `make test`.
 soak: build cook
 	$(PY) tools/soak.py $(SOAK_ARGS)
+
+# Fuzzing (issue 11), outside `make test`: libFuzzer through cargo-fuzz on the readers of untrusted
+# input, the pack reader (pack_from_bytes; pack_manifest, which fixes up the length and checksum
+# so mutations reach the manifest checks) and glTF import (gltf_import). The crate is fuzz/, outside
+# the workspace. cargo-fuzz's flags (-Zsanitizer=address, -Cpasses=sancov-module) need a nightly
+# toolchain: FUZZ_TOOLCHAIN (rustup's `nightly`). Each target runs FUZZ_SECONDS, one job, from
+# corpora that tools/fuzz_seed.sh seeds (cooked packs, ../shared/gltf-samples); a crash stops the
+# run with the input in fuzz/artifacts/<target>/ (`cargo fuzz tmin` minimises it; it then becomes a
+# regression test in the crate). cargo-fuzz itself is installed into build/tools on first use.
+FUZZ_SECONDS ?= 300
+FUZZ_TARGETS ?= pack_from_bytes pack_manifest gltf_import
+FUZZ_TOOLCHAIN ?= nightly
+CARGO_FUZZ := build/tools/bin/cargo-fuzz
+FUZZ := PATH=$(abspath build/tools/bin):$$PATH $(CARGO) +$(FUZZ_TOOLCHAIN) fuzz
+
+$(CARGO_FUZZ):
+	$(CARGO) install cargo-fuzz --locked --root build/tools
+
+fuzz-build: $(CARGO_FUZZ)
+	$(FUZZ) build --fuzz-dir fuzz -O
+
+fuzz: fuzz-build
+	bash tools/fuzz_seed.sh
+	@for t in $(FUZZ_TARGETS); do \
+	  echo "== fuzz $$t for $(FUZZ_SECONDS) s"; \
+	  $(FUZZ) run --fuzz-dir fuzz -O $$t -- -max_total_time=$(FUZZ_SECONDS) -timeout=10 \
+	    -rss_limit_mb=2048 -malloc_limit_mb=1024 -print_final_stats=1 2>&1 | tee build/fuzz-$$t.log \
+	    | grep -E '^(==|#[0-9]+[[:space:]]+DONE|stat::number_of_executed_units|stat::peak_rss_mb|Done|SUMMARY|Test unit written)'; \
+	  [ $${PIPESTATUS[0]} -eq 0 ] || { echo "fuzz $$t: crash, see build/fuzz-$$t.log"; exit 1; }; \
+	done
 
 clean:
 	rm -rf build target $(VENV)

@@ -48,10 +48,17 @@ pub fn build_pack(scene: &SceneIr) -> Result<Pack, CookError> {
 /// Import a .gltf or .glb file into the scene IR. `progress` is called with what is being
 /// worked on and the fraction done (0..=1).
 pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<SceneIr, CookError> {
+    progress("reading", 0.0);
+    let bytes = load::read(source, &source.display().to_string())?;
+    import_gltf_bytes(source, &bytes, progress)
+}
+
+/// Import the bytes of a .gltf or .glb file that `source` names: `source` is only used in
+/// messages, for the scene's name and to resolve relative URIs (the fuzz target's entry point).
+pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&str, f32)) -> Result<SceneIr, CookError> {
     let file = source.display().to_string();
     let invalid = |problem: String| CookError::invalid(&file, problem);
-    progress("reading", 0.0);
-    let src = load::open(source, &file)?;
+    let src = load::parse(bytes, source, &file)?;
     let doc = &src.document;
 
     // Progress counts images once per material slot that reads them (a rough total is enough).

@@ -16,16 +16,22 @@ pub(crate) struct Source {
     pub base: PathBuf,
 }
 
-pub(crate) fn open(path: &Path, file: &str) -> Result<Source, CookError> {
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+/// The bytes of a .gltf or .glb file.
+pub(crate) fn read(path: &Path, file: &str) -> Result<Vec<u8>, CookError> {
+    std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => CookError::NotFound { file: file.into() },
         _ => CookError::io(file, format!("cannot read: {e}")),
-    })?;
+    })
+}
+
+/// Parse the bytes of the .gltf or .glb file at `path` (which resolves relative URIs; `file`
+/// names it in messages) and load its buffers.
+pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, CookError> {
     let not_gltf = |reason: String| CookError::NotGltf { file: file.into(), reason: one_line(&reason) };
     if bytes.starts_with(b"glTF") {
-        check_glb_header(&bytes).map_err(not_gltf)?;
+        check_glb_header(bytes).map_err(not_gltf)?;
     }
-    let gltf = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| not_gltf(e.to_string()))?;
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
     let json = gltf.document.into_json();
     if !json.asset.version.starts_with("2.") {
         return Err(not_gltf(format!("asset version is {:?}", json.asset.version)));
@@ -57,8 +63,9 @@ pub(crate) fn open(path: &Path, file: &str) -> Result<Source, CookError> {
     Ok(Source { document, buffers, base })
 }
 
-/// gltf-json 1.4 validates a primitive by indexing `accessors` with its POSITION index before
-/// that index is checked, and panics when it is out of range; check it first.
+/// What gltf-json 1.4 does not validate but the gltf crate relies on. It validates a primitive by
+/// indexing `accessors` with its POSITION index before that index is checked, and panics when it
+/// is out of range; check it first.
 fn check_position_indices(json: &gltf::json::Root) -> Result<(), String> {
     use gltf::json::{mesh::Semantic, validation::Checked};
     for (m, mesh) in json.meshes.iter().enumerate() {
@@ -67,6 +74,19 @@ fn check_position_indices(json: &gltf::json::Root) -> Result<(), String> {
                 if i.value() >= json.accessors.len() {
                     return Err(format!("invalid glTF: meshes[{m}].primitives[{p}].attributes.POSITION: Index out of bounds"));
                 }
+            }
+        }
+    }
+    // Its validation of an animation checks samplers but not channel targets, and the gltf
+    // crate unwraps both the target node and the target path.
+    for (a, anim) in json.animations.iter().enumerate() {
+        for (c, ch) in anim.channels.iter().enumerate() {
+            let at = format!("invalid glTF: animations[{a}].channels[{c}].target");
+            if ch.target.node.value() >= json.nodes.len() {
+                return Err(format!("{at}.node: Index out of bounds"));
+            }
+            if !matches!(ch.target.path, Checked::Valid(_)) {
+                return Err(format!("{at}.path: Invalid value"));
             }
         }
     }
@@ -124,6 +144,11 @@ pub(crate) fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, String> {
     } else {
         base.join(percent_decode(uri))
     };
+    // Only regular files: a device (/dev/zero, /dev/stdin) or a pipe never ends or blocks.
+    match std::fs::metadata(&path) {
+        Ok(m) if !m.is_file() => return Err(format!("cannot read '{}': not a regular file", path.display())),
+        _ => {}
+    }
     std::fs::read(&path).map_err(|e| format!("cannot read '{}': {e}", path.display()))
 }
 

@@ -379,6 +379,48 @@ impl Manifest {
         Ok(())
     }
 
+    /// Every number of the JSON part is finite. JSON has no infinity or NaN: serde_json writes
+    /// them as null, which does not read back, and reads a number too large for f32 (1e39) as
+    /// infinity; either way the pack would not survive a round trip, and the runtime would
+    /// compute with infinities. (LOD errors, clip durations and probe grids are checked with
+    /// their other rules.)
+    fn validate_floats(&self) -> Result<(), PackError> {
+        let check = |what: &dyn Fn() -> String, v: &[f32]| match v.iter().all(|x| x.is_finite()) {
+            true => Ok(()),
+            false => Err(PackError::Malformed(format!("{}: {v:?} is not finite", what()))),
+        };
+        for (i, m) in self.meshes.iter().enumerate() {
+            check(&|| format!("mesh {i} '{}' bounds", m.name), &[m.bounds_min, m.bounds_max].concat())?;
+        }
+        for (i, m) in self.materials.iter().enumerate() {
+            let v = [&m.base_color[..], &[m.metallic, m.roughness], &m.emissive, &[m.alpha_cutoff, m.normal_scale, m.occlusion_strength]].concat();
+            check(&|| format!("material {i} '{}'", m.name), &v)?;
+        }
+        for (i, l) in self.lights.iter().enumerate() {
+            let v = [&l.color[..], &[l.intensity], &l.position, &l.direction, l.range.as_slice(), &[l.inner_cone, l.outer_cone], &l.size, &[l.angular_radius]].concat();
+            check(&|| format!("light {i} '{}'", l.name), &v)?;
+        }
+        for (i, s) in self.spawns.iter().enumerate() {
+            check(&|| format!("spawn {i} '{}'", s.name), &[&s.position[..], &s.rotation].concat())?;
+        }
+        if let Some(s) = &self.sky {
+            check(&|| "sky".into(), &[&s.color[..], &[s.intensity]].concat())?;
+        }
+        if let Some(l) = &self.lightmap {
+            check(&|| "lightmap texels_per_metre".into(), &[l.texels_per_metre])?;
+        }
+        for (i, n) in self.nodes.iter().enumerate() {
+            check(&|| format!("node {i} '{}' transform", n.name), &n.local)?;
+        }
+        for d in &self.animation.meshes {
+            check(&|| format!("animation: mesh {} morph weights", d.mesh), &d.morph_weights)?;
+        }
+        for b in &self.animation.nodes {
+            check(&|| format!("animation: node {} morph weights", b.node), b.weights.as_deref().unwrap_or_default())?;
+        }
+        Ok(())
+    }
+
     /// Every index and range must point at something that exists; a reader that passes this can
     /// index without bounds checks failing.
     pub fn validate(&self, data_len: u64) -> Result<(), PackError> {
@@ -395,6 +437,7 @@ impl Manifest {
                 _ => bad(format!("{what}: range {}..+{} lies outside the data ({data_len} bytes)", r.offset, r.len)),
             }
         };
+        self.validate_floats()?;
         let pages = self.lightmap.as_ref().map_or(0, |l| l.pages.len());
         for (i, m) in self.meshes.iter().enumerate() {
             if m.lods.is_empty() {
@@ -441,9 +484,18 @@ impl Manifest {
             if t.width == 0 || t.height == 0 || t.mips.is_empty() {
                 return bad(format!("texture {i} '{}': empty ({}x{}, {} mips)", t.name, t.width, t.height, t.mips.len()));
             }
+            // A full chain ends at 1x1; more levels would shift the size by 32 bits or more.
+            let full_chain = 32 - t.width.max(t.height).leading_zeros() as usize;
+            if t.mips.len() > full_chain {
+                return bad(format!("texture {i} '{}': {} mips, more than the {full_chain} of a full chain for {}x{}", t.name, t.mips.len(), t.width, t.height));
+            }
             for (l, r) in t.mips.iter().enumerate() {
                 let (w, h) = ((t.width >> l).max(1) as u64, (t.height >> l).max(1) as u64);
-                in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, w * h * t.format.bytes_per_texel())?;
+                // u32 x u32 fits in u64, times the texel size need not.
+                let Some(bytes) = (w * h).checked_mul(t.format.bytes_per_texel()) else {
+                    return bad(format!("texture {i} '{}': {}x{} is too large", t.name, t.width, t.height));
+                };
+                in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, bytes)?;
             }
         }
         if let Some(l) = &self.lightmap {

@@ -344,3 +344,44 @@ fn animation_section_round_trips_and_bad_references_are_rejected() {
     bad(&|p| p.manifest.animation.meshes[0].lods[1].skin = None, "node 0 'root': skin 0 does not exist or the node's mesh has no joints and weights");
     bad(&|p| p.manifest.animation.meshes[0].lods[0].skin.as_mut().unwrap().weights.len = 48, "mesh 0 'quad' LOD 0 weights");
 }
+
+#[test]
+fn texture_sizes_that_overflow_are_malformed_not_a_panic() {
+    // Seen beside the fuzz targets: mip level 32 shifted the u32 width by 32 bits (a panic with
+    // overflow checks, a wrapped size without), and a 2^32-1 square texture's byte count
+    // overflowed u64.
+    let mut p = sample();
+    let one_texel = p.manifest.textures[0].mips[1];
+    p.manifest.textures[0].mips = vec![one_texel; 40];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("40 mips, more than the 2 of a full chain for 2x2"), "{e}");
+    let mut p = sample();
+    p.manifest.textures[0].width = u32::MAX;
+    p.manifest.textures[0].height = u32::MAX;
+    p.manifest.textures[0].format = TextureFormat::Rgba16Unorm;
+    p.manifest.materials[0].base_color_texture = None;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("4294967295x4294967295 is too large"), "{e}");
+}
+
+#[test]
+fn non_finite_numbers_in_the_manifest_are_malformed() {
+    // Infinity was written as JSON null, so the pack did not read back; and a number beyond f32
+    // (1e39) read as infinity.
+    let mut p = sample();
+    p.manifest.lights[0].intensity = f32::INFINITY;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("light 0 'sun': ") && e.contains("inf"), "{e}");
+    let mut p = sample();
+    p.manifest.materials[0].emissive[1] = f32::NAN;
+    assert!(p.to_bytes().unwrap_err().to_string().contains("material 0 'default'"));
+
+    let mut bytes = sample().to_bytes().unwrap();
+    let at = bytes.windows(8).position(|w| w == b"100000.0").expect("the sun's intensity in the JSON");
+    bytes[at..at + 8].copy_from_slice(b"1.000e39");
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].fill(0);
+    let crc = checksum(&bytes);
+    bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
+    let e = Pack::from_bytes(&bytes).unwrap_err().to_string();
+    assert!(e.starts_with("malformed pack: light 0 'sun': ") && e.contains("inf"), "{e}");
+}

@@ -1,0 +1,17 @@
+//! glTF import from arbitrary bytes (.gltf JSON with data: URIs, or .glb): any input gives a scene
+//! or an error, never a panic; a scene that imports builds a pack the runtime can read.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use std::path::Path;
+
+mod common;
+
+fuzz_target!(|data: &[u8]| {
+    // Relative URIs resolve against a directory that does not exist: the target reads no files.
+    let source = Path::new("/nonexistent-fuzz-input/input.gltf");
+    let Ok(scene) = cook_core::import_gltf_bytes(source, data, &mut |_, _| {}) else { return };
+    if let Ok(pack) = cook_core::build_pack(&scene) {
+        common::exercise(&pack);
+    }
+});
