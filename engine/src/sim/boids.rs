@@ -20,7 +20,7 @@
 //! - Banking: a boid rolls into a turn by atan(a_lateral / g) (a coordinated turn), smoothed with
 //!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
 
-use super::grid::{brute_force_neighbours, Grid};
+use super::grid::Grid;
 use super::rng::hash;
 use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
@@ -437,18 +437,24 @@ impl StepContext<'_> {
         let (p, s) = (self.p, self.cur);
         let (pos, vel) = (s.position(i), s.velocity(i));
 
-        let (found, keys) = scratch;
-        found.clear();
+        let (_, keys) = scratch;
+        keys.clear();
         match self.search {
-            NeighbourSearch::Grid => counts.examined += self.grid.neighbours(pos, self.radius, Some(i as u32), found) as u64,
+            NeighbourSearch::Grid => counts.examined += self.grid.neighbour_keys(pos, self.radius, i as u32, keys) as u64,
             NeighbourSearch::BruteForce => {
-                brute_force_neighbours(&s.px, &s.py, &s.pz, pos, self.radius, Some(i as u32), found);
+                // Key: squared distance (non-negative, so its bits order as the numbers) above the
+                // index, with the grid's arithmetic.
+                let r2 = self.radius * self.radius;
+                for j in 0..s.len() {
+                    let (dx, dy, dz) = (s.px[j] - pos.x, s.py[j] - pos.y, s.pz[j] - pos.z);
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    if d2 < r2 && j != i {
+                        keys.push((d2.to_bits() as u64) << 32 | j as u64);
+                    }
+                }
                 counts.examined += s.len() as u64;
             }
         }
-        // Key: squared distance (non-negative, so its bits order as the numbers) above the index.
-        keys.clear();
-        keys.extend(found.iter().map(|&j| ((pos - s.position(j as usize)).length_squared().to_bits() as u64) << 32 | j as u64));
         keys.sort_unstable();
         if p.max_neighbours > 0 {
             keys.truncate(p.max_neighbours as usize);
@@ -460,7 +466,7 @@ impl StepContext<'_> {
         for &key in keys.iter() {
             let j = key as u32 as usize;
             let d = pos - s.position(j);
-            let d2 = d.length_squared();
+            let d2 = f32::from_bits((key >> 32) as u32);
             if d2 < sep2 && d2 > 0.0 {
                 sep += d / d2;
             }

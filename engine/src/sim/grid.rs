@@ -176,6 +176,53 @@ impl Grid {
         }
         examined
     }
+    /// As `neighbours`, but appends each found point as the sort key
+    /// `(|p_j − p|² as bits) << 32 | j` (the squared distance is non-negative, so its bits order as
+    /// the number), computed with the same arithmetic as `neighbours` uses for its test. The
+    /// inner loop appends without a branch: every candidate is written, and the length only
+    /// advances past the ones that pass.
+    pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> usize {
+        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
+        let r2 = radius * radius;
+        let c = [
+            cell_coord(p.x, self.cell) - self.min_cell[0],
+            cell_coord(p.y, self.cell) - self.min_cell[1],
+            cell_coord(p.z, self.cell) - self.min_cell[2],
+        ];
+        let d = self.dims;
+        let span = |a: usize| -> Option<(usize, usize)> {
+            let lo = (c[a] - 1).max(0);
+            let hi = (c[a] + 1).min(d[a] as i32 - 1);
+            (lo <= hi).then_some((lo as usize, hi as usize))
+        };
+        let (Some((x0, x1)), Some((y0, y1)), Some((z0, z1))) = (span(0), span(1), span(2)) else {
+            return 0;
+        };
+        let mut examined = 0;
+        let mut len = out.len();
+        for z in z0..=z1 {
+            for y in y0..=y1 {
+                let row = d[0] * (y + d[1] * z);
+                let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
+                examined += e - s;
+                if out.len() < len + (e - s) {
+                    out.resize(len + (e - s) + 32, 0);
+                }
+                let buf = &mut out[len..len + (e - s)];
+                let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
+                let mut k = 0;
+                for (((&x, &y), &z), &j) in run {
+                    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    buf[k] = (d2.to_bits() as u64) << 32 | j as u64;
+                    k += (d2 < r2 && j != exclude) as usize;
+                }
+                len += k;
+            }
+        }
+        out.truncate(len);
+        examined
+    }
 }
 
 /// The O(N) scan with the same test as `Grid::neighbours`, in index order.
