@@ -179,9 +179,11 @@ impl Grid {
     /// As `neighbours`, but appends each found point as the sort key
     /// `(|p_j − p|² as bits) << 32 | j` (the squared distance is non-negative, so its bits order as
     /// the number), computed with the same arithmetic as `neighbours` uses for its test. The
-    /// inner loop appends without a branch: every candidate is written, and the length only
-    /// advances past the ones that pass.
-    pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> usize {
+    /// inner loop appends without a branch: every candidate is written, and the count only
+    /// advances past the ones that pass. `out` is a scratch buffer that only grows (its length is
+    /// its usable size, so no clearing per query): the keys are `out[..found]`.
+    /// Returns (found, examined).
+    pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
         debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
         let r2 = radius * radius;
         let c = [
@@ -196,17 +198,17 @@ impl Grid {
             (lo <= hi).then_some((lo as usize, hi as usize))
         };
         let (Some((x0, x1)), Some((y0, y1)), Some((z0, z1))) = (span(0), span(1), span(2)) else {
-            return 0;
+            return (0, 0);
         };
         let mut examined = 0;
-        let mut len = out.len();
+        let mut len = 0;
         for z in z0..=z1 {
             for y in y0..=y1 {
                 let row = d[0] * (y + d[1] * z);
                 let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
                 examined += e - s;
                 if out.len() < len + (e - s) {
-                    out.resize(len + (e - s) + 32, 0);
+                    out.resize(len + (e - s) + 64, 0);
                 }
                 let buf = &mut out[len..len + (e - s)];
                 let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
@@ -220,8 +222,7 @@ impl Grid {
                 len += k;
             }
         }
-        out.truncate(len);
-        examined
+        (len, examined)
     }
 }
 
