@@ -454,7 +454,7 @@ impl StepContext<'_> {
         let (_, buf) = scratch;
         let keys: &mut [u64] = match self.search {
             NeighbourSearch::Grid => {
-                let (found, examined) = self.grid.neighbour_keys(pos, self.radius, i as u32, buf);
+                let (found, examined) = self.grid.point_neighbour_keys(i as u32, pos, self.radius, buf);
                 counts.examined += examined as u64;
                 &mut buf[..found]
             }

@@ -35,6 +35,9 @@ pub struct Grid {
     sz: Vec<f32>,
     /// Scratch: linear cell of each point.
     cell_of: Vec<u32>,
+    /// Cell coordinates of each point (relative to `min_cell`), so a query about a point of the
+    /// build needs no divisions.
+    cell_xyz: Vec<[u32; 3]>,
 }
 
 /// Cells in the grid at most this many times the points (plus a floor for small sets).
@@ -95,12 +98,14 @@ impl Grid {
         let cells = self.cell_count();
 
         self.cell_of.resize(n, 0);
+        self.cell_xyz.resize(n, [0; 3]);
         let (cs, mc, d) = (self.cell, self.min_cell, self.dims);
-        self.cell_of.par_iter_mut().enumerate().with_min_len(4096).for_each(|(i, c)| {
+        self.cell_of.par_iter_mut().zip(self.cell_xyz.par_iter_mut()).enumerate().with_min_len(4096).for_each(|(i, (c, xyz))| {
             let x = (cell_coord(px[i], cs) - mc[0]) as usize;
             let y = (cell_coord(py[i], cs) - mc[1]) as usize;
             let z = (cell_coord(pz[i], cs) - mc[2]) as usize;
             *c = (x + d[0] * (y + d[1] * z)) as u32;
+            *xyz = [x as u32, y as u32, z as u32];
         });
 
         // Counting sort: counts shifted by one, prefix sum to starts, scatter with cursors that
@@ -110,8 +115,12 @@ impl Grid {
         for &c in &self.cell_of {
             self.cell_start[c as usize + 1] += 1;
         }
-        for c in 0..cells {
-            self.cell_start[c + 1] += self.cell_start[c];
+        // A running sum in a register: `cell_start[c + 1] += cell_start[c]` would wait on the
+        // store of the previous iteration.
+        let mut acc = 0u32;
+        for s in self.cell_start.iter_mut() {
+            acc += *s;
+            *s = acc;
         }
         self.order.resize(n, 0);
         // Scatter backwards from each cell's end, visiting points in descending index, so each
@@ -184,13 +193,24 @@ impl Grid {
     /// its usable size, so no clearing per query): the keys are `out[..found]`.
     /// Returns (found, examined).
     pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
-        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
-        let r2 = radius * radius;
         let c = [
             cell_coord(p.x, self.cell) - self.min_cell[0],
             cell_coord(p.y, self.cell) - self.min_cell[1],
             cell_coord(p.z, self.cell) - self.min_cell[2],
         ];
+        self.keys_around(c, p, radius, exclude, out)
+    }
+
+    /// `neighbour_keys` about point `i` of the last build (excluding itself), at `p`, its
+    /// position in that build, using the cell the build found for it.
+    pub fn point_neighbour_keys(&self, i: u32, p: Vec3, radius: f32, out: &mut Vec<u64>) -> (usize, usize) {
+        let c = self.cell_xyz[i as usize].map(|v| v as i32);
+        self.keys_around(c, p, radius, i, out)
+    }
+
+    fn keys_around(&self, c: [i32; 3], p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
+        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
+        let r2 = radius * radius;
         let d = self.dims;
         let span = |a: usize| -> Option<(usize, usize)> {
             let lo = (c[a] - 1).max(0);
