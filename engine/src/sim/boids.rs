@@ -396,8 +396,9 @@ impl Flock {
                 |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
                     let mut counts = StepCounters::default();
                     for k in 0..px.len() {
-                        let i = order.map_or(c * CHUNK + k, |o| o[c * CHUNK + k] as usize);
-                        let (pos, vel, r) = ctx.boid(i, scratch, &mut counts);
+                        let at = c * CHUNK + k;
+                        let i = order.map_or(at, |o| o[at] as usize);
+                        let (pos, vel, r) = ctx.boid(i, at, scratch, &mut counts);
                         (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
                         (vx[k], vy[k], vz[k]) = (vel.x, vel.y, vel.z);
                         roll[k] = r;
@@ -447,14 +448,15 @@ struct StepContext<'a> {
 
 impl StepContext<'_> {
     /// The next position, velocity and roll of boid `i`.
-    fn boid(&self, i: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
+    /// `at`: its position in the grid's order (with the grid).
+    fn boid(&self, i: usize, at: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
         let (p, s) = (self.p, self.cur);
         let (pos, vel) = (s.position(i), s.velocity(i));
 
         let (_, buf) = scratch;
         let keys: &mut [u64] = match self.search {
             NeighbourSearch::Grid => {
-                let (found, examined) = self.grid.point_neighbour_keys(i as u32, pos, self.radius, buf);
+                let (found, examined) = self.grid.sorted_point_neighbour_keys(at, self.radius, buf);
                 counts.examined += examined as u64;
                 &mut buf[..found]
             }

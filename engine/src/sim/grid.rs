@@ -36,8 +36,9 @@ pub struct Grid {
     /// Scratch: linear cell of each point.
     cell_of: Vec<u32>,
     /// Cell coordinates of each point (relative to `min_cell`), so a query about a point of the
-    /// build needs no divisions.
+    /// build needs no divisions; `sorted_xyz` has them in `order`'s order.
     cell_xyz: Vec<[u32; 3]>,
+    sorted_xyz: Vec<[u32; 3]>,
 }
 
 /// Cells in the grid at most this many times the points (plus a floor for small sets).
@@ -145,6 +146,9 @@ impl Grid {
             let order = &self.order;
             dst.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = src[i as usize]);
         }
+        self.sorted_xyz.resize(n, [0; 3]);
+        let (order, xyz) = (&self.order, &self.cell_xyz);
+        self.sorted_xyz.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = xyz[i as usize]);
     }
 
     /// Appends to `out` every point j != `exclude` with |p_j − p|² < radius², in cell order.
@@ -201,11 +205,12 @@ impl Grid {
         self.keys_around(c, p, radius, exclude, out)
     }
 
-    /// `neighbour_keys` about point `i` of the last build (excluding itself), at `p`, its
-    /// position in that build, using the cell the build found for it.
-    pub fn point_neighbour_keys(&self, i: u32, p: Vec3, radius: f32, out: &mut Vec<u64>) -> (usize, usize) {
-        let c = self.cell_xyz[i as usize].map(|v| v as i32);
-        self.keys_around(c, p, radius, i, out)
+    /// `neighbour_keys` about the point at position `k` of `order` (excluding itself), using
+    /// the cell the build found for it: walking k upward reads the query points sequentially.
+    pub fn sorted_point_neighbour_keys(&self, k: usize, radius: f32, out: &mut Vec<u64>) -> (usize, usize) {
+        let c = self.sorted_xyz[k].map(|v| v as i32);
+        let p = Vec3::new(self.sx[k], self.sy[k], self.sz[k]);
+        self.keys_around(c, p, radius, self.order[k], out)
     }
 
     fn keys_around(&self, c: [i32; 3], p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
