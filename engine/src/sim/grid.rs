@@ -189,6 +189,7 @@ impl Grid {
         }
         examined
     }
+
     /// As `neighbours`, but appends each found point as the sort key
     /// `(|p_j − p|² as bits) << 32 | j` (the squared distance is non-negative, so its bits order as
     /// the number), computed with the same arithmetic as `neighbours` uses for its test. The
