@@ -20,7 +20,7 @@
 //! - Banking: a boid rolls into a turn by atan(a_lateral / g) (a coordinated turn), smoothed with
 //!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
 
-use super::grid::{brute_force_neighbours, Grid};
+use super::grid::Grid;
 use super::rng::hash;
 use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
@@ -282,6 +282,20 @@ pub fn boid_rotation(v: Vec3, roll: f32) -> Quat {
 
 const GRAVITY: f32 = 9.81;
 
+/// atan within about 1e-7 of libm's (Abramowitz & Stegun 4.4.49, |ε| ≤ 2·10⁻⁸ on [0, 1], and
+/// atan x = π/2 − atan(1/x) beyond): a polynomial instead of a libm call per boid and step.
+fn atan(x: f32) -> f32 {
+    let a = x.abs();
+    let big = a > 1.0;
+    let t = if big { 1.0 / a } else { a };
+    let t2 = t * t;
+    let poly = -0.333_331_45
+        + t2 * (0.199_935_51 + t2 * (-0.142_088_99 + t2 * (0.106_562_64 + t2 * (-0.075_289_64 + t2 * (0.042_909_61 + t2 * (-0.016_165_737 + t2 * 0.002_866_225_7))))));
+    let r = t + t * t2 * poly;
+    let r = if big { std::f32::consts::FRAC_PI_2 - r } else { r };
+    r.copysign(x)
+}
+
 /// v + a·h with the speed held in [min, max]. Above the maximum the velocity is scaled back.
 /// Below the minimum (a bird cannot hover) the boid turns instead of slowing: its heading rotates
 /// toward `a` at the rate |a|/min that the acceleration allows at that speed, so |Δv| stays
@@ -382,8 +396,9 @@ impl Flock {
                 |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
                     let mut counts = StepCounters::default();
                     for k in 0..px.len() {
-                        let i = order.map_or(c * CHUNK + k, |o| o[c * CHUNK + k] as usize);
-                        let (pos, vel, r) = ctx.boid(i, scratch, &mut counts);
+                        let at = c * CHUNK + k;
+                        let i = order.map_or(at, |o| o[at] as usize);
+                        let (pos, vel, r) = ctx.boid(i, at, scratch, &mut counts);
                         (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
                         (vx[k], vy[k], vz[k]) = (vel.x, vel.y, vel.z);
                         roll[k] = r;
@@ -433,26 +448,47 @@ struct StepContext<'a> {
 
 impl StepContext<'_> {
     /// The next position, velocity and roll of boid `i`.
-    fn boid(&self, i: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
+    /// `at`: its position in the grid's order (with the grid).
+    fn boid(&self, i: usize, at: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
         let (p, s) = (self.p, self.cur);
         let (pos, vel) = (s.position(i), s.velocity(i));
 
-        let (found, keys) = scratch;
-        found.clear();
-        match self.search {
-            NeighbourSearch::Grid => counts.examined += self.grid.neighbours(pos, self.radius, Some(i as u32), found) as u64,
-            NeighbourSearch::BruteForce => {
-                brute_force_neighbours(&s.px, &s.py, &s.pz, pos, self.radius, Some(i as u32), found);
-                counts.examined += s.len() as u64;
+        let (_, buf) = scratch;
+        let keys: &mut [u64] = match self.search {
+            NeighbourSearch::Grid => {
+                let (found, examined) = self.grid.sorted_point_neighbour_keys(at, self.radius, buf);
+                counts.examined += examined as u64;
+                &mut buf[..found]
             }
-        }
-        // Key: squared distance (non-negative, so its bits order as the numbers) above the index.
-        keys.clear();
-        keys.extend(found.iter().map(|&j| ((pos - s.position(j as usize)).length_squared().to_bits() as u64) << 32 | j as u64));
-        keys.sort_unstable();
-        if p.max_neighbours > 0 {
-            keys.truncate(p.max_neighbours as usize);
-        }
+            NeighbourSearch::BruteForce => {
+                let keys = buf;
+                keys.clear();
+                // Key: squared distance (non-negative, so its bits order as the numbers) above the
+                // index, with the grid's arithmetic.
+                let r2 = self.radius * self.radius;
+                for j in 0..s.len() {
+                    let (dx, dy, dz) = (s.px[j] - pos.x, s.py[j] - pos.y, s.pz[j] - pos.z);
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    if d2 < r2 && j != i {
+                        keys.push((d2.to_bits() as u64) << 32 | j as u64);
+                    }
+                }
+                counts.examined += s.len() as u64;
+                &mut keys[..]
+            }
+        };
+        // The nearest `max_neighbours` by (distance, index), ascending. Keys are unique (the index
+        // is in them), so selecting before sorting gives the same list as sorting everything.
+        let cap = p.max_neighbours as usize;
+        let keys: &[u64] = if cap > 0 && keys.len() > cap {
+            keys.select_nth_unstable(cap - 1);
+            let kept = &mut keys[..cap];
+            kept.sort_unstable();
+            kept
+        } else {
+            keys.sort_unstable();
+            keys
+        };
         counts.neighbours += keys.len() as u64;
 
         let (r2, sep2) = (p.neighbour_radius * p.neighbour_radius, p.separation_radius * p.separation_radius);
@@ -460,7 +496,7 @@ impl StepContext<'_> {
         for &key in keys.iter() {
             let j = key as u32 as usize;
             let d = pos - s.position(j);
-            let d2 = d.length_squared();
+            let d2 = f32::from_bits((key >> 32) as u32);
             if d2 < sep2 && d2 > 0.0 {
                 sep += d / d2;
             }
@@ -492,7 +528,7 @@ impl StepContext<'_> {
         // Bank into the turn: the lateral part of the acceleration actually applied.
         let applied = (v - vel) / self.h;
         let right = v.cross(Vec3::Y).try_normalize();
-        let target = right.map_or(0.0, |r| (applied.dot(r) / GRAVITY).atan().clamp(-self.max_bank, self.max_bank));
+        let target = right.map_or(0.0, |r| atan(applied.dot(r) / GRAVITY).clamp(-self.max_bank, self.max_bank));
         let roll = s.roll[i] + (target - s.roll[i]) * self.bank_follow;
         (next_pos, v, roll)
     }
@@ -546,5 +582,21 @@ impl StepContext<'_> {
         let smooth = w * w * (3.0 - 2.0 * w);
         let dir = heading(k as u64).lerp(heading(k as u64 + 1), smooth).try_normalize().unwrap_or(Vec3::X);
         (dir * p.speed_max - vel) * p.wander_weight
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn polynomial_atan_matches_libm() {
+        let mut worst = 0f32;
+        for k in -200_000..=200_000 {
+            let x = k as f32 * 1e-4;
+            worst = worst.max((super::atan(x) - x.atan()).abs());
+        }
+        for x in [1e-30f32, 1e6, -1e6, f32::MAX, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0] {
+            worst = worst.max((super::atan(x) - x.atan()).abs());
+        }
+        assert!(worst < 5e-7, "worst error {worst}");
     }
 }

@@ -35,6 +35,10 @@ pub struct Grid {
     sz: Vec<f32>,
     /// Scratch: linear cell of each point.
     cell_of: Vec<u32>,
+    /// Cell coordinates of each point (relative to `min_cell`), so a query about a point of the
+    /// build needs no divisions; `sorted_xyz` has them in `order`'s order.
+    cell_xyz: Vec<[u32; 3]>,
+    sorted_xyz: Vec<[u32; 3]>,
 }
 
 /// Cells in the grid at most this many times the points (plus a floor for small sets).
@@ -95,12 +99,14 @@ impl Grid {
         let cells = self.cell_count();
 
         self.cell_of.resize(n, 0);
+        self.cell_xyz.resize(n, [0; 3]);
         let (cs, mc, d) = (self.cell, self.min_cell, self.dims);
-        self.cell_of.par_iter_mut().enumerate().with_min_len(4096).for_each(|(i, c)| {
+        self.cell_of.par_iter_mut().zip(self.cell_xyz.par_iter_mut()).enumerate().with_min_len(4096).for_each(|(i, (c, xyz))| {
             let x = (cell_coord(px[i], cs) - mc[0]) as usize;
             let y = (cell_coord(py[i], cs) - mc[1]) as usize;
             let z = (cell_coord(pz[i], cs) - mc[2]) as usize;
             *c = (x + d[0] * (y + d[1] * z)) as u32;
+            *xyz = [x as u32, y as u32, z as u32];
         });
 
         // Counting sort: counts shifted by one, prefix sum to starts, scatter with cursors that
@@ -110,8 +116,12 @@ impl Grid {
         for &c in &self.cell_of {
             self.cell_start[c as usize + 1] += 1;
         }
-        for c in 0..cells {
-            self.cell_start[c + 1] += self.cell_start[c];
+        // A running sum in a register: `cell_start[c + 1] += cell_start[c]` would wait on the
+        // store of the previous iteration.
+        let mut acc = 0u32;
+        for s in self.cell_start.iter_mut() {
+            acc += *s;
+            *s = acc;
         }
         self.order.resize(n, 0);
         // Scatter backwards from each cell's end, visiting points in descending index, so each
@@ -136,6 +146,9 @@ impl Grid {
             let order = &self.order;
             dst.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = src[i as usize]);
         }
+        self.sorted_xyz.resize(n, [0; 3]);
+        let (order, xyz) = (&self.order, &self.cell_xyz);
+        self.sorted_xyz.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = xyz[i as usize]);
     }
 
     /// Appends to `out` every point j != `exclude` with |p_j − p|² < radius², in cell order.
@@ -175,6 +188,67 @@ impl Grid {
             }
         }
         examined
+    }
+
+    /// As `neighbours`, but appends each found point as the sort key
+    /// `(|p_j − p|² as bits) << 32 | j` (the squared distance is non-negative, so its bits order as
+    /// the number), computed with the same arithmetic as `neighbours` uses for its test. The
+    /// inner loop appends without a branch: every candidate is written, and the count only
+    /// advances past the ones that pass. `out` is a scratch buffer that only grows (its length is
+    /// its usable size, so no clearing per query): the keys are `out[..found]`.
+    /// Returns (found, examined).
+    pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
+        let c = [
+            cell_coord(p.x, self.cell) - self.min_cell[0],
+            cell_coord(p.y, self.cell) - self.min_cell[1],
+            cell_coord(p.z, self.cell) - self.min_cell[2],
+        ];
+        self.keys_around(c, p, radius, exclude, out)
+    }
+
+    /// `neighbour_keys` about the point at position `k` of `order` (excluding itself), using
+    /// the cell the build found for it: walking k upward reads the query points sequentially.
+    pub fn sorted_point_neighbour_keys(&self, k: usize, radius: f32, out: &mut Vec<u64>) -> (usize, usize) {
+        let c = self.sorted_xyz[k].map(|v| v as i32);
+        let p = Vec3::new(self.sx[k], self.sy[k], self.sz[k]);
+        self.keys_around(c, p, radius, self.order[k], out)
+    }
+
+    fn keys_around(&self, c: [i32; 3], p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
+        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
+        let r2 = radius * radius;
+        let d = self.dims;
+        let span = |a: usize| -> Option<(usize, usize)> {
+            let lo = (c[a] - 1).max(0);
+            let hi = (c[a] + 1).min(d[a] as i32 - 1);
+            (lo <= hi).then_some((lo as usize, hi as usize))
+        };
+        let (Some((x0, x1)), Some((y0, y1)), Some((z0, z1))) = (span(0), span(1), span(2)) else {
+            return (0, 0);
+        };
+        let mut examined = 0;
+        let mut len = 0;
+        for z in z0..=z1 {
+            for y in y0..=y1 {
+                let row = d[0] * (y + d[1] * z);
+                let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
+                examined += e - s;
+                if out.len() < len + (e - s) {
+                    out.resize(len + (e - s) + 64, 0);
+                }
+                let buf = &mut out[len..len + (e - s)];
+                let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
+                let mut k = 0;
+                for (((&x, &y), &z), &j) in run {
+                    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    buf[k] = (d2.to_bits() as u64) << 32 | j as u64;
+                    k += (d2 < r2 && j != exclude) as usize;
+                }
+                len += k;
+            }
+        }
+        (len, examined)
     }
 }
 
