@@ -7,6 +7,7 @@ Errors are one line on stderr, ``cook: error: <message>``, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -81,6 +82,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print("cook: interrupted; nothing written", file=sys.stderr)
+        if "ray" in sys.modules:
+            # The outputs are already as they were (the pipeline's clean-up ran). Leave now: Ray
+            # 2.60's core worker can abort the process on its way out when a reply for a task we
+            # just cancelled arrives late ("Tried to complete task that was not pending"), which
+            # would turn this clean exit into a crash with a C++ trace. The cluster drops a dead
+            # driver's tasks on its own.
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
         return 130
     s = result.summary
     if result.up_to_date:
