@@ -6,16 +6,12 @@ use engine::sim_level::{warm_up, world_from_spawns};
 use glam::Vec3;
 use pack::Spawn;
 
+mod common;
+use common::spawn;
+
 /// The temple's boids and particles spawns as authored in content/levels/temple.toml, plus a
 /// player spawn the simulation ignores.
 fn temple_spawns() -> Vec<Spawn> {
-    let spawn = |name: &str, kind: &str, position: [f32; 3], params: &str| Spawn {
-        name: name.into(),
-        kind: kind.into(),
-        position,
-        rotation: [0.0, 0.0, 0.0, 1.0],
-        params: serde_json::from_str(params).unwrap(),
-    };
     vec![
         spawn("player", "player", [0.0, 0.0, 18.0], r#"{ "speed": 4.0 }"#),
         spawn("doves", "boids", [0.0, 9.0, 9.0], r#"{ "count": 32, "radius": 8.0, "speed": 3.0 }"#),

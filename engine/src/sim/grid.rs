@@ -162,13 +162,7 @@ impl Grid {
             cell_coord(p.z, self.cell) - self.min_cell[2],
         ];
         let d = self.dims;
-        // The clamped 3-wide range along an axis, or None if it misses the grid.
-        let span = |a: usize| -> Option<(usize, usize)> {
-            let lo = (c[a] - 1).max(0);
-            let hi = (c[a] + 1).min(d[a] as i32 - 1);
-            (lo <= hi).then_some((lo as usize, hi as usize))
-        };
-        let (Some((x0, x1)), Some((y0, y1)), Some((z0, z1))) = (span(0), span(1), span(2)) else {
+        let Some([(x0, x1), (y0, y1), (z0, z1)]) = self.spans(c) else {
             return 0;
         };
         let mut examined = 0;
@@ -214,16 +208,22 @@ impl Grid {
         self.keys_around(c, p, radius, self.order[k], out)
     }
 
-    fn keys_around(&self, c: [i32; 3], p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
-        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
-        let r2 = radius * radius;
+    /// Per axis, the clamped 3-cell range around cell `c`; None if it misses the grid.
+    fn spans(&self, c: [i32; 3]) -> Option<[(usize, usize); 3]> {
         let d = self.dims;
         let span = |a: usize| -> Option<(usize, usize)> {
             let lo = (c[a] - 1).max(0);
             let hi = (c[a] + 1).min(d[a] as i32 - 1);
             (lo <= hi).then_some((lo as usize, hi as usize))
         };
-        let (Some((x0, x1)), Some((y0, y1)), Some((z0, z1))) = (span(0), span(1), span(2)) else {
+        Some([span(0)?, span(1)?, span(2)?])
+    }
+
+    fn keys_around(&self, c: [i32; 3], p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
+        debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
+        let r2 = radius * radius;
+        let d = self.dims;
+        let Some([(x0, x1), (y0, y1), (z0, z1)]) = self.spans(c) else {
             return (0, 0);
         };
         let mut examined = 0;

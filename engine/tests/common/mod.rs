@@ -71,3 +71,8 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
     b.manifest.nodes.push(Node { name: name.into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(), mesh: Some(0) });
     b.finish()
 }
+
+/// A level spawn as the cooker writes it: unrotated, `params` given as JSON text.
+pub fn spawn(name: &str, kind: &str, position: [f32; 3], params: &str) -> pack::Spawn {
+    pack::Spawn { name: name.into(), kind: kind.into(), position, rotation: [0.0, 0.0, 0.0, 1.0], params: serde_json::from_str(params).unwrap() }
+}
