@@ -21,6 +21,7 @@
 //!   a time constant, and `boid_rotation` turns velocity and roll into the instance rotation.
 
 use super::grid::Grid;
+use super::lanes::{self, F, LANES, V3};
 use super::rng::hash;
 use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
@@ -218,56 +219,50 @@ pub fn allocate<const N: usize>(urges: [Vec3; N], budget: f32) -> (Vec3, [f32; N
 
 /// Repulsion from a surface at signed distance `d` (negative inside) with outward normal `n`:
 /// zero beyond `range`, rising linearly to `strength` at contact, `strength` inside.
-fn repel(d: f32, n: Vec3, range: f32, strength: f32) -> Vec3 {
-    if d >= range {
-        return Vec3::ZERO;
-    }
-    n * (strength * ((range - d) / range).min(1.0))
+fn repel(d: F, n: V3, range: f32, strength: f32) -> V3 {
+    let range = F::splat(range);
+    let f = F::splat(strength) * ((range - d) / range).min(F::ONE);
+    lanes::select(d.simd_ge(range), V3::ZERO, n * f)
 }
 
 /// Signed distance from `p` to a box and the outward normal there.
-fn box_distance(p: Vec3, b: &Aabb) -> (f32, Vec3) {
+fn box_distance(p: V3, b: &Aabb) -> (F, V3) {
     let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
-    let q = p.clamp(lo, hi);
-    let out = p - q;
+    let out = p - p.clamp(V3::splat(lo), V3::splat(hi));
     let d = out.length();
-    if d > 0.0 {
-        return (d, out / d);
-    }
-    // Inside: the nearest face.
-    let mut best = (f32::INFINITY, Vec3::ZERO);
-    for a in 0..3 {
-        let mut n = Vec3::ZERO;
-        for (depth, sign) in [(p[a] - lo[a], -1.0), (hi[a] - p[a], 1.0)] {
-            if depth < best.0 {
-                n[a] = sign;
-                best = (depth, n);
-                n[a] = 0.0;
-            }
+    // Inside: the nearest face (the first of equals, as the axes and sides are visited).
+    let (mut best, mut normal) = (F::splat(f32::INFINITY), V3::ZERO);
+    let axes = [(p.x, lo.x, hi.x), (p.y, lo.y, hi.y), (p.z, lo.z, hi.z)];
+    for (a, (pa, lo, hi)) in axes.into_iter().enumerate() {
+        for (depth, sign) in [(pa - F::splat(lo), -1.0), (F::splat(hi) - pa, 1.0)] {
+            let mut n = Vec3::ZERO;
+            n[a] = sign;
+            let nearer = depth.simd_lt(best);
+            best = nearer.select(depth, best);
+            normal = lanes::select(nearer, V3::splat(n), normal);
         }
     }
-    (-best.0, best.1)
+    let outside = d.simd_gt(F::ZERO);
+    (outside.select(d, -best), lanes::select(outside, out / d, normal))
 }
 
 /// Signed distance from `p` to a capped vertical cylinder and the outward normal there.
-fn pillar_distance(p: Vec3, c: &Pillar) -> (f32, Vec3) {
-    let radial = glam::Vec2::new(p.x - c.centre[0], p.z - c.centre[1]);
-    let r = radial.length();
-    let dir = if r > 0.0 { radial / r } else { glam::Vec2::X };
-    let side = (r - c.radius, Vec3::new(dir.x, 0.0, dir.y));
-    let (below, above) = (c.y_min - p.y, p.y - c.y_max);
-    let cap = if above > below { (above, Vec3::Y) } else { (below, Vec3::NEG_Y) };
-    if side.0 > 0.0 && cap.0 > 0.0 {
-        // Past the rim: distance to the circular edge.
-        let off = side.1 * side.0 + cap.1 * cap.0;
-        let d = off.length();
-        return (d, off / d);
-    }
-    if side.0 > cap.0 {
-        side
-    } else {
-        cap
-    }
+fn pillar_distance(p: V3, c: &Pillar) -> (F, V3) {
+    let (rx, rz) = (p.x - F::splat(c.centre[0]), p.z - F::splat(c.centre[1]));
+    let r = (rx * rx + rz * rz).sqrt();
+    let off_axis = r.simd_gt(F::ZERO);
+    let side_n = V3 { x: off_axis.select(rx / r, F::ONE), y: F::ZERO, z: off_axis.select(rz / r, F::ZERO) };
+    let side_d = r - F::splat(c.radius);
+    let (below, above) = (F::splat(c.y_min) - p.y, p.y - F::splat(c.y_max));
+    let up = above.simd_gt(below);
+    let (cap_d, cap_n) = (up.select(above, below), lanes::select(up, V3::splat(Vec3::Y), V3::splat(Vec3::NEG_Y)));
+    // Past the rim: distance to the circular edge.
+    let off = side_n * side_d + cap_n * cap_d;
+    let rim_d = off.length();
+    let rim = side_d.simd_gt(F::ZERO) & cap_d.simd_gt(F::ZERO);
+    let sideways = side_d.simd_gt(cap_d);
+    let (d, n) = (sideways.select(side_d, cap_d), lanes::select(sideways, side_n, cap_n));
+    (rim.select(rim_d, d), lanes::select(rim, off / rim_d, n))
 }
 
 /// Rotation of a boid model (facing +Z, up +Y, as glTF) flying along `v`, rolled by `roll`
@@ -283,17 +278,48 @@ pub fn boid_rotation(v: Vec3, roll: f32) -> Quat {
 const GRAVITY: f32 = 9.81;
 
 /// atan within about 1e-7 of libm's (Abramowitz & Stegun 4.4.49, |ε| ≤ 2·10⁻⁸ on [0, 1], and
-/// atan x = π/2 − atan(1/x) beyond): a polynomial instead of a libm call per boid and step.
-fn atan(x: f32) -> f32 {
+/// atan x = π/2 − atan(1/x) beyond): a polynomial, in lanes, instead of a libm call per boid.
+fn atan(x: F) -> F {
     let a = x.abs();
-    let big = a > 1.0;
-    let t = if big { 1.0 / a } else { a };
+    let big = a.simd_gt(F::ONE);
+    let t = big.select(F::ONE / a, a);
     let t2 = t * t;
-    let poly = -0.333_331_45
-        + t2 * (0.199_935_51 + t2 * (-0.142_088_99 + t2 * (0.106_562_64 + t2 * (-0.075_289_64 + t2 * (0.042_909_61 + t2 * (-0.016_165_737 + t2 * 0.002_866_225_7))))));
+    let c = F::splat;
+    let poly = c(-0.333_331_45)
+        + t2 * (c(0.199_935_51) + t2 * (c(-0.142_088_99) + t2 * (c(0.106_562_64) + t2 * (c(-0.075_289_64) + t2 * (c(0.042_909_61) + t2 * (c(-0.016_165_737) + t2 * c(0.002_866_225_7)))))));
     let r = t + t * t2 * poly;
-    let r = if big { std::f32::consts::FRAC_PI_2 - r } else { r };
-    r.copysign(x)
+    big.select(c(std::f32::consts::FRAC_PI_2) - r, r).copysign(x)
+}
+
+/// `allocate` for eight boids at once, returning the summed accelerations.
+pub fn allocate_lanes<const N: usize>(urges: [V3; N], budget: f32) -> V3 {
+    let mut remaining = F::splat(budget.max(0.0));
+    let mut sum = V3::ZERO;
+    for u in urges {
+        let m = u.length();
+        let skip = m.simd_le(F::ZERO) | remaining.simd_le(F::ZERO);
+        let take = m.min(remaining);
+        sum = lanes::select(skip, sum, sum + u * (take / m));
+        remaining = skip.select(remaining, remaining - take);
+    }
+    sum
+}
+
+/// `limit_speed` for eight boids. Below the minimum speed a lane takes the scalar turn (rare:
+/// the budget rarely brakes a boid that far).
+pub fn limit_speed_lanes(vel: V3, a: V3, h: f32, min: f32, max: f32) -> V3 {
+    let v = vel + a * F::splat(h);
+    let speed = v.length();
+    let over = speed.simd_gt(F::splat(max));
+    let slow = !(over | speed.simd_ge(F::splat(min)));
+    let mut out = lanes::select(over, v * (F::splat(max) / speed), v);
+    if slow.any() {
+        let bits = slow.to_bitmask();
+        for k in (0..LANES).filter(|k| bits >> k & 1 == 1) {
+            out.set_lane(k, limit_speed(vel.lane(k), a.lane(k), h, min, max));
+        }
+    }
+    out
 }
 
 /// v + a·h with the speed held in [min, max]. Above the maximum the velocity is scaled back.
@@ -392,16 +418,29 @@ impl Flock {
             .into_par_iter()
             .enumerate()
             .map_init(
-                || (Vec::with_capacity(64), Vec::with_capacity(64)),
-                |scratch, (c, (px, py, pz, vx, vy, vz, roll))| {
+                || Vec::with_capacity(64),
+                |buf, (c, (px, py, pz, vx, vy, vz, roll))| {
                     let mut counts = StepCounters::default();
-                    for k in 0..px.len() {
-                        let at = c * CHUNK + k;
-                        let i = order.map_or(at, |o| o[at] as usize);
-                        let (pos, vel, r) = ctx.boid(i, at, scratch, &mut counts);
-                        (px[k], py[k], pz[k]) = (pos.x, pos.y, pos.z);
-                        (vx[k], vy[k], vz[k]) = (vel.x, vel.y, vel.z);
-                        roll[k] = r;
+                    let len = px.len();
+                    // Eight boids at a time: each one's neighbourhood sums (scalar: the query and
+                    // the sorted neighbour list), then the rules for all eight in SIMD lanes. A
+                    // short last group repeats its last boid, whose copies are not written.
+                    for g in (0..len).step_by(LANES) {
+                        let mut group = Group::default();
+                        for l in 0..LANES {
+                            let k = (g + l).min(len - 1);
+                            let at = c * CHUNK + k;
+                            let i = order.map_or(at, |o| o[at] as usize);
+                            let mut ignored = StepCounters::default();
+                            ctx.neighbourhood(i, at, buf, if g + l < len { &mut counts } else { &mut ignored }, &mut group, l);
+                        }
+                        let (pos, vel, r) = ctx.rules(&group);
+                        for l in 0..LANES.min(len - g) {
+                            let k = g + l;
+                            (px[k], py[k], pz[k]) = (pos.x.as_array()[l], pos.y.as_array()[l], pos.z.as_array()[l]);
+                            (vx[k], vy[k], vz[k]) = (vel.x.as_array()[l], vel.y.as_array()[l], vel.z.as_array()[l]);
+                            roll[k] = r.as_array()[l];
+                        }
                     }
                     counts
                 },
@@ -446,14 +485,25 @@ struct StepContext<'a> {
     bank_follow: f32,
 }
 
+/// Eight boids' inputs to the rules, one lane each: their state and their neighbourhood sums.
+#[derive(Debug, Default, Clone)]
+struct Group {
+    index: [usize; LANES],
+    pos: [Vec3; LANES],
+    vel: [Vec3; LANES],
+    roll: [f32; LANES],
+    sep: [Vec3; LANES],
+    alignment: [Vec3; LANES],
+    cohesion: [Vec3; LANES],
+}
+
 impl StepContext<'_> {
-    /// The next position, velocity and roll of boid `i`.
+    /// Boid `i`'s state and its separation, alignment and cohesion sums into lane `l` of `g`.
     /// `at`: its position in the grid's order (with the grid).
-    fn boid(&self, i: usize, at: usize, scratch: &mut (Vec<u32>, Vec<u64>), counts: &mut StepCounters) -> (Vec3, Vec3, f32) {
+    fn neighbourhood(&self, i: usize, at: usize, buf: &mut Vec<u64>, counts: &mut StepCounters, g: &mut Group, l: usize) {
         let (p, s) = (self.p, self.cur);
         let (pos, vel) = (s.position(i), s.velocity(i));
 
-        let (_, buf) = scratch;
         let keys: &mut [u64] = match self.search {
             NeighbourSearch::Grid => {
                 let (found, examined) = self.grid.sorted_point_neighbour_keys(at, self.radius, buf);
@@ -512,38 +562,47 @@ impl StepContext<'_> {
         } else {
             (Vec3::ZERO, Vec3::ZERO)
         };
-
-        let urges = [
-            self.obstacles(pos),
-            sep * p.separation_weight,
-            alignment * p.alignment_weight,
-            cohesion * p.cohesion_weight,
-            self.goal(i, pos, vel),
-        ];
-        let (a, _) = allocate(urges, p.accel_max);
-
-        let v = limit_speed(vel, a, self.h, p.speed_min, p.speed_max);
-        let next_pos = pos + v * self.h;
-
-        // Bank into the turn: the lateral part of the acceleration actually applied.
-        let applied = (v - vel) / self.h;
-        let right = v.cross(Vec3::Y).try_normalize();
-        let target = right.map_or(0.0, |r| atan(applied.dot(r) / GRAVITY).clamp(-self.max_bank, self.max_bank));
-        let roll = s.roll[i] + (target - s.roll[i]) * self.bank_follow;
-        (next_pos, v, roll)
+        (g.index[l], g.pos[l], g.vel[l], g.roll[l]) = (i, pos, vel, s.roll[i]);
+        (g.sep[l], g.alignment[l], g.cohesion[l]) = (sep, alignment, cohesion);
     }
 
-    fn obstacles(&self, pos: Vec3) -> Vec3 {
+    /// The next positions, velocities and rolls of the eight boids of `g`.
+    fn rules(&self, g: &Group) -> (V3, V3, F) {
+        let p = self.p;
+        let (pos, vel) = (V3::from_lanes(&g.pos), V3::from_lanes(&g.vel));
+        let urges = [
+            self.obstacles(pos),
+            V3::from_lanes(&g.sep) * F::splat(p.separation_weight),
+            V3::from_lanes(&g.alignment) * F::splat(p.alignment_weight),
+            V3::from_lanes(&g.cohesion) * F::splat(p.cohesion_weight),
+            self.goal(&g.index, pos, vel),
+        ];
+        let a = allocate_lanes(urges, p.accel_max);
+
+        let h = F::splat(self.h);
+        let v = limit_speed_lanes(vel, a, self.h, p.speed_min, p.speed_max);
+        let next_pos = pos + v * h;
+
+        // Bank into the turn: the lateral part of the acceleration actually applied.
+        let applied = (v - vel) / h;
+        let (right, has_right) = v.cross(V3::splat(Vec3::Y)).try_normalize();
+        let target = atan(applied.dot(right) / F::splat(GRAVITY)).max(F::splat(-self.max_bank)).min(F::splat(self.max_bank));
+        let target = has_right.select(target, F::ZERO);
+        let roll = F::new(g.roll);
+        (next_pos, v, roll + (target - roll) * F::splat(self.bank_follow))
+    }
+
+    fn obstacles(&self, pos: V3) -> V3 {
         let p = self.p;
         let (range, strength) = (p.avoid_distance.max(1e-3), p.obstacle_weight * p.accel_max);
-        let mut u = Vec3::ZERO;
+        let mut u = V3::ZERO;
         if let Some(b) = &p.bounds {
             // Inside the bounds is free space: each wall pushes inward.
-            for a in 0..3 {
+            for (a, pa) in [pos.x, pos.y, pos.z].into_iter().enumerate() {
                 let mut n = Vec3::ZERO;
                 n[a] = 1.0;
-                u += repel(pos[a] - b.min[a], n, range, strength);
-                u += repel(b.max[a] - pos[a], -n, range, strength);
+                u += repel(pa - F::splat(b.min[a]), V3::splat(n), range, strength);
+                u += repel(F::splat(b.max[a]) - pa, V3::splat(-n), range, strength);
             }
         }
         for b in &p.boxes {
@@ -561,42 +620,245 @@ impl StepContext<'_> {
     /// random directions drawn from (seed, boid, period), so no generator state is shared. The
     /// directions are normalised points of a cube, not uniform on the sphere (a little more
     /// often diagonal): no trigonometry per boid, and a wander needs no better.
-    fn goal(&self, i: usize, pos: Vec3, vel: Vec3) -> Vec3 {
+    fn goal(&self, index: &[usize; LANES], pos: V3, vel: V3) -> V3 {
         let p = self.p;
+        let speed_max = F::splat(p.speed_max);
         if let Some(g) = p.goal {
-            let desired = (Vec3::from(g) - pos).try_normalize().unwrap_or(Vec3::ZERO) * p.speed_max;
-            return (desired - vel) * p.goal_weight;
+            let (dir, ok) = (V3::splat(Vec3::from(g)) - pos).try_normalize();
+            return (lanes::select(ok, dir, V3::ZERO) * speed_max - vel) * F::splat(p.goal_weight);
         }
         if p.wander_weight == 0.0 {
-            return Vec3::ZERO;
+            return V3::ZERO;
         }
         let phase = self.t / p.wander_period_s.max(1e-3);
         let k = phase.floor();
         let w = phase - k;
-        let heading = |period: u64| {
-            let bits = hash(p.seed ^ hash((i as u64) << 32 ^ period));
-            // Three 21-bit coordinates in [-1, 1).
-            let c = |shift: u32| ((bits >> shift) & 0x1F_FFFF) as f32 * (2.0 / (1u32 << 21) as f32) - 1.0;
-            Vec3::new(c(0), c(21), c(42))
-        };
         let smooth = w * w * (3.0 - 2.0 * w);
-        let dir = heading(k as u64).lerp(heading(k as u64 + 1), smooth).try_normalize().unwrap_or(Vec3::X);
-        (dir * p.speed_max - vel) * p.wander_weight
+        let headings = |period: u64| V3::from_lanes(&index.map(|i| wander_heading(p.seed, i, period)));
+        let (dir, ok) = headings(k as u64).lerp(headings(k as u64 + 1), F::splat(smooth)).try_normalize();
+        (lanes::select(ok, dir, V3::splat(Vec3::X)) * speed_max - vel) * F::splat(p.wander_weight)
     }
+}
+
+/// The random heading of boid `i` in wander period `period`: three 21-bit coordinates of one
+/// hash, in [-1, 1).
+fn wander_heading(seed: u64, i: usize, period: u64) -> Vec3 {
+    let bits = hash(seed ^ hash((i as u64) << 32 ^ period));
+    let c = |shift: u32| ((bits >> shift) & 0x1F_FFFF) as f32 * (2.0 / (1u32 << 21) as f32) - 1.0;
+    Vec3::new(c(0), c(21), c(42))
 }
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn polynomial_atan_matches_libm() {
-        let mut worst = 0f32;
-        for k in -200_000..=200_000 {
-            let x = k as f32 * 1e-4;
-            worst = worst.max((super::atan(x) - x.atan()).abs());
+    use super::*;
+
+    /// The rules one boid at a time in scalar glam, as they were before the lanes: the
+    /// reference `StepContext::rules` must agree with to the bit.
+    mod reference {
+        use super::super::*;
+
+        /// Repulsion from a surface at signed distance `d` (negative inside) with outward normal `n`:
+        /// zero beyond `range`, rising linearly to `strength` at contact, `strength` inside.
+        fn repel(d: f32, n: Vec3, range: f32, strength: f32) -> Vec3 {
+            if d >= range {
+                return Vec3::ZERO;
+            }
+            n * (strength * ((range - d) / range).min(1.0))
         }
-        for x in [1e-30f32, 1e6, -1e6, f32::MAX, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0] {
-            worst = worst.max((super::atan(x) - x.atan()).abs());
+
+        /// Signed distance from `p` to a box and the outward normal there.
+        fn box_distance(p: Vec3, b: &Aabb) -> (f32, Vec3) {
+            let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+            let q = p.clamp(lo, hi);
+            let out = p - q;
+            let d = out.length();
+            if d > 0.0 {
+                return (d, out / d);
+            }
+            // Inside: the nearest face.
+            let mut best = (f32::INFINITY, Vec3::ZERO);
+            for a in 0..3 {
+                let mut n = Vec3::ZERO;
+                for (depth, sign) in [(p[a] - lo[a], -1.0), (hi[a] - p[a], 1.0)] {
+                    if depth < best.0 {
+                        n[a] = sign;
+                        best = (depth, n);
+                        n[a] = 0.0;
+                    }
+                }
+            }
+            (-best.0, best.1)
+        }
+
+        /// Signed distance from `p` to a capped vertical cylinder and the outward normal there.
+        fn pillar_distance(p: Vec3, c: &Pillar) -> (f32, Vec3) {
+            let radial = glam::Vec2::new(p.x - c.centre[0], p.z - c.centre[1]);
+            let r = radial.length();
+            let dir = if r > 0.0 { radial / r } else { glam::Vec2::X };
+            let side = (r - c.radius, Vec3::new(dir.x, 0.0, dir.y));
+            let (below, above) = (c.y_min - p.y, p.y - c.y_max);
+            let cap = if above > below { (above, Vec3::Y) } else { (below, Vec3::NEG_Y) };
+            if side.0 > 0.0 && cap.0 > 0.0 {
+                // Past the rim: distance to the circular edge.
+                let off = side.1 * side.0 + cap.1 * cap.0;
+                let d = off.length();
+                return (d, off / d);
+            }
+            if side.0 > cap.0 {
+                side
+            } else {
+                cap
+            }
+        }
+
+        /// atan within about 1e-7 of libm's (Abramowitz & Stegun 4.4.49, |ε| ≤ 2·10⁻⁸ on [0, 1], and
+        /// atan x = π/2 − atan(1/x) beyond): a polynomial instead of a libm call per boid and step.
+        fn atan(x: f32) -> f32 {
+            let a = x.abs();
+            let big = a > 1.0;
+            let t = if big { 1.0 / a } else { a };
+            let t2 = t * t;
+            let poly = -0.333_331_45
+                + t2 * (0.199_935_51 + t2 * (-0.142_088_99 + t2 * (0.106_562_64 + t2 * (-0.075_289_64 + t2 * (0.042_909_61 + t2 * (-0.016_165_737 + t2 * 0.002_866_225_7))))));
+            let r = t + t * t2 * poly;
+            let r = if big { std::f32::consts::FRAC_PI_2 - r } else { r };
+            r.copysign(x)
+        }
+
+        fn obstacles(p: &BoidParams, pos: Vec3) -> Vec3 {
+            let (range, strength) = (p.avoid_distance.max(1e-3), p.obstacle_weight * p.accel_max);
+            let mut u = Vec3::ZERO;
+            if let Some(b) = &p.bounds {
+                for a in 0..3 {
+                    let mut n = Vec3::ZERO;
+                    n[a] = 1.0;
+                    u += repel(pos[a] - b.min[a], n, range, strength);
+                    u += repel(b.max[a] - pos[a], -n, range, strength);
+                }
+            }
+            for b in &p.boxes {
+                let (d, n) = box_distance(pos, b);
+                u += repel(d, n, range, strength);
+            }
+            for c in &p.pillars {
+                let (d, n) = pillar_distance(pos, c);
+                u += repel(d, n, range, strength);
+            }
+            u
+        }
+
+        fn goal(p: &BoidParams, t: f32, i: usize, pos: Vec3, vel: Vec3) -> Vec3 {
+            if let Some(g) = p.goal {
+                let desired = (Vec3::from(g) - pos).try_normalize().unwrap_or(Vec3::ZERO) * p.speed_max;
+                return (desired - vel) * p.goal_weight;
+            }
+            if p.wander_weight == 0.0 {
+                return Vec3::ZERO;
+            }
+            let phase = t / p.wander_period_s.max(1e-3);
+            let k = phase.floor();
+            let w = phase - k;
+            let smooth = w * w * (3.0 - 2.0 * w);
+            let heading = |period: u64| wander_heading(p.seed, i, period);
+            let dir = heading(k as u64).lerp(heading(k as u64 + 1), smooth).try_normalize().unwrap_or(Vec3::X);
+            (dir * p.speed_max - vel) * p.wander_weight
+        }
+
+        /// Lane `l` of `StepContext::rules`.
+        pub fn rules(ctx: &StepContext, g: &Group, l: usize) -> (Vec3, Vec3, f32) {
+            let p = ctx.p;
+            let (i, pos, vel) = (g.index[l], g.pos[l], g.vel[l]);
+            let urges = [
+                obstacles(p, pos),
+                g.sep[l] * p.separation_weight,
+                g.alignment[l] * p.alignment_weight,
+                g.cohesion[l] * p.cohesion_weight,
+                goal(p, ctx.t, i, pos, vel),
+            ];
+            let (a, _) = allocate(urges, p.accel_max);
+            let v = limit_speed(vel, a, ctx.h, p.speed_min, p.speed_max);
+            let applied = (v - vel) / ctx.h;
+            let right = v.cross(Vec3::Y).try_normalize();
+            let target = right.map_or(0.0, |r| atan(applied.dot(r) / GRAVITY).clamp(-ctx.max_bank, ctx.max_bank));
+            (pos + v * ctx.h, v, g.roll[l] + (target - g.roll[l]) * ctx.bank_follow)
+        }
+
+        pub fn atan_scalar(x: f32) -> f32 {
+            atan(x)
+        }
+    }
+
+    #[test]
+    fn polynomial_atan_matches_libm_and_the_lanes_match_the_scalar_bits() {
+        let mut xs: Vec<f32> = (-200_000..=200_000).map(|k| k as f32 * 1e-4).collect();
+        xs.extend([1e-30f32, 1e6, -1e6, f32::MAX, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0]);
+        let mut worst = 0f32;
+        for x in xs.chunks(LANES) {
+            let lane: [f32; LANES] = std::array::from_fn(|k| x[k.min(x.len() - 1)]);
+            let got = atan(F::new(lane)).to_array();
+            for k in 0..LANES {
+                worst = worst.max((got[k] - lane[k].atan()).abs());
+                assert_eq!(got[k].to_bits(), reference::atan_scalar(lane[k]).to_bits(), "atan({})", lane[k]);
+            }
         }
         assert!(worst < 5e-7, "worst error {worst}");
+    }
+
+    /// A flock strewn through and around two boxes and two pillars, near the bounds, at every
+    /// speed from standing still to past the limit (so the slow-turn and clamp paths run).
+    fn awkward_flock(n: usize) -> (BoidParams, FlockState) {
+        let params = BoidParams {
+            bounds: Some(Aabb { min: [-20.0, 0.0, -20.0], max: [20.0, 15.0, 20.0] }),
+            boxes: vec![Aabb { min: [-6.0, 0.0, -6.0], max: [-1.0, 6.0, -1.0] }, Aabb { min: [4.0, 2.0, 4.0], max: [9.0, 4.0, 12.0] }],
+            pillars: vec![Pillar { centre: [8.0, -8.0], radius: 1.5, y_min: 0.0, y_max: 9.0 }, Pillar { centre: [-10.0, 10.0], radius: 3.0, y_min: 2.0, y_max: 5.0 }],
+            ..BoidParams::default()
+        };
+        let mut rng = crate::sim::rng::Rng::new(5);
+        let mut s = FlockState::random(n, Vec3::new(-22.0, -2.0, -22.0), Vec3::new(22.0, 17.0, 22.0), 5.0, 3);
+        for i in 0..n {
+            let v = match i % 9 {
+                0 => Vec3::ZERO,
+                1 => Vec3::Y * 0.5,
+                2 => rng.unit_vector() * 1.9,
+                3 => rng.unit_vector() * 14.0,
+                _ => rng.unit_vector() * rng.range(0.0, 11.0),
+            };
+            (s.vx[i], s.vy[i], s.vz[i]) = (v.x, v.y, v.z);
+            s.roll[i] = rng.range(-1.0, 1.0);
+        }
+        (s.px[0], s.py[0], s.pz[0]) = (8.0, 4.0, -8.0); // on a pillar's axis
+        (s.px[1], s.py[1], s.pz[1]) = (-3.5, 3.0, -3.5); // at a box's centre
+        (params, s)
+    }
+
+    #[test]
+    fn the_rules_in_lanes_give_the_scalar_rules_bits() {
+        let grid = Grid::new();
+        let (base, state) = awkward_flock(203);
+        let goal = BoidParams { goal: Some([3.0, 7.0, -2.0]), ..base.clone() };
+        let still = BoidParams { wander_weight: 0.0, ..base.clone() };
+        let mut compared = 0;
+        for (p, t) in [(&base, 0.0), (&base, 5.3), (&goal, 1.0), (&still, 2.0)] {
+            let ctx = StepContext { p, cur: &state, grid: &grid, search: NeighbourSearch::BruteForce, radius: 5.0, h: 1.0 / 60.0, t, max_bank: 1.0, bank_follow: 0.1 };
+            let mut buf = Vec::new();
+            for start in (0..state.len()).step_by(LANES) {
+                let mut g = Group::default();
+                for l in 0..LANES {
+                    let i = (start + l).min(state.len() - 1);
+                    ctx.neighbourhood(i, i, &mut buf, &mut StepCounters::default(), &mut g, l);
+                }
+                let (pos, vel, roll) = ctx.rules(&g);
+                for l in 0..LANES {
+                    let (rp, rv, rr) = reference::rules(&ctx, &g, l);
+                    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                    let i = g.index[l];
+                    assert_eq!(bits(pos.lane(l)), bits(rp), "boid {i} position: {:?} vs {rp:?}", pos.lane(l));
+                    assert_eq!(bits(vel.lane(l)), bits(rv), "boid {i} velocity: {:?} vs {rv:?}", vel.lane(l));
+                    assert_eq!(roll.as_array()[l].to_bits(), rr.to_bits(), "boid {i} roll");
+                    compared += 1;
+                }
+            }
+        }
+        assert_eq!(compared, 4 * 26 * LANES);
     }
 }

@@ -29,10 +29,9 @@ pub struct Grid {
     order: Vec<u32>,
     /// Inverse of `order`: where point i sits in it.
     rank: Vec<u32>,
-    /// Positions in `order`'s order.
-    sx: Vec<f32>,
-    sy: Vec<f32>,
-    sz: Vec<f32>,
+    /// Positions in `order`'s order, with the point's index in the fourth float's bits: a query
+    /// reads one 16-byte record per candidate from one array.
+    points: Vec<[f32; 4]>,
     /// Scratch: linear cell of each point.
     cell_of: Vec<u32>,
     /// Cell coordinates of each point (relative to `min_cell`), so a query about a point of the
@@ -141,14 +140,14 @@ impl Grid {
         for (k, &i) in self.order.iter().enumerate() {
             self.rank[i as usize] = k as u32;
         }
-        for (dst, src) in [(&mut self.sx, px), (&mut self.sy, py), (&mut self.sz, pz)] {
-            dst.resize(n, 0.0);
-            let order = &self.order;
-            dst.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = src[i as usize]);
-        }
+        self.points.resize(n, [0.0; 4]);
         self.sorted_xyz.resize(n, [0; 3]);
         let (order, xyz) = (&self.order, &self.cell_xyz);
-        self.sorted_xyz.par_iter_mut().zip(order.par_iter()).with_min_len(4096).for_each(|(d, &i)| *d = xyz[i as usize]);
+        self.points.par_iter_mut().zip(self.sorted_xyz.par_iter_mut()).zip(order.par_iter()).with_min_len(4096).for_each(|((pt, c), &i)| {
+            let i = i as usize;
+            *pt = [px[i], py[i], pz[i], f32::from_bits(i as u32)];
+            *c = xyz[i];
+        });
     }
 
     /// Appends to `out` every point j != `exclude` with |p_j − p|² < radius², in cell order.
@@ -171,10 +170,8 @@ impl Grid {
                 let row = d[0] * (y + d[1] * z);
                 let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
                 examined += e - s;
-                // Zipped slices: one bounds check per run, not four per point.
-                let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
-                for (((&x, &y), &z), &j) in run {
-                    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+                for &[x, y, z, j] in &self.points[s..e] {
+                    let (dx, dy, dz, j) = (x - p.x, y - p.y, z - p.z, j.to_bits());
                     if dx * dx + dy * dy + dz * dz < r2 && Some(j) != exclude {
                         out.push(j);
                     }
@@ -204,8 +201,8 @@ impl Grid {
     /// the cell the build found for it: walking k upward reads the query points sequentially.
     pub fn sorted_point_neighbour_keys(&self, k: usize, radius: f32, out: &mut Vec<u64>) -> (usize, usize) {
         let c = self.sorted_xyz[k].map(|v| v as i32);
-        let p = Vec3::new(self.sx[k], self.sy[k], self.sz[k]);
-        self.keys_around(c, p, radius, self.order[k], out)
+        let [x, y, z, i] = self.points[k];
+        self.keys_around(c, Vec3::new(x, y, z), radius, i.to_bits(), out)
     }
 
     /// Per axis, the clamped 3-cell range around cell `c`; None if it misses the grid.
@@ -226,26 +223,30 @@ impl Grid {
         let Some([(x0, x1), (y0, y1), (z0, z1)]) = self.spans(c) else {
             return (0, 0);
         };
-        let mut examined = 0;
-        let mut len = 0;
+        // The (up to nine) runs first, so the buffer is sized once and the loop below keeps its
+        // count in a register.
+        let mut runs = [(0usize, 0usize); 9];
+        let (mut nruns, mut examined) = (0, 0);
         for z in z0..=z1 {
             for y in y0..=y1 {
                 let row = d[0] * (y + d[1] * z);
                 let (s, e) = (self.cell_start[row + x0] as usize, self.cell_start[row + x1 + 1] as usize);
+                runs[nruns] = (s, e);
+                nruns += (e > s) as usize;
                 examined += e - s;
-                if out.len() < len + (e - s) {
-                    out.resize(len + (e - s) + 64, 0);
-                }
-                let buf = &mut out[len..len + (e - s)];
-                let run = self.sx[s..e].iter().zip(&self.sy[s..e]).zip(&self.sz[s..e]).zip(&self.order[s..e]);
-                let mut k = 0;
-                for (((&x, &y), &z), &j) in run {
-                    let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
-                    let d2 = dx * dx + dy * dy + dz * dz;
-                    buf[k] = (d2.to_bits() as u64) << 32 | j as u64;
-                    k += (d2 < r2 && j != exclude) as usize;
-                }
-                len += k;
+            }
+        }
+        if out.len() < examined {
+            out.resize(examined + 64, 0);
+        }
+        let buf = &mut out[..examined];
+        let mut len = 0;
+        for &(s, e) in &runs[..nruns] {
+            for &[x, y, z, j] in &self.points[s..e] {
+                let (dx, dy, dz, j) = (x - p.x, y - p.y, z - p.z, j.to_bits());
+                let d2 = dx * dx + dy * dy + dz * dz;
+                buf[len] = (d2.to_bits() as u64) << 32 | j as u64;
+                len += (d2 < r2 && j != exclude) as usize;
             }
         }
         (len, examined)

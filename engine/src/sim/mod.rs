@@ -17,6 +17,7 @@ pub mod clock;
 pub mod curve;
 pub mod grid;
 pub mod integrate;
+pub mod lanes;
 pub mod particles;
 pub mod rng;
 
