@@ -197,6 +197,8 @@ pub struct Flock {
 
 /// Boids per parallel work item.
 const CHUNK: usize = 256;
+/// Boids per work item of the gather back to index order.
+const GATHER: usize = 4096;
 
 /// Hands `budget` out to `urges` in order: each gets min(|u|, remaining) along its own direction.
 /// Returns the summed acceleration and the magnitude each urge received.
@@ -451,19 +453,27 @@ impl Flock {
             });
         self.last = counters;
         if order.is_some() {
-            let rank = self.grid.rank();
-            let (src, dst) = (&self.sorted, &mut self.next);
-            for (d, s) in [
-                (&mut dst.px, &src.px),
-                (&mut dst.py, &src.py),
-                (&mut dst.pz, &src.pz),
-                (&mut dst.vx, &src.vx),
-                (&mut dst.vy, &src.vy),
-                (&mut dst.vz, &src.vz),
-                (&mut dst.roll, &src.roll),
-            ] {
-                d.par_iter_mut().zip(rank.par_iter()).with_min_len(4096).for_each(|(d, &r)| *d = s[r as usize]);
-            }
+            // Back to index order, in one parallel pass over all seven arrays.
+            let (rank, src, dst) = (self.grid.rank(), &self.sorted, &mut self.next);
+            (
+                dst.px.par_chunks_mut(GATHER),
+                dst.py.par_chunks_mut(GATHER),
+                dst.pz.par_chunks_mut(GATHER),
+                dst.vx.par_chunks_mut(GATHER),
+                dst.vy.par_chunks_mut(GATHER),
+                dst.vz.par_chunks_mut(GATHER),
+                dst.roll.par_chunks_mut(GATHER),
+                rank.par_chunks(GATHER),
+            )
+                .into_par_iter()
+                .for_each(|(px, py, pz, vx, vy, vz, roll, rank)| {
+                    for (k, &r) in rank.iter().enumerate() {
+                        let r = r as usize;
+                        (px[k], py[k], pz[k]) = (src.px[r], src.py[r], src.pz[r]);
+                        (vx[k], vy[k], vz[k]) = (src.vx[r], src.vy[r], src.vz[r]);
+                        roll[k] = src.roll[r];
+                    }
+                });
         }
         std::mem::swap(&mut self.cur, &mut self.next);
         self.steps += 1;
