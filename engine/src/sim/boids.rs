@@ -383,6 +383,13 @@ impl Flock {
 
     /// One fixed step of `h` seconds.
     pub fn step(&mut self, h: f32, search: NeighbourSearch) {
+        // The whole step on one of rayon's worker threads: each parallel loop started from
+        // outside the pool wakes a worker and puts this thread to sleep until it is done, a
+        // round trip per loop (10k boids on 2 cores: 2.0 ms a step that way, 1.35 ms this way).
+        rayon::scope(|_| self.step_in_pool(h, search));
+    }
+
+    fn step_in_pool(&mut self, h: f32, search: NeighbourSearch) {
         let p = &self.params;
         let radius = p.neighbour_radius.max(p.separation_radius);
         if search == NeighbourSearch::Grid && !self.cur.is_empty() {

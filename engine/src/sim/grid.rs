@@ -21,6 +21,7 @@ use rayon::prelude::*;
 #[derive(Debug, Clone, Default)]
 pub struct Grid {
     cell: f32,
+    inv_cell: f32,
     radius: f32,
     min_cell: [i32; 3],
     dims: [usize; 3],
@@ -44,10 +45,12 @@ pub struct Grid {
 const CELLS_PER_POINT: usize = 8;
 const MIN_CELLS: usize = 4096;
 
-/// floor(v / cell). Truncation, one down for negatives with a fraction: `f32::floor` is a libm
-/// call without SSE4.1, and this runs for every point and query.
-fn cell_coord(v: f32, cell: f32) -> i32 {
-    let t = v / cell;
+/// floor(v / cell), as floor(v · (1 / cell)): a multiply where a divide would take several
+/// times as long, and still monotonic in v, which is all the build and the queries need of it
+/// (the cell's 2⁻¹² margin covers the rounding). Truncation, one down for negatives with a
+/// fraction: `f32::floor` is a libm call without SSE4.1, and this runs for every point and query.
+fn cell_coord(v: f32, inv_cell: f32) -> i32 {
+    let t = v * inv_cell;
     let i = t as i32;
     i - ((i as f32) > t) as i32
 }
@@ -86,11 +89,12 @@ impl Grid {
         let mut cell = radius * (1.0 + 1.0 / 4096.0);
         let limit = CELLS_PER_POINT * n + MIN_CELLS;
         loop {
-            let lo_c = [cell_coord(lo.x, cell), cell_coord(lo.y, cell), cell_coord(lo.z, cell)];
-            let hi_c = [cell_coord(hi.x, cell), cell_coord(hi.y, cell), cell_coord(hi.z, cell)];
+            let inv = 1.0 / cell;
+            let lo_c = [cell_coord(lo.x, inv), cell_coord(lo.y, inv), cell_coord(lo.z, inv)];
+            let hi_c = [cell_coord(hi.x, inv), cell_coord(hi.y, inv), cell_coord(hi.z, inv)];
             let dims: [usize; 3] = std::array::from_fn(|a| (hi_c[a] as i64 - lo_c[a] as i64 + 1).max(1) as usize);
             if dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d)).is_some_and(|c| c <= limit) {
-                (self.cell, self.min_cell, self.dims) = (cell, lo_c, dims);
+                (self.cell, self.inv_cell, self.min_cell, self.dims) = (cell, inv, lo_c, dims);
                 break;
             }
             cell *= 2.0;
@@ -99,11 +103,11 @@ impl Grid {
 
         self.cell_of.resize(n, 0);
         self.cell_xyz.resize(n, [0; 3]);
-        let (cs, mc, d) = (self.cell, self.min_cell, self.dims);
+        let (inv, mc, d) = (self.inv_cell, self.min_cell, self.dims);
         self.cell_of.par_iter_mut().zip(self.cell_xyz.par_iter_mut()).enumerate().with_min_len(4096).for_each(|(i, (c, xyz))| {
-            let x = (cell_coord(px[i], cs) - mc[0]) as usize;
-            let y = (cell_coord(py[i], cs) - mc[1]) as usize;
-            let z = (cell_coord(pz[i], cs) - mc[2]) as usize;
+            let x = (cell_coord(px[i], inv) - mc[0]) as usize;
+            let y = (cell_coord(py[i], inv) - mc[1]) as usize;
+            let z = (cell_coord(pz[i], inv) - mc[2]) as usize;
             *c = (x + d[0] * (y + d[1] * z)) as u32;
             *xyz = [x as u32, y as u32, z as u32];
         });
@@ -156,9 +160,9 @@ impl Grid {
         debug_assert!(radius <= self.radius, "query radius {radius} above the build radius {}", self.radius);
         let r2 = radius * radius;
         let c = [
-            cell_coord(p.x, self.cell) - self.min_cell[0],
-            cell_coord(p.y, self.cell) - self.min_cell[1],
-            cell_coord(p.z, self.cell) - self.min_cell[2],
+            cell_coord(p.x, self.inv_cell) - self.min_cell[0],
+            cell_coord(p.y, self.inv_cell) - self.min_cell[1],
+            cell_coord(p.z, self.inv_cell) - self.min_cell[2],
         ];
         let d = self.dims;
         let Some([(x0, x1), (y0, y1), (z0, z1)]) = self.spans(c) else {
@@ -190,9 +194,9 @@ impl Grid {
     /// Returns (found, examined).
     pub fn neighbour_keys(&self, p: Vec3, radius: f32, exclude: u32, out: &mut Vec<u64>) -> (usize, usize) {
         let c = [
-            cell_coord(p.x, self.cell) - self.min_cell[0],
-            cell_coord(p.y, self.cell) - self.min_cell[1],
-            cell_coord(p.z, self.cell) - self.min_cell[2],
+            cell_coord(p.x, self.inv_cell) - self.min_cell[0],
+            cell_coord(p.y, self.inv_cell) - self.min_cell[1],
+            cell_coord(p.z, self.inv_cell) - self.min_cell[2],
         ];
         self.keys_around(c, p, radius, exclude, out)
     }

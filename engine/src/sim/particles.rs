@@ -350,9 +350,13 @@ impl ParticleSystem {
 
     /// One fixed step of `h` seconds: move, kill, spawn.
     pub fn step(&mut self, h: f32) {
-        self.integrate(h);
-        self.kill();
-        self.spawn(h);
+        // On a rayon worker, so the parallel loops inside queue work instead of each waking a
+        // worker and waiting for it (as `Flock::step`).
+        rayon::scope(|_| {
+            self.integrate(h);
+            self.kill();
+            self.spawn(h);
+        });
         self.counters.steps += 1;
     }
 
@@ -480,7 +484,8 @@ impl ParticleSystem {
                 }
             });
         };
-        match p.blend {
+        // On a rayon worker, as `step`: four parallel loops, one wake-up.
+        rayon::scope(|_| match p.blend {
             Blend::Additive => fill(out),
             Blend::Alpha => {
                 // Build in storage order (streaming through the particle arrays), sort 8-byte
@@ -499,7 +504,7 @@ impl ParticleSystem {
                 out.clear();
                 out.par_extend(keys.par_iter().with_min_len(CHUNK).map(|&k| src[k as u32 as usize]));
             }
-        }
+        });
     }
 }
 
