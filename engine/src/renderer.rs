@@ -451,18 +451,18 @@ impl Renderer {
         stamp(7);
         stamp(0);
         if draw_shadow {
-            let shadow_area = self.shadow.begin(gpu, cb);
-            let depth_attachment = vk::RenderingAttachmentInfo::default()
-                .image_view(self.shadow.view())
-                .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
-            let rendering = vk::RenderingInfo::default().render_area(shadow_area).layer_count(1).depth_attachment(&depth_attachment);
             let p = &self.pipelines;
-            let pass = PassSetup { slot, frame_set: self.shadow.sets[slot], draws: &self.shadow.casters, query: None, depth_test: true, cull: false };
-            self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
-            self.shadow.end(gpu, cb);
+            self.shadow.record(gpu, cb, |view, load_op, casters| {
+                let depth_attachment = vk::RenderingAttachmentInfo::default()
+                    .image_view(view)
+                    .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                    .load_op(load_op)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
+                let rendering = vk::RenderingInfo::default().render_area(self.shadow.area()).layer_count(1).depth_attachment(&depth_attachment);
+                let pass = PassSetup { slot, frame_set: self.shadow.sets[slot], draws: casters, query: None, depth_test: true, cull: false };
+                self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
+            });
         }
         stamp(1);
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a

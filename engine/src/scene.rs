@@ -64,6 +64,9 @@ pub struct BakedLighting {
 }
 
 pub struct GpuScene {
+    /// Unique per upload in this process, so caches of derived data (the shadow map's static
+    /// part) can tell one scene from the next even where Vulkan reuses handles.
+    pub id: u64,
     pub meshes: Vec<GpuMesh>,
     pub materials: Vec<GpuMaterial>,
     pub instances: Vec<Instance>,
@@ -307,7 +310,9 @@ impl GpuScene {
         let unlit_set = scene_set(&black)?;
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
 
+        static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         Ok(GpuScene {
+            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             meshes,
             materials,
             instances,

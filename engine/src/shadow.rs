@@ -8,6 +8,11 @@
 //! not make the shadow edges of everything else crawl. It draws every opaque instance, static and
 //! dynamic, with culling off (single-sided occluders such as a roof quad cast from either side)
 //! and a slope-scaled depth bias. The shading pass reads it through a comparison sampler (PCF).
+//!
+//! The static casters (the level, most of the triangles) are drawn into a map of their own that
+//! is kept between frames; each frame copies it into the map and draws only the dynamic casters
+//! on top. It is drawn again only when something it depends on changes: the scene, the map's
+//! window or size, or a static caster's transform or LOD (`prepare` hashes them all).
 
 use crate::gpu::{barrier, full_range, Buffer, Gpu, Image, Transition};
 use crate::scene::GpuScene;
@@ -16,6 +21,7 @@ use anyhow::Result;
 use ash::vk;
 use glam::{Mat3, Mat4, Vec3, Vec4};
 use gpu_allocator::MemoryLocation;
+use std::hash::{Hash, Hasher};
 
 /// Shadow map width and height in texels unless set otherwise (`Renderer::set_shadow_map_size`).
 pub const DEFAULT_SHADOW_MAP_SIZE: u32 = 2048;
@@ -76,6 +82,17 @@ pub struct SunShadow {
     pub texel_m: f32,
     /// This frame's casters: every instance at its shadow LOD.
     pub casters: Vec<Draw>,
+    /// The same split: instances of static meshes, and the rest.
+    pub static_casters: Vec<Draw>,
+    pub dynamic_casters: Vec<Draw>,
+    /// The static casters' depth alone, copied into `image` every frame.
+    static_image: Image,
+    /// Hash of what `static_image` was drawn from (None: never drawn, or stale after a resize).
+    static_key: Option<u64>,
+    /// Whether this frame draws `static_image` again (`prepare` decides).
+    pub redraw_static: bool,
+    /// Times `static_image` has been drawn.
+    pub static_draws: u64,
     /// Per frame slot: uniforms whose `view_proj` is the sun's (what mesh.vert transforms by),
     /// and the set 0 that binds them for the shadow pass.
     ubos: Vec<Buffer>,
@@ -91,6 +108,7 @@ impl SunShadow {
         let d = &gpu.device;
         let (format, linear) = pick_format(gpu)?;
         let image = create_map(gpu, format, size)?;
+        let static_image = create_static_map(gpu, format, size)?;
         let filter = if linear { vk::Filter::LINEAR } else { vk::Filter::NEAREST };
         let sampler = unsafe {
             d.create_sampler(
@@ -152,6 +170,12 @@ impl SunShadow {
             view_proj: Mat4::IDENTITY,
             texel_m: 1.0,
             casters: Vec::new(),
+            static_casters: Vec::new(),
+            dynamic_casters: Vec::new(),
+            static_image,
+            static_key: None,
+            redraw_static: false,
+            static_draws: 0,
             ubos,
             sets,
             pool,
@@ -166,24 +190,44 @@ impl SunShadow {
     /// one and points its descriptors at `view()` again.
     pub fn resize(&mut self, gpu: &Gpu, size: u32) -> Result<()> {
         let image = create_map(gpu, self.format, size)?;
+        let static_image = create_static_map(gpu, self.format, size)?;
         self.image.destroy(gpu);
-        self.image = image;
+        self.static_image.destroy(gpu);
+        (self.image, self.static_image, self.static_key) = (image, static_image, None);
         self.size = size;
         Ok(())
     }
 
     /// Fit the map to the scene for a sun towards `towards_sun` and list the casters: every
-    /// instance at its shadow LOD.
+    /// instance at its shadow LOD, split into static and dynamic; and decide whether the static
+    /// part must be drawn again.
     pub fn prepare(&mut self, scene: &GpuScene, towards_sun: Vec3) {
         let (lo, hi) = scene.bounds();
         (self.view_proj, self.texel_m) = sun_view_proj(towards_sun, lo, hi, self.size);
         self.casters.clear();
+        self.static_casters.clear();
+        self.dynamic_casters.clear();
+        let mut key = std::collections::hash_map::DefaultHasher::new();
+        (scene.id, self.size, self.view_proj.to_cols_array().map(f32::to_bits)).hash(&mut key);
         for (i, inst) in scene.instances.iter().enumerate() {
             let mesh = &scene.meshes[inst.mesh as usize];
-            self.casters.push(Draw {
+            let draw = Draw {
                 instance: i as u32,
                 lod: shadow_lod(&mesh.errors, inst.scale, self.texel_m) as u8,
-            });
+            };
+            self.casters.push(draw);
+            if mesh.is_static {
+                (draw.instance, draw.lod, inst.mesh, inst.world.to_cols_array().map(f32::to_bits)).hash(&mut key);
+                self.static_casters.push(draw);
+            } else {
+                self.dynamic_casters.push(draw);
+            }
+        }
+        let key = Some(key.finish());
+        self.redraw_static = !self.static_casters.is_empty() && key != self.static_key;
+        if self.redraw_static {
+            self.static_key = key;
+            self.static_draws += 1;
         }
     }
 
@@ -192,18 +236,47 @@ impl SunShadow {
         self.ubos[slot].mapped()[..bytes.len()].copy_from_slice(bytes);
     }
 
-    /// Begin the depth-only rendering into the map (cleared to the far depth, 1).
-    pub fn begin(&self, gpu: &Gpu, cb: vk::CommandBuffer) -> vk::Rect2D {
-        barrier(gpu, cb, self.image.image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::SAMPLED_TO_DEPTH_ATTACHMENT_DISCARD);
+    /// The map's size as a render area.
+    pub fn area(&self) -> vk::Rect2D {
         vk::Rect2D {
             offset: vk::Offset2D::default(),
             extent: vk::Extent2D { width: self.size, height: self.size },
         }
     }
 
-    /// After the pass: the map becomes readable by the shading pass.
-    pub fn end(&self, gpu: &Gpu, cb: vk::CommandBuffer) {
-        barrier(gpu, cb, self.image.image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_ATTACHMENT_TO_SAMPLED);
+    /// Record this frame's map (after `prepare`), leaving it readable by the shading pass.
+    /// `draw(view, load_op, casters)` records one depth-only rendering of `casters` into `view`
+    /// (an image of the map's size), cleared or on top of what is there.
+    pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, draw: impl Fn(vk::ImageView, vk::AttachmentLoadOp, &[Draw])) {
+        let range = full_range(vk::ImageAspectFlags::DEPTH, 1);
+        let (map, cache) = (&self.image, &self.static_image);
+        if self.static_casters.is_empty() {
+            barrier(gpu, cb, map.image, range, Transition::SAMPLED_TO_DEPTH_ATTACHMENT_DISCARD);
+            draw(map.view, vk::AttachmentLoadOp::CLEAR, &self.casters);
+            barrier(gpu, cb, map.image, range, Transition::DEPTH_ATTACHMENT_TO_SAMPLED);
+            return;
+        }
+        if self.redraw_static {
+            barrier(gpu, cb, cache.image, range, Transition::TRANSFER_SRC_TO_DEPTH_ATTACHMENT_DISCARD);
+            draw(cache.view, vk::AttachmentLoadOp::CLEAR, &self.static_casters);
+            barrier(gpu, cb, cache.image, range, Transition::DEPTH_ATTACHMENT_TO_TRANSFER_SRC);
+        }
+        barrier(gpu, cb, map.image, range, Transition::SAMPLED_TO_TRANSFER_DST_DISCARD);
+        let layers = vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::DEPTH, mip_level: 0, base_array_layer: 0, layer_count: 1 };
+        let region = vk::ImageCopy {
+            src_subresource: layers,
+            dst_subresource: layers,
+            extent: vk::Extent3D { width: self.size, height: self.size, depth: 1 },
+            ..Default::default()
+        };
+        unsafe { gpu.device.cmd_copy_image(cb, cache.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, map.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &[region]) };
+        if self.dynamic_casters.is_empty() {
+            barrier(gpu, cb, map.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
+        } else {
+            barrier(gpu, cb, map.image, range, Transition::TRANSFER_DST_TO_DEPTH_ATTACHMENT);
+            draw(map.view, vk::AttachmentLoadOp::LOAD, &self.dynamic_casters);
+            barrier(gpu, cb, map.image, range, Transition::DEPTH_ATTACHMENT_TO_SAMPLED);
+        }
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
@@ -211,6 +284,7 @@ impl SunShadow {
             b.destroy(gpu);
         }
         self.image.destroy(gpu);
+        self.static_image.destroy(gpu);
         unsafe {
             gpu.device.destroy_descriptor_pool(self.pool, None);
             gpu.device.destroy_sampler(self.sampler, None);
@@ -222,7 +296,10 @@ impl SunShadow {
 /// first (the sun's depth range spans the whole scene), D16 (which every device must offer for
 /// both) otherwise. Also whether it filters linearly (hardware PCF).
 fn pick_format(gpu: &Gpu) -> Result<(vk::Format, bool)> {
-    let need = vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT | vk::FormatFeatureFlags::SAMPLED_IMAGE;
+    let need = vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT
+        | vk::FormatFeatureFlags::SAMPLED_IMAGE
+        | vk::FormatFeatureFlags::TRANSFER_SRC
+        | vk::FormatFeatureFlags::TRANSFER_DST;
     for f in [vk::Format::D32_SFLOAT, vk::Format::D16_UNORM] {
         let p = unsafe { gpu.instance.get_physical_device_format_properties(gpu.physical_device, f) };
         if p.optimal_tiling_features.contains(need) {
@@ -241,11 +318,25 @@ fn create_map(gpu: &Gpu, format: vk::Format, size: u32) -> Result<Image> {
         format,
         vk::Extent2D { width: size, height: size },
         1,
-        vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::SAMPLED,
+        vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
         vk::ImageAspectFlags::DEPTH,
     )?;
     gpu.one_shot(|cb| barrier(gpu, cb, image.image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::UNDEFINED_TO_SAMPLED))?;
     Ok(image)
+}
+
+/// The static casters' map: rendered, then copied from; never sampled (its layout is set by the
+/// first `record`).
+fn create_static_map(gpu: &Gpu, format: vk::Format, size: u32) -> Result<Image> {
+    Image::new(
+        gpu,
+        "sun shadow map, static casters",
+        format,
+        vk::Extent2D { width: size, height: size },
+        1,
+        vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+        vk::ImageAspectFlags::DEPTH,
+    )
 }
 
 #[cfg(test)]

@@ -864,6 +864,71 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
 }
 
 #[test]
+fn the_static_casters_are_drawn_into_the_shadow_map_once_and_reused_while_the_cube_moves() {
+    // The roof (static) goes into the map's cached part once; frames that only move the cube
+    // copy that part and draw the cube on top, and must give the pixels of a renderer drawing
+    // everything afresh. Moving the roof, resizing the map or loading a scene draws it again.
+    let gpu = gpu();
+    let mut pack = roof_pack(0.0, 40.0, 2000.0, Vec3::new(0.0, 1.0, 0.5));
+    // A static ground under it all (the roof's quad, 24 m wide), so the map's window, fitted to
+    // the scene, stays put while the cube moves about inside it.
+    let ground_at = Mat4::from_translation(Vec3::new(0.0, -0.6, 0.0)) * Mat4::from_scale(Vec3::new(24.0, 1.0, 24.0));
+    let roof_mesh = pack.manifest.nodes[0].mesh;
+    pack.manifest.nodes.push(Node { name: "ground".into(), parent: None, local: ground_at.to_cols_array(), mesh: roof_mesh });
+    // Puts the cube at x and the roof at height y in `scene` (transforms and culling spheres).
+    let place = |scene: &mut GpuScene, cube_x: f32, roof_y: f32| {
+        let [roof, cube] = [0, 1];
+        assert!(scene.meshes[scene.instances[roof].mesh as usize].is_static && !scene.meshes[scene.instances[cube].mesh as usize].is_static);
+        scene.instances[roof].world = Mat4::from_translation(Vec3::new(0.0, roof_y, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
+        scene.instances[cube].world = Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0));
+        let s = &mut scene.spheres;
+        (s.y[roof], s.x[cube]) = (roof_y, cube_x);
+    };
+    let cam = |cube_x: f32| Camera { position: Vec3::new(cube_x, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };
+    let afresh = |cube_x: f32, roof_y: f32, map_size: u32| {
+        let mut rig = Rig::new(&gpu, &pack, 48, 48);
+        rig.renderer.set_shadow_map_size(&gpu, map_size).unwrap();
+        place(&mut rig.scene, cube_x, roof_y);
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam(cube_x), &Lighting::default(), true).unwrap();
+        assert_eq!(rig.renderer.shadow.static_draws, 1);
+        let px = rig.target.pixels().to_vec();
+        rig.destroy(&gpu);
+        px
+    };
+    let mut rig = Rig::new(&gpu, &pack, 48, 48);
+    let frame = |rig: &mut Rig, cube_x: f32, roof_y: f32| {
+        place(&mut rig.scene, cube_x, roof_y);
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam(cube_x), &Lighting::default(), true).unwrap();
+        (rig.target.pixels().to_vec(), rig.renderer.shadow.static_draws, rig.renderer.shadow_casters)
+    };
+    let size = engine::shadow::DEFAULT_SHADOW_MAP_SIZE;
+    let mut seen = Vec::new();
+    for x in [0.0, 8.0, 0.5, 0.0] {
+        let (px, static_draws, casters) = frame(&mut rig, x, 1.5);
+        assert_eq!((static_draws, casters), (1, 3), "cube at x = {x}: the roof and ground are drawn once, all three cast");
+        assert!(px == afresh(x, 1.5, size), "cube at x = {x}: the cached frame differs from a fresh one");
+        seen.push(px);
+    }
+    // Under the roof the face gets the probes alone, out in the sun much more (the roof test
+    // above pins both values); a map without the roof, or with nothing, would not tell them apart.
+    let (under, out) = (pixel(&seen[0], 48, 24, 24), pixel(&seen[1], 48, 24, 24));
+    assert!(out[0] > under[0] + 50, "under the roof {under:?}, out in the sun {out:?}");
+    // The roof lowered: drawn again, and the cube (still under it) sees the new roof.
+    let (px, static_draws, _) = frame(&mut rig, 0.0, 1.2);
+    assert_eq!(static_draws, 2, "a moved static caster draws the static part again");
+    assert!(px == afresh(0.0, 1.2, size));
+    rig.renderer.set_shadow_map_size(&gpu, 512).unwrap();
+    let (px, static_draws, _) = frame(&mut rig, 0.0, 1.2);
+    assert_eq!(static_draws, 3, "a new map size draws the static part again");
+    assert!(px == afresh(0.0, 1.2, 512));
+    rig.reload(&gpu, &pack);
+    let (_, static_draws, _) = frame(&mut rig, 0.0, 1.2);
+    assert_eq!(static_draws, 4, "a new scene draws the static part again");
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
 fn the_shadow_pass_is_skipped_without_a_dynamic_object_in_view() {
     // Static geometry has the sun in its lightmap: with only the (static) roof in view nothing
     // reads the map, so it is not drawn; an unbaked pack (stand-in lighting) never draws it.

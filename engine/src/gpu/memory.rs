@@ -285,6 +285,47 @@ impl Transition {
         dst_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
         dst_access: vk::AccessFlags2::SHADER_SAMPLED_READ,
     };
+    /// A depth map earlier frames copied from (the shadow map's cached static part) is rendered
+    /// again: discard, after those copies.
+    pub const TRANSFER_SRC_TO_DEPTH_ATTACHMENT_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COPY,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: DEPTH_TESTS,
+        dst_access: vk::AccessFlags2::from_raw(
+            vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
+        ),
+    };
+    /// A rendered depth map becomes the source of copies.
+    pub const DEPTH_ATTACHMENT_TO_TRANSFER_SRC: Transition = Transition {
+        old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        new: vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        src_stage: DEPTH_TESTS,
+        src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+        dst_stage: vk::PipelineStageFlags2::COPY,
+        dst_access: vk::AccessFlags2::TRANSFER_READ,
+    };
+    /// A map the previous frame sampled is overwritten by a copy: discard, after those reads.
+    pub const SAMPLED_TO_TRANSFER_DST_DISCARD: Transition = Transition {
+        old: vk::ImageLayout::UNDEFINED,
+        new: vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::FRAGMENT_SHADER,
+        src_access: vk::AccessFlags2::NONE,
+        dst_stage: vk::PipelineStageFlags2::COPY,
+        dst_access: vk::AccessFlags2::TRANSFER_WRITE,
+    };
+    /// Depth rendering continues on top of what a copy wrote.
+    pub const TRANSFER_DST_TO_DEPTH_ATTACHMENT: Transition = Transition {
+        old: vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+        src_stage: vk::PipelineStageFlags2::COPY,
+        src_access: vk::AccessFlags2::TRANSFER_WRITE,
+        dst_stage: DEPTH_TESTS,
+        dst_access: vk::AccessFlags2::from_raw(
+            vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw(),
+        ),
+    };
     /// A new image that is only ever sampled until first rendered (no contents yet).
     pub const UNDEFINED_TO_SAMPLED: Transition = Transition {
         old: vk::ImageLayout::UNDEFINED,
