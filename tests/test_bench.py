@@ -143,6 +143,14 @@ def test_help_lists_every_scenario():
         assert name in r.stdout
     for option in ("--scenario", "--all", "--frames", "--warmup", "--json-dir", "--level", "--character"):
         assert option in r.stdout
+    # The subcommands' help is not an error either.
+    for sub, options in (("sim", ("--boids", "--brute-max", "--particles", "--steps")), ("skinned", ("--pack", "--characters"))):
+        r = run_bench(sub, "--help")
+        assert r.returncode == 0 and r.stderr == "", (sub, r.returncode, r.stderr)
+        for option in options:
+            assert option in r.stdout, (sub, option)
+    r = run_bench("sim", "--boids", "ten")
+    assert r.returncode == 2 and "--boids: 'ten' is not a whole number" in r.stderr, r.stderr
 
 
 def test_missing_level_says_how_to_cook_it(tmp_path):

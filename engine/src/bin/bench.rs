@@ -235,7 +235,14 @@ mod sim_bench {
         steps: usize,
     }
 
-    const USAGE: &str = "usage: bench sim [--boids N,N,..] [--brute-max N] [--particles N,N,..] [--steps S]";
+    const USAGE: &str = "usage: bench sim [--boids N,N,..] [--brute-max N] [--particles N,N,..] [--steps S]
+
+  --boids LIST      flock sizes to step (default 1000,10000,100000), in a ±100 m cube
+  --brute-max N     also step with the O(N²) neighbour scan up to this size, interleaved with
+                    the grid, and check both give the same flock (default 10000)
+  --particles LIST  fountain sizes to update and turn into billboards (default 100000,1000000;
+                    an empty list skips them)
+  --steps S         measured steps per size (default 30)";
 
     fn parse(args: Vec<String>) -> Result<Args, String> {
         let mut a = Args { boids: vec![1_000, 10_000, 100_000], brute_max: 10_000, particles: vec![100_000, 1_000_000], steps: 30 };
@@ -258,21 +265,16 @@ mod sim_bench {
     }
 
     pub fn main(args: Vec<String>) -> ExitCode {
-        let args = match parse(args) {
-            Ok(a) => a,
-            Err(e) => {
-                eprintln!("bench: {e}");
-                return ExitCode::from(2);
+        super::exit_status(parse(args), |args| {
+            println!("sim: {} rayon threads; {} steps per measurement; h = 1/120 s", rayon::current_num_threads(), args.steps);
+            for &n in &args.boids {
+                boids(n, args.steps, n <= args.brute_max);
             }
-        };
-        println!("sim: {} rayon threads; {} steps per measurement; h = 1/120 s", rayon::current_num_threads(), args.steps);
-        for &n in &args.boids {
-            boids(n, args.steps, n <= args.brute_max);
-        }
-        for &n in &args.particles {
-            particles(n, args.steps);
-        }
-        ExitCode::SUCCESS
+            for &n in &args.particles {
+                particles(n, args.steps);
+            }
+            Ok(0)
+        })
     }
 
     fn ms_since(t: Instant) -> f64 {
