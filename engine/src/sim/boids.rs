@@ -159,6 +159,21 @@ impl FlockState {
         s
     }
 
+    /// The seven arrays in parallel chunks of `size` boids, a chunk of each together.
+    fn par_chunks_mut(&mut self, size: usize) -> impl IndexedParallelIterator<Item = ChunkMut<'_>> {
+        let s = self;
+        (
+            s.px.par_chunks_mut(size),
+            s.py.par_chunks_mut(size),
+            s.pz.par_chunks_mut(size),
+            s.vx.par_chunks_mut(size),
+            s.vy.par_chunks_mut(size),
+            s.vz.par_chunks_mut(size),
+            s.roll.par_chunks_mut(size),
+        )
+            .into_par_iter()
+    }
+
     fn resize_like(&mut self, other: &FlockState) {
         let n = other.len();
         for a in [&mut self.px, &mut self.py, &mut self.pz, &mut self.vx, &mut self.vy, &mut self.vz, &mut self.roll] {
@@ -166,6 +181,9 @@ impl FlockState {
         }
     }
 }
+
+/// One range of boids in each of `FlockState`'s arrays: px, py, pz, vx, vy, vz, roll.
+type ChunkMut<'a> = (&'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32]);
 
 /// How a step finds neighbours: the grid, or the O(N²) scan (tests and the bench).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -415,16 +433,8 @@ impl Flock {
             bank_follow,
         };
         let n = if order.is_some() { &mut self.sorted } else { &mut self.next };
-        let counters = (
-            n.px.par_chunks_mut(CHUNK),
-            n.py.par_chunks_mut(CHUNK),
-            n.pz.par_chunks_mut(CHUNK),
-            n.vx.par_chunks_mut(CHUNK),
-            n.vy.par_chunks_mut(CHUNK),
-            n.vz.par_chunks_mut(CHUNK),
-            n.roll.par_chunks_mut(CHUNK),
-        )
-            .into_par_iter()
+        let counters = n
+            .par_chunks_mut(CHUNK)
             .enumerate()
             .map_init(
                 || Vec::with_capacity(64),
@@ -462,18 +472,7 @@ impl Flock {
         if order.is_some() {
             // Back to index order, in one parallel pass over all seven arrays.
             let (rank, src, dst) = (self.grid.rank(), &self.sorted, &mut self.next);
-            (
-                dst.px.par_chunks_mut(GATHER),
-                dst.py.par_chunks_mut(GATHER),
-                dst.pz.par_chunks_mut(GATHER),
-                dst.vx.par_chunks_mut(GATHER),
-                dst.vy.par_chunks_mut(GATHER),
-                dst.vz.par_chunks_mut(GATHER),
-                dst.roll.par_chunks_mut(GATHER),
-                rank.par_chunks(GATHER),
-            )
-                .into_par_iter()
-                .for_each(|(px, py, pz, vx, vy, vz, roll, rank)| {
+            dst.par_chunks_mut(GATHER).zip(rank.par_chunks(GATHER)).for_each(|((px, py, pz, vx, vy, vz, roll), rank)| {
                     for (k, &r) in rank.iter().enumerate() {
                         let r = r as usize;
                         (px[k], py[k], pz[k]) = (src.px[r], src.py[r], src.pz[r]);
