@@ -175,3 +175,18 @@ def test_demo_rejects_bad_arguments():
         assert "demo: error:" in result.stderr and "usage:" in result.stderr
         assert "panicked" not in result.stderr
     assert DEMO.exists()
+
+
+def test_a_hung_gpu_is_a_clear_error_not_a_wait_forever():
+    # ENGINE_GPU_TIMEOUT_S (default 60 s) bounds every wait for the GPU; lavapipe never reports a
+    # hang itself (its anisotropic sampling once stalled a frame for minutes). With 1 ns nothing
+    # can finish: the demo must say the GPU is hung, naming what it waited for, and exit 1 at once.
+    pack = REPO / "build" / "demo.pack"
+    assert pack.exists(), "build/demo.pack is made by `make cook` (a prerequisite of `make test`)"
+    result = run_demo([pack, "--headless", "--frames", "3", "--width", "64", "--height", "36"], timeout=60,
+                      env=dict(os.environ, ENGINE_GPU_TIMEOUT_S="0.000000001"))
+    assert result.returncode == 1, f"exit {result.returncode}\n{result.stderr}"
+    assert "demo: error: the GPU did not finish in time: it is hung (while waiting for" in result.stderr, result.stderr
+    assert "panicked" not in result.stderr
+    result = run_demo([pack, "--headless", "--frames", "1"], timeout=60, env=dict(os.environ, ENGINE_GPU_TIMEOUT_S="soon"))
+    assert result.returncode == 1 and 'ENGINE_GPU_TIMEOUT_S="soon" is not a positive number of seconds' in result.stderr, result.stderr

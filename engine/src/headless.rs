@@ -107,6 +107,7 @@ impl Offscreen {
         capture: bool,
         after: impl FnOnce(vk::CommandBuffer, &FrameTarget, &mut Renderer) -> Result<()>,
     ) -> Result<FrameTiming> {
+        gpu.alive("a frame")?;
         let d = &gpu.device;
         let start = Instant::now();
         let target = FrameTarget {
@@ -154,7 +155,7 @@ impl Offscreen {
             let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cb)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cbs)];
             d.queue_submit2(gpu.queue, &submit, self.fence)?;
-            d.wait_for_fences(&[self.fence], true, u64::MAX)?;
+            gpu.wait_fence(self.fence, "a frame")?;
             d.reset_fences(&[self.fence])?;
         }
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -375,6 +375,7 @@ impl State {
     }
 
     fn frame(&mut self) -> Result<()> {
+        self.gpu.alive("a frame")?;
         let now = Instant::now();
         let frame_ms = (now - self.last_frame).as_secs_f64() * 1e3;
         let dt = (now - self.last_frame).as_secs_f32().min(0.1);
@@ -393,7 +394,7 @@ impl State {
         let d = &self.gpu.device;
         let slot = (self.presented % FRAMES_IN_FLIGHT as u64) as usize;
         let (cb, fence, acquired) = (self.frames.cbs[slot], self.frames.fences[slot], self.frames.acquired[slot]);
-        unsafe { d.wait_for_fences(&[fence], true, u64::MAX)? };
+        self.gpu.wait_fence(fence, "a frame")?;
         // The frame this slot last held is finished: its GPU measurements are readable (before
         // the slot's first use there is nothing to read).
         if let Some(o) = self.overlay.as_mut().filter(|_| self.presented >= FRAMES_IN_FLIGHT as u64) {

@@ -929,6 +929,44 @@ fn the_static_casters_are_drawn_into_the_shadow_map_once_and_reused_while_the_cu
 }
 
 #[test]
+fn a_hung_device_is_an_error_that_says_so_not_a_wait_forever() {
+    // A frame that cannot finish within the timeout (here 1 ns) ends in `DeviceLost` naming what
+    // was waited for; the Gpu then no longer waits for the device at all, so dropping it returns
+    // (lavapipe never reports a hang itself: without the timeout this would wait forever).
+    let gpu = gpu();
+    let pack = roof_pack(0.0, 40.0, 2000.0, Vec3::new(0.0, 1.0, 0.5));
+    let mut rig = Rig::new(&gpu, &pack, 64, 64);
+    assert_eq!(gpu.timeout(), engine::gpu::DEFAULT_GPU_TIMEOUT);
+    gpu.set_timeout(std::time::Duration::from_nanos(1));
+    let cam = Camera { position: Vec3::new(0.0, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };
+    let err = rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).expect_err("a 1 ns limit");
+    let lost = err.downcast_ref::<engine::gpu::DeviceLost>().unwrap_or_else(|| panic!("not a DeviceLost: {err:#}"));
+    let text = lost.to_string();
+    assert!(text.contains("did not finish in time") && text.contains("a frame"), "{text}");
+    assert!(gpu.is_lost());
+    // Later waits fail at once, saying the device was already lost.
+    let again = rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).expect_err("lost");
+    assert!(again.to_string().contains("was lost before"), "{again:#}");
+    // The rig's objects may still be in use by the device: left to the process, as the demo
+    // does; the Gpu's drop must return without waiting.
+    std::mem::forget(rig);
+    drop(gpu);
+}
+
+#[test]
+fn a_cpu_device_samples_textures_without_anisotropy() {
+    // Lavapipe's anisotropic sampling can stall a frame for minutes (`scene::max_anisotropy`): a
+    // CPU device gets none, any other its own limit up to 16x.
+    let gpu = gpu();
+    let got = engine::scene::max_anisotropy(&gpu);
+    if gpu.caps.device_type == ash::vk::PhysicalDeviceType::CPU {
+        assert_eq!(got, None, "{} is a CPU device", gpu.caps.device_name);
+    } else {
+        assert_eq!(got, gpu.caps.sampler_anisotropy.map(|m| m.min(16.0)));
+    }
+}
+
+#[test]
 fn the_shadow_pass_is_skipped_without_a_dynamic_object_in_view() {
     // Static geometry has the sun in its lightmap: with only the (static) roof in view nothing
     // reads the map, so it is not drawn; an unbaked pack (stand-in lighting) never draws it.

@@ -6,7 +6,21 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::ffi::{c_char, CStr};
 use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// How long a wait for the GPU may take before the device is called hung, unless
+/// ENGINE_GPU_TIMEOUT_S says otherwise: far above any frame (seconds on lavapipe under load),
+/// far below forever. A real driver resets a hung GPU after about 2 s and reports
+/// VK_ERROR_DEVICE_LOST; lavapipe never gives up on its own.
+pub const DEFAULT_GPU_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The device is hung (a wait for it timed out) or lost: no further work can be trusted to
+/// finish, so the `Gpu` stops waiting for it and leaves its objects to the process's exit.
+#[derive(Debug, thiserror::Error)]
+#[error("the GPU {0} (while waiting for {1}); restart the program (on a real GPU, update or reset the driver)")]
+pub struct DeviceLost(pub &'static str, pub String);
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
@@ -86,6 +100,10 @@ pub struct Gpu {
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
     validation_log: Arc<ValidationLog>,
     pub swapchain_capable: bool,
+    /// `wait_fence`'s limit, in nanoseconds.
+    timeout_ns: AtomicU64,
+    /// Set once a wait found the device hung or lost.
+    lost: AtomicBool,
 }
 
 fn cstr_name(raw: &[c_char]) -> String {
@@ -227,7 +245,47 @@ impl Gpu {
             debug,
             validation_log,
             swapchain_capable: want_swapchain,
+            timeout_ns: AtomicU64::new(gpu_timeout_from_env()?.as_nanos().min(u64::MAX as u128) as u64),
+            lost: AtomicBool::new(false),
         })
+    }
+
+    /// Waits for `fence`, signalled when `what` is done. A device that does not get there within
+    /// the timeout, or reports itself lost, is an error (`DeviceLost`) instead of a wait forever,
+    /// and the `Gpu` is marked lost.
+    pub fn wait_fence(&self, fence: vk::Fence, what: &str) -> Result<()> {
+        self.alive(what)?;
+        let why = match unsafe { self.device.wait_for_fences(&[fence], true, self.timeout_ns.load(Ordering::Relaxed)) } {
+            Ok(()) => return Ok(()),
+            Err(vk::Result::TIMEOUT) => "did not finish in time: it is hung",
+            Err(vk::Result::ERROR_DEVICE_LOST) => "was lost (a driver reset or crash)",
+            Err(e) => return Err(anyhow!("waiting for {what}: {e}")),
+        };
+        self.lost.store(true, Ordering::Relaxed);
+        Err(DeviceLost(why, format!("{what}, {:.1} s", self.timeout().as_secs_f64())).into())
+    }
+
+    /// The limit of `wait_fence`.
+    pub fn timeout(&self) -> Duration {
+        Duration::from_nanos(self.timeout_ns.load(Ordering::Relaxed))
+    }
+
+    pub fn set_timeout(&self, limit: Duration) {
+        self.timeout_ns.store(limit.as_nanos().min(u64::MAX as u128) as u64, Ordering::Relaxed);
+    }
+
+    /// An error once the device is hung or lost: callers check before recording `what`, since
+    /// the command buffers of the hung work are still pending.
+    pub fn alive(&self, what: &str) -> Result<()> {
+        match self.is_lost() {
+            true => Err(DeviceLost("was lost before", what.to_string()).into()),
+            false => Ok(()),
+        }
+    }
+
+    /// Whether a wait found the device hung or lost.
+    pub fn is_lost(&self) -> bool {
+        self.lost.load(Ordering::Relaxed)
     }
 
     /// Everything the validation layer has reported so far (empty when validation is off).
@@ -256,23 +314,36 @@ impl Gpu {
             let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
             let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(cb)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cbs)];
-            let res = d.queue_submit2(self.queue, &submit, fence).and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX));
-            d.destroy_fence(fence, None);
-            d.free_command_buffers(self.upload_pool, &[cb]);
+            let res = match d.queue_submit2(self.queue, &submit, fence) {
+                Ok(()) => self.wait_fence(fence, "an upload"),
+                Err(e) => Err(e.into()),
+            };
+            if !self.is_lost() {
+                d.destroy_fence(fence, None);
+                d.free_command_buffers(self.upload_pool, &[cb]);
+            }
             res?;
             Ok(r)
         }
     }
 
+    /// Waits for all the device's work (not at all once it is lost: that would never return).
     pub fn wait_idle(&self) {
-        unsafe {
-            let _ = self.device.device_wait_idle();
+        if !self.is_lost() {
+            unsafe {
+                let _ = self.device.device_wait_idle();
+            }
         }
     }
 }
 
 impl Drop for Gpu {
     fn drop(&mut self) {
+        if self.is_lost() {
+            // Destroying the device would wait for the work it never finishes: leave everything
+            // to the process's exit.
+            return;
+        }
         unsafe {
             let _ = self.device.device_wait_idle();
             self.device.destroy_command_pool(self.upload_pool, None);
@@ -288,6 +359,20 @@ impl Drop for Gpu {
             }
             self.instance.destroy_instance(None);
         }
+    }
+}
+
+/// ENGINE_GPU_TIMEOUT_S (seconds, > 0) or the default.
+fn gpu_timeout_from_env() -> Result<Duration> {
+    match std::env::var("ENGINE_GPU_TIMEOUT_S") {
+        Err(_) => Ok(DEFAULT_GPU_TIMEOUT),
+        Ok(v) => v
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|s| *s > 0.0 && s.is_finite())
+            .map(Duration::from_secs_f64)
+            .ok_or_else(|| anyhow!("ENGINE_GPU_TIMEOUT_S={v:?} is not a positive number of seconds")),
     }
 }
 

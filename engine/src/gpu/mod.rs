@@ -4,6 +4,6 @@ mod context;
 mod memory;
 mod validation;
 
-pub use context::{Capabilities, DevicePreference, Gpu, GpuOptions};
+pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};
 pub use memory::{barrier, full_range, Buffer, Image, Transition};
 pub use validation::ValidationLog;
