@@ -157,6 +157,17 @@ class DemoWindow:
         subprocess.run(["import", "-display", self.display, "-window", "root", str(path)], check=True, timeout=60)
         return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
 
+    def screenshot_until(self, path: Path, done, timeout: float = 60.0) -> np.ndarray:
+        """Screenshots until `done(image)` holds or `timeout` passes; the last one. On a loaded
+        machine a change can take seconds to reach the screen (lavapipe renders a few frames a
+        second then), so a fixed wait would catch the frame before it."""
+        end = time.monotonic() + timeout
+        while True:
+            image = self.screenshot(path)
+            if done(image) or time.monotonic() > end:
+                return image
+            time.sleep(0.5)
+
     def close(self):
         """Close the window (SIGTERM, unless it is already closing) and check a clean exit with no
         validation message."""
@@ -193,9 +204,9 @@ def test_keys_and_mouse_drive_the_demo_window(xvfb, tmp_path):
         time.sleep(1.0)
         lit = w.screenshot(tmp_path / "lit.png")
         w.key("F5", "window: lightmaps off")
-        unlit = w.screenshot(tmp_path / "unlit.png")
+        unlit = w.screenshot_until(tmp_path / "unlit.png", lambda im: changed(lit, im) > 0.15)
         w.key("F5", "window: lightmaps on")
-        relit = w.screenshot(tmp_path / "relit.png")
+        relit = w.screenshot_until(tmp_path / "relit.png", lambda im: changed(lit, im) < 0.07)
         w.xdotool("mousemove", WIDTH // 2, HEIGHT // 2)
         w.xdotool("mousedown", 1)
         for step in range(1, 9):
@@ -203,9 +214,9 @@ def test_keys_and_mouse_drive_the_demo_window(xvfb, tmp_path):
             time.sleep(0.1)
         w.xdotool("mouseup", 1)
         time.sleep(2.0)
-        turned = w.screenshot(tmp_path / "turned.png")
+        turned = w.screenshot_until(tmp_path / "turned.png", lambda im: changed(relit, im) > 0.5)
         w.key("Tab", "window: scene 2 of 2")
-        other = w.screenshot(tmp_path / "other.png")
+        other = w.screenshot_until(tmp_path / "other.png", lambda im: changed(turned, im) > 0.5)
         # The other switches, each rendered with for a moment (validation checks every frame).
         for key, switch in [("F2", "depth pre-pass"), ("F3", "frustum culling"), ("F4", "LOD selection"), ("F6", "walk mode")]:
             first, second = ("on", "off") if key == "F6" else ("off", "on")

@@ -6,7 +6,7 @@
 //! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
 
 use engine::camera::Camera;
-use engine::gpu::{DevicePreference, Gpu, GpuOptions};
+use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::overlay::{self, FrameStats, Overlay};
 use engine::renderer::{Lighting, Renderer};
@@ -230,16 +230,31 @@ fn main() -> ExitCode {
                 println!("window closed after {} frames on {}", run.frames, run.device_name);
                 return validation_verdict(args.validation, run.validation_errors);
             }
+            Err(e) if e.is::<DeviceLost>() => exit_device_lost(&e),
             Err(e) => eprintln!("demo: cannot use a window ({e:#}); rendering headless instead"),
         }
     }
     match headless(&args, pack, &gpu_opts) {
         Ok(code) => code,
+        Err(e) if e.is::<DeviceLost>() => exit_device_lost(&e),
         Err(e) => {
             eprintln!("demo: error: {e:#}");
             ExitCode::from(1)
         }
     }
+}
+
+/// Leaves at once, status 1, after the GPU hung or was lost. The device's threads may still be
+/// running the hung work: exit handlers and library destructors would then free memory under
+/// them (a fresh-clone CI run of `test_a_hung_gpu_is_a_clear_error_not_a_wait_forever` saw a
+/// segfault on the way out), so none of them run.
+fn exit_device_lost(e: &anyhow::Error) -> ! {
+    eprintln!("demo: error: {e:#}");
+    let _ = std::io::Write::flush(&mut std::io::stdout());
+    let _ = std::io::Write::flush(&mut std::io::stderr());
+    // SAFETY: _exit ends the process; nothing after it runs, nothing before it is left half done
+    // that the OS does not reclaim.
+    unsafe { libc::_exit(1) }
 }
 
 /// The process's resident set size (Linux: /proc/self/statm, in pages of 4 KiB).
@@ -284,10 +299,19 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(&(_, secs)) = args.screens.iter().find(|&&(k, _)| k >= frames) {
         anyhow::bail!("--screens {secs}: past the last frame ({frames} frames are {:.2} s)", frames as f64 / 60.0);
     }
-    let mut frame_ms = Vec::with_capacity(frames as usize);
-    let mut gpu_ms = Vec::with_capacity(frames as usize);
-    let mut pass_ms: [Vec<f64>; 5] = Default::default();
-    let mut skin_ms = Vec::new();
+    // The per-frame records are allocated and written once up front, so their memory is resident
+    // before the first frame: `--rss-at` (the soak) compares resident memory between frames, and
+    // records that grew as frames passed (by pages, and by doubling) would read as a leak.
+    let record = || {
+        let mut v = vec![0.0f64; frames as usize];
+        v.fill(1.0);
+        v.clear();
+        v
+    };
+    let mut frame_ms = record();
+    let mut gpu_ms = record();
+    let mut pass_ms: [Vec<f64>; 5] = std::array::from_fn(|_| record());
+    let mut skin_ms = record();
     for f in 0..frames {
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
         renderer.animate(&mut scene, 1.0 / 60.0);
