@@ -8,12 +8,11 @@ layout(location = 4) in vec2 in_uv1;
 layout(location = 5) in vec4 in_color;
 // Location 2 (tangent) exists in the vertex format but is not read yet.
 
-// 128 bytes: the minimum every device guarantees. Mirrors `DrawPush` in renderer.rs.
-layout(push_constant) uniform Draw {
-    mat4 model;
-    vec4 normal_cols[3]; // inverse-transpose of model's 3x3 (handles non-uniform and mirrored scale)
-    vec4 base_color;
-} draw;
+// Per instance (binding 1, the renderer's instance stream; `InstanceData` in batches.rs): the
+// model matrix and its normal matrix, the inverse-transpose of the 3x3 (non-uniform and mirrored
+// scale).
+layout(location = 6) in mat4 in_model;
+layout(location = 10) in mat3 in_normal_matrix;
 
 layout(location = 0) out vec3 out_normal;
 // The depth pre-pass and the shading pass run this same shader, and the shading pass's EQUAL
@@ -28,9 +27,8 @@ layout(location = 3) out vec3 out_world;
 layout(location = 4) out vec2 out_uv1;
 
 void main() {
-    vec4 world = draw.model * vec4(in_position, 1.0);
-    mat3 normal_matrix = mat3(draw.normal_cols[0].xyz, draw.normal_cols[1].xyz, draw.normal_cols[2].xyz);
-    out_normal = normal_matrix * in_normal;
+    vec4 world = in_model * vec4(in_position, 1.0);
+    out_normal = in_normal_matrix * in_normal;
     out_uv0 = in_uv0;
     out_color = in_color;
     out_world = world.xyz;

@@ -5,8 +5,7 @@
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
 
 layout(push_constant) uniform Draw {
-    mat4 model;
-    vec4 normal_cols[3]; // w: alpha-test cutoff (or -1), lightmapped (1/0), material index
+    vec4 material; // x: alpha-test cutoff (or -1), y: lightmapped (1/0), z: material index
     vec4 base_color;
 } draw;
 
@@ -48,7 +47,7 @@ vec4 albedo() {
 }
 
 bool alpha_tested_away(vec4 a) {
-    float cutoff = draw.normal_cols[0].w;
+    float cutoff = draw.material.x;
     return cutoff >= 0.0 && a.a < cutoff;
 }
 
@@ -143,7 +142,7 @@ vec4 shade(vec4 a) {
     // Physical: B = H/pi from the lightmap (static geometry: it holds the sun too) or from the
     // probes plus the sun where the shadow map sees it (dynamic objects).
     vec3 b;
-    if (draw.normal_cols[1].w > 0.5) {
+    if (draw.material.y > 0.5) {
         b = texture(lightmap, in_uv1).rgb;
     } else {
         vec4 pl = probe_light(in_world, n);
@@ -151,6 +150,6 @@ vec4 shade(vec4 a) {
     }
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
-    vec3 l = a.rgb * b + materials.emission[int(draw.normal_cols[2].w)].rgb;
+    vec3 l = a.rgb * b + materials.emission[int(draw.material.z)].rgb;
     return vec4(min(l, HALF_MAX), 1.0);
 }

@@ -54,7 +54,7 @@ def results(tmp_path_factory) -> tuple[Path, dict[str, dict], str]:
 def test_times_are_reported_not_gated(results, capsys):
     """Print the short run's frame times into the CI log (past pytest's capture)."""
     lines = [line for line in results[2].splitlines() if "cpu_frame_ms" in line or line.startswith(("bench:", "floor"))]
-    assert len(lines) == 2 + len(SCENARIOS) + 1  # header, floor, a line per scenario, pre-pass off
+    assert len(lines) == 2 + len(SCENARIOS) + 2  # header, floor, a line per scenario, pre-pass off, instancing off
     with capsys.disabled():
         print("\nbench short run (times are not checked):\n" + "\n".join(lines))
 
@@ -85,6 +85,17 @@ def test_culling_100k_culls_the_same_cubes(results):
     assert c["instances"] == c["cull_tested"] == 100_000
     assert (c["culled"], c["drawn"]) == (CULLING_CULLED, 100_000 - CULLING_CULLED)
     assert c["triangles"] == 12 * c["drawn"]  # one LOD: 12 triangles a cube
+
+
+def test_culling_100k_draws_its_cubes_instanced(results):
+    """The visible cubes are one mesh: with instancing, one call per LOD and pass (the cubes
+    have one LOD and no sun, so the pre-pass and the shading pass make one each); without, one
+    per cube and pass. Both variants draw the same cubes."""
+    doc = results[1]["culling-100k"]
+    on, off = doc["counters"], doc["variants"]["instancing_off"]["counters"]
+    assert on["drawn"] == off["drawn"] == 100_000 - CULLING_CULLED
+    assert on["draw_calls"] == 2
+    assert off["draw_calls"] == 2 * off["drawn"]
 
 
 def test_boids_10k_steps_and_draws_the_whole_flock(results):

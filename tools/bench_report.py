@@ -91,10 +91,11 @@ def axes(title: str, y_max: float, frames: int) -> list[str]:
 def plot_svg(doc: dict) -> str:
     """Frame time over the run: CPU frame time (and the pre-pass-off variant), with the floor."""
     series = [("CPU frame (wall, fence wait included)", doc["samples"]["cpu_frame_ms"])]
-    off = doc.get("variants", {}).get("prepass_off")
-    if off:
-        series[0] = ("CPU frame, pre-pass on", series[0][1])
-        series.append(("CPU frame, pre-pass off", off["samples"]["cpu_frame_ms"]))
+    for key, feature in (("prepass_off", "pre-pass"), ("instancing_off", "instancing")):
+        off = doc.get("variants", {}).get(key)
+        if off:
+            series[0] = (f"CPU frame, {feature} on", series[0][1])
+            series.append((f"CPU frame, {feature} off", off["samples"]["cpu_frame_ms"]))
     floor = doc.get("floor_ms", {}).get("p50") or 0.0
     y_max = max([floor] + [max(v) for _, v in series if v]) * 1.1 or 1.0
     parts = axes(f"{doc['scenario']} ({doc['width']}x{doc['height']}, {doc['device']})", y_max, doc["frames"])

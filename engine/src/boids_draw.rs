@@ -8,14 +8,13 @@
 //! pre-pass would save nothing, and a dove's shadow on the temple floor is a few pixels.
 
 use crate::cull::{Class, CullCounts, Frustum};
-use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::gpu::{barrier, full_range, opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers, Transition};
 use crate::shaders;
 use crate::sim::boids::{boid_rotation, Flock};
 use crate::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 use glam::{Mat4, Vec3};
-use gpu_allocator::MemoryLocation;
 
 /// Bounding radius of the bird mesh at scale 1 (its wing tips are the farthest points).
 const MESH_RADIUS: f32 = 0.47;
@@ -26,7 +25,7 @@ pub struct BoidsDraw {
     mesh: Buffer,
     vertex_count: u32,
     /// Instance buffers (model matrices) per frame slot, with their capacity in instances.
-    instances: Vec<Option<(Buffer, usize)>>,
+    instances: SlotBuffers,
     /// Every boid's model matrix this frame (`fill`), and the ones in view (`cull`).
     pub boids: Vec<Mat4>,
     visible: Vec<Mat4>,
@@ -94,7 +93,7 @@ impl BoidsDraw {
             pipeline,
             mesh,
             vertex_count: verts.len() as u32,
-            instances: (0..frames_in_flight).map(|_| None).collect(),
+            instances: SlotBuffers::new("boid instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 64 * 64),
             boids: Vec::new(),
             visible: Vec::new(),
             scale: 1.0,
@@ -147,22 +146,9 @@ impl BoidsDraw {
         if needed == 0 {
             return Ok(());
         }
-        let entry = &mut self.instances[slot];
-        if entry.as_ref().is_none_or(|(_, cap)| *cap < needed) {
-            if let Some((mut old, _)) = entry.take() {
-                old.destroy(gpu);
-            }
-            let cap = needed.next_power_of_two().max(64);
-            *entry = Some((
-                Buffer::new(gpu, "boid instances", (cap * 64) as u64, vk::BufferUsageFlags::VERTEX_BUFFER, MemoryLocation::CpuToGpu)?,
-                cap,
-            ));
-        }
-        let (buffer, _) = entry.as_mut().unwrap();
         // SAFETY: Mat4 is 16 plain f32s, column-major, as the shader reads it.
         let bytes = unsafe { std::slice::from_raw_parts(self.visible.as_ptr() as *const u8, needed * 64) };
-        buffer.mapped()[..bytes.len()].copy_from_slice(bytes);
-        Ok(())
+        self.instances.write(gpu, slot, bytes)
     }
 
     /// Draw the uploaded visible boids into `hdr` over `depth` (loaded and stored). Call only
@@ -170,7 +156,7 @@ impl BoidsDraw {
     #[allow(clippy::too_many_arguments)]
     pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet, hdr: (vk::Image, vk::ImageView), depth: (vk::Image, vk::ImageView), extent: vk::Extent2D) {
         let d = &gpu.device;
-        let Some((buffer, _)) = &self.instances[slot] else { return };
+        let Some(buffer) = self.instances.get(slot) else { return };
         barrier(gpu, cb, hdr.0, full_range(vk::ImageAspectFlags::COLOR, 1), COLOR_WRITE_TO_WRITE);
         barrier(gpu, cb, depth.0, full_range(vk::ImageAspectFlags::DEPTH, 1), DEPTH_TO_TEST_AND_WRITE);
         let area = vk::Rect2D {
@@ -216,9 +202,7 @@ impl BoidsDraw {
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
-        for (mut b, _) in self.instances.iter_mut().filter_map(Option::take) {
-            b.destroy(gpu);
-        }
+        self.instances.destroy(gpu);
         self.mesh.destroy(gpu);
         unsafe {
             gpu.device.destroy_pipeline(self.pipeline, None);
@@ -230,13 +214,6 @@ impl BoidsDraw {
 /// The bird pipeline: mesh vertices (binding 0) and per-instance model matrices (binding 1),
 /// no culling (single-triangle wings), reversed-Z depth test and write.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format) -> Result<vk::Pipeline> {
-    let d = &gpu.device;
-    let vert = shaders::module(d, shaders::BOID_VERT)?;
-    let frag = shaders::module(d, shaders::BOID_FRAG)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(c"main"),
-    ];
     let bindings = [
         vk::VertexInputBindingDescription {
             binding: 0,
@@ -289,45 +266,10 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
             offset: 48,
         },
     ];
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
-        .vertex_binding_descriptions(&bindings)
-        .vertex_attribute_descriptions(&attributes);
-    let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::NONE)
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(true)
-        .depth_compare_op(vk::CompareOp::GREATER_OR_EQUAL);
-    let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats = [HDR_FORMAT];
-    let mut rendering = vk::PipelineRenderingCreateInfo::default()
-        .color_attachment_formats(&color_formats)
-        .depth_attachment_format(depth_format);
-    let info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&input_assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .depth_stencil_state(&depth)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout)
-        .push_next(&mut rendering);
-    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    unsafe {
-        d.destroy_shader_module(vert, None);
-        d.destroy_shader_module(frag, None);
-    }
-    let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the boid pipeline: {e}"))?;
-    Ok(pipelines[0])
+    GraphicsPipeline::new("boid", shaders::BOID_VERT)
+        .fragment(shaders::BOID_FRAG, None)
+        .vertex_input(&bindings, &attributes)
+        .depth(depth_format, true, vk::CompareOp::GREATER_OR_EQUAL)
+        .color(HDR_FORMAT, opaque())
+        .build(&gpu.device, layout)
 }

@@ -2,6 +2,7 @@
 
 pub mod anim;
 pub mod animated;
+pub mod batches;
 pub mod boids_draw;
 pub mod camera;
 pub mod cull;

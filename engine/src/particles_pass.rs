@@ -13,14 +13,13 @@
 //!   comes out brighter than over a surface; accepted for now (it would need the depth as a
 //!   texture to tell the two apart).
 
-use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::gpu::{barrier, full_range, Gpu, GraphicsPipeline, SlotBuffers, Transition};
 use crate::shaders;
 use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
 use crate::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 use glam::{Vec3, Vec4};
-use gpu_allocator::MemoryLocation;
 
 /// Mirrors the push-constant block of shaders/particle.vert.
 #[repr(C)]
@@ -43,7 +42,7 @@ pub struct ParticlePass {
     alpha: vk::Pipeline,
     additive: vk::Pipeline,
     /// Instance buffers per frame slot, with their capacity in billboards.
-    buffers: Vec<Option<(Buffer, usize)>>,
+    buffers: SlotBuffers,
     /// This frame's billboards and how they split into batches (filled before `record`).
     pub billboards: Vec<Billboard>,
     pub batches: Vec<ParticleBatch>,
@@ -86,7 +85,7 @@ impl ParticlePass {
             layout,
             alpha,
             additive,
-            buffers: (0..frames_in_flight).map(|_| None).collect(),
+            buffers: SlotBuffers::new("particle instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 256 * std::mem::size_of::<Billboard>()),
             billboards: Vec::new(),
             batches: Vec::new(),
             scratch: BillboardScratch::default(),
@@ -145,26 +144,9 @@ impl ParticlePass {
         if needed == 0 {
             return Ok(());
         }
-        let entry = &mut self.buffers[slot];
-        if entry.as_ref().is_none_or(|(_, cap)| *cap < needed) {
-            if let Some((mut old, _)) = entry.take() {
-                old.destroy(gpu);
-            }
-            let cap = needed.next_power_of_two().max(256);
-            let buffer = Buffer::new(
-                gpu,
-                "particle instances",
-                (cap * std::mem::size_of::<Billboard>()) as u64,
-                vk::BufferUsageFlags::VERTEX_BUFFER,
-                MemoryLocation::CpuToGpu,
-            )?;
-            *entry = Some((buffer, cap));
-        }
-        let (buffer, _) = entry.as_mut().unwrap();
         // SAFETY: Billboard is repr(C) plain floats.
         let bytes = unsafe { std::slice::from_raw_parts(self.billboards.as_ptr() as *const u8, needed * std::mem::size_of::<Billboard>()) };
-        buffer.mapped()[..bytes.len()].copy_from_slice(bytes);
-        Ok(())
+        self.buffers.write(gpu, slot, bytes)
     }
 
     /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass stored.
@@ -183,7 +165,7 @@ impl ParticlePass {
         camera_up: Vec3,
     ) {
         let d = &gpu.device;
-        let Some((buffer, _)) = &self.buffers[slot] else { return };
+        let Some(buffer) = self.buffers.get(slot) else { return };
         barrier(gpu, cb, hdr.0, full_range(vk::ImageAspectFlags::COLOR, 1), COLOR_WRITE_TO_BLEND);
         barrier(gpu, cb, depth.0, full_range(vk::ImageAspectFlags::DEPTH, 1), DEPTH_TO_TEST);
         let area = vk::Rect2D {
@@ -246,9 +228,7 @@ impl ParticlePass {
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
-        for (mut b, _) in self.buffers.iter_mut().filter_map(Option::take) {
-            b.destroy(gpu);
-        }
+        self.buffers.destroy(gpu);
         unsafe {
             gpu.device.destroy_pipeline(self.alpha, None);
             gpu.device.destroy_pipeline(self.additive, None);
@@ -260,13 +240,6 @@ impl ParticlePass {
 /// A particle pipeline: colour = src * src_alpha + dst * `dst_factor` (ONE_MINUS_SRC_ALPHA for
 /// soft alpha, ONE for additive), RGB only; reversed-Z depth test, no depth writes.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, dst_factor: vk::BlendFactor) -> Result<vk::Pipeline> {
-    let d = &gpu.device;
-    let vert = shaders::module(d, shaders::PARTICLE_VERT)?;
-    let frag = shaders::module(d, shaders::PARTICLE_FRAG)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(c"main"),
-    ];
     let bindings = [vk::VertexInputBindingDescription {
         binding: 0,
         stride: std::mem::size_of::<Billboard>() as u32,
@@ -286,22 +259,7 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
             offset: 16,
         },
     ];
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
-        .vertex_binding_descriptions(&bindings)
-        .vertex_attribute_descriptions(&attributes);
-    let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_STRIP);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::NONE)
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    // Reversed-Z: nearer is greater.
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(false)
-        .depth_compare_op(vk::CompareOp::GREATER_OR_EQUAL);
-    let blend_attachment = [vk::PipelineColorBlendAttachmentState::default()
+    let blend = vk::PipelineColorBlendAttachmentState::default()
         .blend_enable(true)
         .src_color_blend_factor(vk::BlendFactor::SRC_ALPHA)
         .dst_color_blend_factor(dst_factor)
@@ -309,31 +267,13 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .src_alpha_blend_factor(vk::BlendFactor::ZERO)
         .dst_alpha_blend_factor(vk::BlendFactor::ONE)
         .alpha_blend_op(vk::BlendOp::ADD)
-        .color_write_mask(vk::ColorComponentFlags::R | vk::ColorComponentFlags::G | vk::ColorComponentFlags::B)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats = [HDR_FORMAT];
-    let mut rendering = vk::PipelineRenderingCreateInfo::default()
-        .color_attachment_formats(&color_formats)
-        .depth_attachment_format(depth_format);
-    let info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&input_assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .depth_stencil_state(&depth)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout)
-        .push_next(&mut rendering);
-    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    unsafe {
-        d.destroy_shader_module(vert, None);
-        d.destroy_shader_module(frag, None);
-    }
-    let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the particle pipeline: {e}"))?;
-    Ok(pipelines[0])
+        .color_write_mask(vk::ColorComponentFlags::R | vk::ColorComponentFlags::G | vk::ColorComponentFlags::B);
+    // Reversed-Z: nearer is greater; particles test depth but do not write it.
+    GraphicsPipeline::new("particle", shaders::PARTICLE_VERT)
+        .fragment(shaders::PARTICLE_FRAG, None)
+        .vertex_input(&bindings, &attributes)
+        .topology(vk::PrimitiveTopology::TRIANGLE_STRIP)
+        .depth(depth_format, false, vk::CompareOp::GREATER_OR_EQUAL)
+        .color(HDR_FORMAT, blend)
+        .build(&gpu.device, layout)
 }

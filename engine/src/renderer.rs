@@ -4,17 +4,18 @@
 
 use crate::animated::AnimatedScene;
 use crate::camera::Camera;
-use crate::gpu::{barrier, full_range, Buffer, Gpu, Transition};
+use crate::batches::{instance_attributes, Batch, Batcher, INSTANCE_STRIDE};
+use crate::gpu::{barrier, full_range, opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers, Transition};
 use crate::boids_draw::BoidsDraw;
 use crate::particles_pass::ParticlePass;
 use crate::scene::{GpuMaterial, GpuScene, SceneLayouts};
 use crate::shaders;
 use crate::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE, DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
 use crate::tonemap::{ToneMap, HDR_FORMAT};
-use crate::visibility::{Draw, Visibility};
+use crate::visibility::Visibility;
 use anyhow::Result;
 use ash::vk;
-use glam::{Mat3, Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec3, Vec4};
 use gpu_allocator::MemoryLocation;
 
 /// Mirrors `Frame` in shaders/frame.glsl (std140).
@@ -37,16 +38,17 @@ pub struct FrameUniforms {
     pub shadow: Vec4,
 }
 
-/// Mirrors the push-constant block of shaders/mesh.vert (128 bytes).
+/// Mirrors the push-constant block of shaders/mesh_shading.glsl: what a submesh's material
+/// gives its fragments (the transforms are per instance, in the instance stream).
 #[repr(C)]
 #[derive(Debug, Clone, Copy)]
 struct DrawPush {
-    model: Mat4,
-    /// Columns of the normal matrix; `.w` of column 0 carries the alpha-test cutoff.
-    normal_cols: [Vec4; 3],
+    /// x: alpha-test cutoff (or -1); y: 1 when the fragment reads a lightmap page; z: material
+    /// index (its emission).
+    material: Vec4,
     base_color: Vec4,
 }
-const _: () = assert!(std::mem::size_of::<DrawPush>() == 128);
+const _: () = assert!(std::mem::size_of::<DrawPush>() == 32);
 
 /// Lighting that stands in until lightmaps and probes land.
 #[derive(Debug, Clone, Copy)]
@@ -118,6 +120,16 @@ pub struct Renderer {
     pub boids: BoidsDraw,
     /// Casters the last recorded frame drew into the shadow map (0 when it skipped the pass).
     pub shadow_casters: u32,
+    /// Instances of one mesh LOD drawn with one call (on by default; off, one call per draw, for
+    /// comparison).
+    pub instancing: bool,
+    /// Draw calls the mesh passes (shadow, pre-pass, shading) of the last recorded frame made.
+    pub draw_calls: u32,
+    /// Each slot's instance stream (transforms per instance, binding 1 of the mesh pipelines).
+    instance_buffers: SlotBuffers,
+    batcher: Batcher,
+    /// This frame's batches of the camera's draw list (the pre-pass and shading pass share them).
+    view_batches: Vec<Batch>,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -191,12 +203,6 @@ pub struct PassStats {
     pub shading: ShaderInvocations,
 }
 
-/// Normal matrix: inverse-transpose of the 3x3 part (not the cofactor, which flips normals of
-/// mirrored instances; pipeline.md §1).
-pub fn normal_matrix(model: Mat4) -> Mat3 {
-    Mat3::from_mat4(model).inverse().transpose()
-}
-
 impl Renderer {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Renderer> {
         let d = &gpu.device;
@@ -237,7 +243,7 @@ impl Renderer {
         let scene_layout = unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&scene_bindings), None)? };
         let set_layouts = [frame_layout, material_layout, scene_layout];
         let push = [vk::PushConstantRange::default()
-            .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
+            .stage_flags(vk::ShaderStageFlags::FRAGMENT)
             .size(std::mem::size_of::<DrawPush>() as u32)];
         let pipeline_layout = unsafe {
             d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?
@@ -330,6 +336,11 @@ impl Renderer {
             boids: BoidsDraw::new(gpu, frame_layout, depth_format, frames_in_flight)?,
             shadow,
             shadow_casters: 0,
+            instancing: true,
+            draw_calls: 0,
+            instance_buffers: SlotBuffers::new("mesh instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 256 * INSTANCE_STRIDE as usize),
+            batcher: Batcher::default(),
+            view_batches: Vec::new(),
             prepass: true,
             lightmaps: true,
             count_fragments: false,
@@ -395,6 +406,16 @@ impl Renderer {
             _ => false,
         };
         self.shadow_casters = if draw_shadow { self.shadow.casters.len() as u32 } else { 0 };
+        // The camera's draw list as instanced batches, shared by the pre-pass and the shading
+        // pass; the shadow pass batches its casters as it draws them. The slot's instance buffer
+        // holds both: at most every caster plus every draw.
+        let mut batcher = std::mem::take(&mut self.batcher);
+        let mut view_batches = std::mem::take(&mut self.view_batches);
+        batcher.clear();
+        batcher.batch(scene, self.animation.as_ref(), slot, &self.visibility.draws, self.instancing, &mut view_batches);
+        let stream_capacity = (self.shadow_casters as usize + self.visibility.draws.len()) * INSTANCE_STRIDE as usize;
+        let instances = self.instance_buffers.reserve(gpu, slot, stream_capacity)?.buffer;
+        let mut draw_calls = 0;
         let shadow_params = Vec4::new(draw_shadow as u32 as f32, self.shadow.texel_m, 1.0 / self.shadow.size as f32, 0.0);
         // A baked scene is lit by its lightmaps, probes and sun in physical units, exposed and
         // tone-mapped; otherwise the stand-in `lighting`.
@@ -452,7 +473,9 @@ impl Renderer {
         stamp(0);
         if draw_shadow {
             let p = &self.pipelines;
+            let mut batches = Vec::new();
             self.shadow.record(gpu, cb, |view, load_op, casters| {
+                batcher.batch(scene, self.animation.as_ref(), slot, casters, self.instancing, &mut batches);
                 let depth_attachment = vk::RenderingAttachmentInfo::default()
                     .image_view(view)
                     .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
@@ -460,8 +483,8 @@ impl Renderer {
                     .store_op(vk::AttachmentStoreOp::STORE)
                     .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
                 let rendering = vk::RenderingInfo::default().render_area(self.shadow.area()).layer_count(1).depth_attachment(&depth_attachment);
-                let pass = PassSetup { slot, frame_set: self.shadow.sets[slot], draws: casters, query: None, depth_test: true, cull: false };
-                self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
+                let pass = PassSetup { frame_set: self.shadow.sets[slot], batches: &batches, instances, query: None, depth_test: true, cull: false };
+                draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
             });
         }
         stamp(1);
@@ -480,8 +503,8 @@ impl Renderer {
                 .store_op(vk::AttachmentStoreOp::STORE)
                 .clear_value(depth_clear);
             let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
-            let pass = PassSetup { slot, frame_set, draws: &self.visibility.draws, query: Some(query_a), depth_test: true, cull: true };
-            self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
+            let pass = PassSetup { frame_set, batches: &view_batches, instances, query: Some(query_a), depth_test: true, cull: true };
+            draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
         }
@@ -508,8 +531,15 @@ impl Renderer {
             _ => if prepass { p.shade_equal } else { p.shade },
         };
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
-        let pass = PassSetup { slot, frame_set, draws: &self.visibility.draws, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
-        self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        let pass = PassSetup { frame_set, batches: &view_batches, instances, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
+        draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        // Every pass is recorded: the instance stream is complete.
+        let stream = batcher.stream_bytes();
+        assert!(stream.len() <= stream_capacity, "instance stream overran its reservation");
+        self.instance_buffers.write(gpu, slot, stream)?;
+        self.draw_calls = draw_calls;
+        self.batcher = batcher;
+        self.view_batches = view_batches;
         if draw_boids {
             self.boids.record(gpu, cb, slot, frame_set, (hdr_image, hdr_view), (target.depth_image, target.depth_view), target.extent);
         }
@@ -552,12 +582,14 @@ impl Renderer {
         Ok(())
     }
 
-    /// One rendering instance drawing `setup.draws`, each submesh with the pipeline
+    /// One rendering instance drawing `setup.batches`, each submesh with the pipeline
     /// `pipeline_for(material)` gives, counted by the pipeline-statistics query `setup.query`.
-    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &PassSetup, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) {
+    /// Returns the draw calls it made.
+    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &PassSetup, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) -> u32 {
         let d = &gpu.device;
         let extent = rendering.render_area.extent;
         let query = setup.query.and_then(|q| self.stats_pool.map(|pool| (pool, q)));
+        let mut calls = 0;
         unsafe {
             if let Some((pool, q)) = query {
                 d.cmd_begin_query(cb, pool, q, vk::QueryControlFlags::empty());
@@ -567,30 +599,21 @@ impl Renderer {
             d.cmd_set_scissor(cb, 0, &[rendering.render_area]);
             d.cmd_set_depth_test_enable(cb, setup.depth_test);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
-            d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer], &[0]);
+            d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, setup.instances], &[0, 0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
             let mut bound = vk::Pipeline::null();
             let mut bound_vertices = scene.vertex_buffer.buffer;
-            for draw in setup.draws {
-                let inst = &scene.instances[draw.instance as usize];
-                let mesh = &scene.meshes[inst.mesh as usize];
-                let lod = &mesh.lods[draw.lod as usize];
+            for batch in setup.batches {
+                let mesh = &scene.meshes[scene.instances[batch.instance as usize].mesh as usize];
+                let lod = &mesh.lods[batch.lod as usize];
                 // An animated instance draws its skinned vertices: already in world space, from
                 // vertex 0 of its own buffer; every pass reads the same buffer, so the pre-pass
                 // and the EQUAL shading pass see identical positions.
-                let skinned = self.animation.as_ref().and_then(|a| a.vertex_buffer(draw.instance, draw.lod, setup.slot));
-                let (vertices, base_vertex, model) = match skinned {
-                    Some(b) => (b, 0, Mat4::IDENTITY),
-                    None => (scene.vertex_buffer.buffer, lod.base_vertex, inst.world),
-                };
-                if vertices != bound_vertices {
-                    d.cmd_bind_vertex_buffers(cb, 0, &[vertices], &[0]);
-                    bound_vertices = vertices;
+                if batch.vertices != bound_vertices {
+                    d.cmd_bind_vertex_buffers(cb, 0, &[batch.vertices], &[0]);
+                    bound_vertices = batch.vertices;
                 }
-                let n = normal_matrix(model);
-                // A mirrored instance (negative determinant) reverses its winding.
-                let front = if model.determinant() < 0.0 { vk::FrontFace::CLOCKWISE } else { vk::FrontFace::COUNTER_CLOCKWISE };
-                d.cmd_set_front_face(cb, front);
+                d.cmd_set_front_face(cb, batch.front);
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
                     let pipeline = pipeline_for(mat);
@@ -601,16 +624,16 @@ impl Renderer {
                         bound = pipeline;
                     }
                     let push = DrawPush {
-                        model,
-                        normal_cols: [n.x_axis.extend(mat.alpha_cutoff), n.y_axis.extend(page.is_some() as u32 as f32), n.z_axis.extend(sm.material as f32)],
+                        material: Vec4::new(mat.alpha_cutoff, page.is_some() as u32 as f32, sm.material as f32, 0.0),
                         base_color: Vec4::from(mat.base_color),
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
-                    d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
+                    d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
                     let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
                     d.cmd_set_cull_mode(cb, cull);
                     d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set, *page.unwrap_or(&scene.unlit_set)], &[]);
-                    d.cmd_draw_indexed(cb, sm.index_count, 1, lod.first_index + sm.first_index, base_vertex, 0);
+                    d.cmd_draw_indexed(cb, sm.index_count, batch.count, lod.first_index + sm.first_index, batch.base_vertex, batch.first_instance);
+                    calls += 1;
                 }
             }
             d.cmd_end_rendering(cb);
@@ -618,6 +641,7 @@ impl Renderer {
                 d.cmd_end_query(cb, pool, q);
             }
         }
+        calls
     }
 
     /// Fragments the shading pass of the frame last recorded in `slot` shaded, once the GPU has
@@ -647,6 +671,7 @@ impl Renderer {
         self.tonemap.destroy(gpu);
         self.particles.destroy(gpu);
         self.boids.destroy(gpu);
+        self.instance_buffers.destroy(gpu);
         self.shadow.destroy(gpu);
         if let Some(a) = &mut self.animation {
             a.destroy(gpu);
@@ -672,10 +697,10 @@ impl Renderer {
 /// the draw list, its statistics query, depth testing, and back-face culling (off for shadow
 /// casters: a single-sided occluder blocks the sun whichever side faces it).
 struct PassSetup<'a> {
-    /// The frame slot (selects the skinned vertex buffers).
-    slot: usize,
     frame_set: vk::DescriptorSet,
-    draws: &'a [Draw],
+    batches: &'a [Batch],
+    /// The frame slot's instance stream the batches index.
+    instances: vk::Buffer,
     query: Option<u32>,
     depth_test: bool,
     cull: bool,
@@ -717,68 +742,39 @@ fn create_mesh_pipeline(
     count_fragments: bool,
     depth_bias: Option<(f32, f32)>,
 ) -> Result<vk::Pipeline> {
-    let d = &gpu.device;
-    let vert = shaders::module(d, shaders::MESH_VERT)?;
-    let frag = frag.map(|f| shaders::module(d, f)).transpose()?;
-    let mut stages = vec![vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main")];
     // Specialisation constant 0: COUNT_FRAGMENTS (mesh_shading.glsl).
     let count_bytes = vk::Bool32::from(count_fragments).to_le_bytes();
     let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }];
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&count_bytes);
-    if let Some(f) = frag {
-        stages.push(vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(f).name(c"main").specialization_info(&spec));
-    }
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared (tangent arrives with normal mapping).
     const MESH_SHADER_INPUTS: [u32; 5] = [0, 1, 3, 4, 5];
-    let bindings = [vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX }];
+    // Binding 1: the instance stream (batches.rs).
+    let bindings = [
+        vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX },
+        vk::VertexInputBindingDescription { binding: 1, stride: INSTANCE_STRIDE, input_rate: vk::VertexInputRate::INSTANCE },
+    ];
     let attributes: Vec<_> = pack::VERTEX_ATTRIBUTES
         .iter()
         .filter(|a| MESH_SHADER_INPUTS.contains(&a.0))
         .map(|&(location, offset, f)| vk::VertexInputAttributeDescription { location, binding: 0, format: attribute_format(f), offset })
+        .chain(instance_attributes())
         .collect();
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
-        .vertex_binding_descriptions(&bindings)
-        .vertex_attribute_descriptions(&attributes);
-    let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    // Cull mode and front face are dynamic (core 1.3): double-sided materials and mirrored
-    // instances change them per draw without a second pipeline.
-    let mut raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::BACK)
-        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
-        .line_width(1.0);
-    if let Some((constant, slope)) = depth_bias {
-        raster = raster.depth_bias_enable(true).depth_bias_constant_factor(constant).depth_bias_slope_factor(slope);
+    // Cull mode, front face and depth testing are dynamic (core 1.3): double-sided materials,
+    // mirrored instances and the raw fragment count (`depth_test` off) change them per draw or
+    // pass without a second pipeline.
+    let dynamic = [vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE, vk::DynamicState::DEPTH_TEST_ENABLE];
+    let mut pipeline = GraphicsPipeline::new("mesh", shaders::MESH_VERT)
+        .vertex_input(&bindings, &attributes)
+        .cull_back()
+        .depth_bias(depth_bias)
+        .depth(depth_format, depth_write, compare)
+        .dynamic(&dynamic);
+    if let Some(f) = frag {
+        pipeline = pipeline.fragment(f, Some(spec));
     }
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(depth_write).depth_compare_op(compare);
-    let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(if color_format.is_some() { &blend_attachment[..] } else { &[] });
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR, vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE, vk::DynamicState::DEPTH_TEST_ENABLE];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats: Vec<vk::Format> = color_format.into_iter().collect();
-    let mut rendering = vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&color_formats).depth_attachment_format(depth_format);
-    let info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&input_assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .depth_stencil_state(&depth)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout)
-        .push_next(&mut rendering);
-    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    unsafe {
-        d.destroy_shader_module(vert, None);
-        if let Some(f) = frag {
-            d.destroy_shader_module(f, None);
-        }
+    if let Some(format) = color_format {
+        pipeline = pipeline.color(format, opaque());
     }
-    let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the mesh pipeline: {e}"))?;
-    Ok(pipelines[0])
+    pipeline.build(&gpu.device, layout)
 }

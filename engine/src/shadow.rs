@@ -247,7 +247,7 @@ impl SunShadow {
     /// Record this frame's map (after `prepare`), leaving it readable by the shading pass.
     /// `draw(view, load_op, casters)` records one depth-only rendering of `casters` into `view`
     /// (an image of the map's size), cleared or on top of what is there.
-    pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, draw: impl Fn(vk::ImageView, vk::AttachmentLoadOp, &[Draw])) {
+    pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, mut draw: impl FnMut(vk::ImageView, vk::AttachmentLoadOp, &[Draw])) {
         let range = full_range(vk::ImageAspectFlags::DEPTH, 1);
         let (map, cache) = (&self.image, &self.static_image);
         if self.static_casters.is_empty() {

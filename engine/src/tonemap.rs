@@ -3,7 +3,7 @@
 //! colour restored (textures.md §5.7; the formula is in shaders/tonemap.frag), written to an
 //! `_SRGB` image so the hardware does the sRGB encode. The one place tone mapping happens.
 
-use crate::gpu::{barrier, full_range, Gpu, Image, Transition};
+use crate::gpu::{barrier, full_range, opaque, Gpu, GraphicsPipeline, Image, Transition};
 use crate::shaders;
 use anyhow::Result;
 use ash::vk;
@@ -182,43 +182,8 @@ impl ToneMap {
 /// `fullscreen.vert` + `tonemap.frag` into one colour attachment of `format`; no depth, no
 /// vertex input, no culling.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, format: vk::Format) -> Result<vk::Pipeline> {
-    let d = &gpu.device;
-    let vert = shaders::module(d, shaders::FULLSCREEN_VERT)?;
-    let frag = shaders::module(d, shaders::TONEMAP_FRAG)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(c"main"),
-    ];
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-    let input_assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::NONE)
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let blend_attachment = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachment);
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let formats = [format];
-    let mut rendering = vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&formats);
-    let info = vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&input_assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout)
-        .push_next(&mut rendering);
-    let result = unsafe { d.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
-    unsafe {
-        d.destroy_shader_module(vert, None);
-        d.destroy_shader_module(frag, None);
-    }
-    let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the tone-map pipeline: {e}"))?;
-    Ok(pipelines[0])
+    GraphicsPipeline::new("tone-map", shaders::FULLSCREEN_VERT)
+        .fragment(shaders::TONEMAP_FRAG, None)
+        .color(format, opaque())
+        .build(&gpu.device, layout)
 }

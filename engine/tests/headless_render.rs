@@ -304,6 +304,40 @@ fn renderer_culls_the_notes_known_scene_exactly() {
 }
 
 #[test]
+fn instances_of_one_mesh_are_drawn_with_one_call_per_winding_and_pass_and_look_the_same_as_one_call_each() {
+    // The known scene again, every other cube mirrored (x scale negative) and every third one
+    // stretched: 121 visible cubes of one mesh are two batches (the mirrored ones wind the other
+    // way), so the pre-pass and the shading pass make 2 calls each; one call per cube makes 242.
+    // The instance stream must give every cube its own transform and normal matrix: the two
+    // images are the same bytes.
+    let gpu = gpu();
+    let s = 1.0 / 3f32.sqrt();
+    let placements: Vec<Mat4> = (-10..=10)
+        .flat_map(|x| (-10..=10).map(move |z| (x, z)))
+        .enumerate()
+        .map(|(i, (x, z))| {
+            let mirror = if i % 2 == 1 { -1.0 } else { 1.0 };
+            let stretch = if i % 3 == 0 { Vec3::new(1.0, 1.6, 0.7) } else { Vec3::ONE };
+            Mat4::from_translation(Vec3::new(x as f32, 0.0, z as f32)) * Mat4::from_rotation_y(0.3 * i as f32) * Mat4::from_scale(Vec3::new(mirror, 1.0, 1.0) * stretch * s)
+        })
+        .collect();
+    let pack = cube_pack(&placements, [[200, 30, 30, 255], [30, 200, 30, 255], [30, 30, 200, 255], [220, 220, 220, 255]], Material::default());
+    let cam = Camera { position: Vec3::new(0.0, 1.0, 0.0), yaw: 0.0, pitch: -0.3, fov_y: 90f32.to_radians(), near: 0.1 };
+    let mut rig = Rig::new(&gpu, &pack, 160, 120);
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    let instanced = rig.target.pixels().to_vec();
+    let visible = rig.renderer.visibility.counts.cull.visible;
+    assert!(visible > 50, "the test needs many cubes in view, not {visible}");
+    assert_eq!(rig.renderer.draw_calls, 2 * 2, "two windings, two passes");
+    rig.renderer.instancing = false;
+    rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+    assert_eq!(rig.renderer.draw_calls, 2 * visible);
+    assert!(rig.target.pixels() == instanced.as_slice(), "instancing changed the image");
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
 fn a_mesh_moving_away_switches_to_coarser_lods_monotonically() {
     // One cube mesh with three LODs (6, 4 and 2 faces of it, errors 0, 5 cm and 30 cm): moving the
     // camera back, the drawn LOD never goes back to a finer one and ends at the coarsest; the

@@ -364,7 +364,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     // The cull counts include the boids (culled with the scene); reported apart here.
     let boids = renderer.boids.boids.len() as u32;
     println!(
-        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail, LOD histogram {:?}",
+        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail in {} draw calls, LOD histogram {:?}",
         args.width,
         args.height,
         scene.instances.len(),
@@ -374,6 +374,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         c.boids,
         c.triangles,
         scene.triangle_count(),
+        renderer.draw_calls,
         c.lod_histogram
     );
     println!(

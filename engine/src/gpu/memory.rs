@@ -63,6 +63,53 @@ impl Buffer {
     }
 }
 
+/// One host-visible buffer per frame in flight for data written every frame (instance
+/// transforms, billboards), grown to the next power of two when a frame needs more. A slot's
+/// buffer is written only after its previous frame's fence, so no frame reads a buffer that is
+/// being rewritten or replaced.
+pub struct SlotBuffers {
+    name: &'static str,
+    usage: vk::BufferUsageFlags,
+    min_bytes: usize,
+    slots: Vec<Option<Buffer>>,
+}
+
+impl SlotBuffers {
+    pub fn new(name: &'static str, usage: vk::BufferUsageFlags, frames_in_flight: usize, min_bytes: usize) -> SlotBuffers {
+        SlotBuffers { name, usage, min_bytes, slots: (0..frames_in_flight).map(|_| None).collect() }
+    }
+
+    /// `slot`'s buffer, at least `bytes` long (a new one, contents undefined, when it grew).
+    pub fn reserve(&mut self, gpu: &Gpu, slot: usize, bytes: usize) -> Result<&mut Buffer> {
+        let entry = &mut self.slots[slot];
+        if entry.as_ref().is_none_or(|b| (b.size as usize) < bytes) {
+            if let Some(mut old) = entry.take() {
+                old.destroy(gpu);
+            }
+            let size = bytes.next_power_of_two().max(self.min_bytes);
+            *entry = Some(Buffer::new(gpu, self.name, size as u64, self.usage, MemoryLocation::CpuToGpu)?);
+        }
+        Ok(entry.as_mut().unwrap())
+    }
+
+    /// Copy `bytes` to the start of `slot`'s buffer, growing it if needed.
+    pub fn write(&mut self, gpu: &Gpu, slot: usize, bytes: &[u8]) -> Result<()> {
+        self.reserve(gpu, slot, bytes.len())?.mapped()[..bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// `slot`'s buffer, if one was reserved.
+    pub fn get(&self, slot: usize) -> Option<&Buffer> {
+        self.slots[slot].as_ref()
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        for mut b in self.slots.iter_mut().filter_map(Option::take) {
+            b.destroy(gpu);
+        }
+    }
+}
+
 pub struct Image {
     pub image: vk::Image,
     pub view: vk::ImageView,

@@ -1,9 +1,12 @@
-//! Vulkan plumbing: context (instance, device, allocator), memory objects, validation.
+//! Vulkan plumbing: context (instance, device, allocator), memory objects, graphics pipelines,
+//! validation.
 
 mod context;
 mod memory;
+mod pipeline;
 mod validation;
 
 pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};
-pub use memory::{barrier, full_range, Buffer, Image, Transition};
+pub use memory::{barrier, full_range, Buffer, Image, SlotBuffers, Transition};
+pub use pipeline::{opaque, GraphicsPipeline};
 pub use validation::ValidationLog;

@@ -121,7 +121,7 @@ fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
         row("instances tested", c.cull.tested.to_string());
         row("instances culled", c.cull.culled.to_string());
         row("instances drawn", c.cull.visible.to_string());
-        row("triangles drawn", c.triangles.to_string());
+        row("triangles / draw calls", format!("{} / {}", c.triangles, renderer.draw_calls));
         let buckets: Vec<String> = c
             .lod_histogram
             .iter()

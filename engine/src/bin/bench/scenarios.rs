@@ -57,7 +57,9 @@ pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frame
 Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
                     animating at a fixed step
-  culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection
+  culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection;
+                    frames alternate with instancing on (the scenario's times) and off, one draw
+                    call per cube (its `variants.instancing_off`)
   boids-10k         a flock of 10 000 boids stepped and drawn
   particles-100k    a fountain holding about 100 000 live particles, stepped, sorted and drawn
   skinned-64        64 skinned characters (the --character pack) all in view, skinned every frame
@@ -162,10 +164,42 @@ struct Setup {
     /// The camera of frame k (warm-up frames included).
     camera: Box<dyn Fn(usize) -> Camera>,
     lighting: Lighting,
-    /// Frames alternate pre-pass on and off (prepass-overdraw).
-    alternate_prepass: bool,
+    /// A renderer switch the frames alternate on and off (prepass-overdraw, culling-100k).
+    alternate: Option<Switch>,
     /// Facts about the scenario's content for the JSON (counts it was built with).
     content: Map<String, Value>,
+}
+
+/// A renderer feature a scenario measures with and without: its frames alternate the two, so
+/// both see the same content on the same machine at the same moment.
+#[derive(Debug, Clone, Copy)]
+enum Switch {
+    Prepass,
+    Instancing,
+}
+
+impl Switch {
+    /// The JSON key of the off variant.
+    fn key(self) -> &'static str {
+        match self {
+            Switch::Prepass => "prepass_off",
+            Switch::Instancing => "instancing_off",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Switch::Prepass => "pre-pass off",
+            Switch::Instancing => "instancing off",
+        }
+    }
+
+    fn set(self, r: &mut Renderer, on: bool) {
+        match self {
+            Switch::Prepass => r.prepass = on,
+            Switch::Instancing => r.instancing = on,
+        }
+    }
 }
 
 /// Samples of one series of frames.
@@ -247,7 +281,7 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
     let result = setup(gpu, o, name, &mut renderer).and_then(|mut s| {
         let r = measure(gpu, o, &mut renderer, &mut target, &mut s);
         s.scene.destroy(gpu);
-        r.map(|series| (series, s.content, s.alternate_prepass))
+        r.map(|series| (series, s.content, s.alternate))
     });
     renderer.destroy(gpu);
     target.destroy(gpu);
@@ -273,9 +307,9 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
         "samples": { "cpu_frame_ms": main.cpu_ms, "gpu_frame_ms": main.gpu_ms },
         "note": "cpu_frame_ms is the wall time of a whole frame including the wait for the GPU fence; GPU timestamps on lavapipe do not capture compute work reliably (skinning_ms understates the skinning pass)",
     });
-    if alternated {
+    if let Some(switch) = alternated {
         let off = &series[1];
-        doc["variants"] = json!({ "prepass_off": {
+        doc["variants"] = json!({ switch.key(): {
             "cpu_frame_ms": summary(&off.cpu_ms),
             "floor_ratio": ratios(&off.cpu_ms, floor),
             "gpu_frame_ms": summary(&off.gpu_ms),
@@ -284,13 +318,13 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
             "samples": { "cpu_frame_ms": off.cpu_ms, "gpu_frame_ms": off.gpu_ms },
         }});
     }
-    print_summary(o, name, &doc);
+    print_summary(o, name, &doc, alternated);
     let path = o.json_dir.join(format!("{name}.json"));
     write_atomic(&path, &serde_json::to_vec_pretty(&doc)?)?;
     Ok(path)
 }
 
-fn print_summary(o: &Options, name: &str, doc: &Value) {
+fn print_summary(o: &Options, name: &str, doc: &Value, alternated: Option<Switch>) {
     let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let cpu = &doc["cpu_frame_ms"];
     let ratio = &doc["floor_ratio"];
@@ -303,9 +337,9 @@ fn print_summary(o: &Options, name: &str, doc: &Value) {
         f(&ratio["p50"]),
         f(&ratio["p95"])
     );
-    if let Some(off) = doc.get("variants").and_then(|v| v.get("prepass_off")) {
-        let c = &off["cpu_frame_ms"];
-        println!("{:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} (pre-pass off)", "", f(&c["p50"]), f(&c["p95"]));
+    if let Some(switch) = alternated {
+        let c = &doc["variants"][switch.key()]["cpu_frame_ms"];
+        println!("{:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} ({})", "", f(&c["p50"]), f(&c["p95"]), switch.label());
     }
     if !o.quiet {
         println!("{:<17} counters {}", "", doc["counters"]);
@@ -320,15 +354,15 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Warm-up frames, then measured ones; series 1 holds the pre-pass-off frames when alternating.
+/// Warm-up frames, then measured ones; series 1 holds the switch-off frames when alternating.
 fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscreen, s: &mut Setup) -> anyhow::Result<Vec<Series>> {
-    let mut series: Vec<Series> = (0..1 + s.alternate_prepass as usize).map(|_| Series::default()).collect();
+    let mut series: Vec<Series> = (0..1 + s.alternate.is_some() as usize).map(|_| Series::default()).collect();
     let per_frame = series.len();
     for k in 0..(o.warmup + o.frames) * per_frame {
         // Alternating frames share a simulation step, so both variants see the same content.
         let (frame, variant) = (k / per_frame, k % per_frame);
-        if s.alternate_prepass {
-            renderer.prepass = variant == 0;
+        if let Some(switch) = s.alternate {
+            switch.set(renderer, variant == 0);
         }
         let t = Instant::now();
         if variant == 0 {
@@ -359,15 +393,19 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
 /// one more frame, not timed, with the shader's fragment counter on: the counter costs an atomic
 /// per fragment, and lavapipe's pipeline statistics count fragments the depth test then rejects,
 /// so they cannot show what the pre-pass saves.
-fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, prepass: bool) -> anyhow::Result<Option<u32>> {
+fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, on: bool) -> anyhow::Result<Option<u32>> {
     let camera = (s.camera)(last);
-    renderer.prepass = prepass || !s.alternate_prepass;
+    if let Some(switch) = s.alternate {
+        switch.set(renderer, on);
+    }
     renderer.count_fragments = true;
     sim_level::prepare_frame(&s.world, renderer, &camera);
     let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
     let shaded = renderer.fragment_count(0);
     renderer.count_fragments = false;
-    renderer.prepass = true;
+    if let Some(switch) = s.alternate {
+        switch.set(renderer, true);
+    }
     frame?;
     Ok(shaded)
 }
@@ -385,6 +423,7 @@ fn counters(gpu: &Gpu, r: &Renderer, scene: &GpuScene, world: &World) -> Map<Str
     put("culled", json!(c.cull.culled));
     put("drawn", json!(c.cull.visible));
     put("triangles", json!(c.triangles));
+    put("draw_calls", json!(r.draw_calls));
     put("lod_histogram", json!(c.lod_histogram));
     put("particles", json!(c.particles));
     put("particles_live", json!(world.emitters.iter().map(|e| e.particles.len()).sum::<usize>()));
@@ -480,7 +519,7 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
         world,
         camera: Box::new(camera),
         lighting: Lighting::for_pack(&pack.manifest),
-        alternate_prepass: false,
+        alternate: None,
         content,
     })
 }
@@ -515,7 +554,7 @@ fn culling(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate_prepass: false,
+        alternate: Some(Switch::Instancing),
         content,
     })
 }
@@ -546,7 +585,7 @@ fn boids(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> 
         world,
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate_prepass: false,
+        alternate: None,
         content,
     })
 }
@@ -586,7 +625,7 @@ fn particles(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Set
         world,
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate_prepass: false,
+        alternate: None,
         content,
     })
 }
@@ -620,7 +659,7 @@ fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow:
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate_prepass: false,
+        alternate: None,
         content,
     })
 }
@@ -644,7 +683,7 @@ fn overdraw(gpu: &Gpu, renderer: &mut Renderer, layers: usize) -> anyhow::Result
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate_prepass: true,
+        alternate: Some(Switch::Prepass),
         content,
     })
 }
