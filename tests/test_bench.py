@@ -184,10 +184,12 @@ def test_report_writes_plots_and_summary(results):
         assert f"| {name} |" in summary
         svg = ET.fromstring((out / f"{name}.svg").read_text())  # well-formed, or it raises
         lines = svg.findall("{http://www.w3.org/2000/svg}polyline")
-        # One point per measured frame; the overdraw plot has the pre-pass-off frames too.
-        assert len(lines) == (2 if name == "prepass-overdraw" else 1), name
+        # One point per measured frame; the overdraw and culling plots have their switch-off
+        # frames too.
+        assert len(lines) == (2 if name in ("prepass-overdraw", "culling-100k") else 1), name
         assert all(len(line.get("points").split()) == FRAMES for line in lines), name
     assert "| prepass-overdraw (prepass off) |" in summary
+    assert "| culling-100k (instancing off) |" in summary
 
 
 def test_compare_prints_ratios_and_rejects_bad_input(results, tmp_path):
@@ -232,6 +234,7 @@ DEMO_COUNTERS = {
     "drawn": 40,
     "culled": 0,
     "triangles": 50_060,
+    "draw_calls": 34,  # one per submesh and pass: the level's meshes are one instance each
     "lod_histogram": [5, 1, 2, 0, 0, 0, 0, 0],
     "particles": 301,
     "boids_drawn": 32,
