@@ -25,6 +25,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 const FRAMES_IN_FLIGHT: usize = 2;
+/// How long a frame waits for a swapchain image before it is skipped.
+const ACQUIRE_TIMEOUT_NS: u64 = 1_000_000_000;
 
 pub struct WindowOptions {
     pub gpu: GpuOptions,
@@ -110,6 +112,8 @@ struct State {
     world: World,
     presented: u64,
     needs_resize: bool,
+    /// Frames skipped because no swapchain image came back in time (reported once).
+    skipped_acquires: u64,
 }
 
 impl ApplicationHandler for App<'_> {
@@ -296,6 +300,7 @@ impl State {
             world,
             presented: 0,
             needs_resize: false,
+            skipped_acquires: 0,
         })
     }
 
@@ -400,12 +405,22 @@ impl State {
         if let Some(o) = self.overlay.as_mut().filter(|_| self.presented >= FRAMES_IN_FLIGHT as u64) {
             o.push_frame(frame_ms, None, FrameStats::read(&self.gpu, &self.renderer, slot));
         }
+        // Bounded: a present engine that holds every image (a hidden window under some
+        // compositors, a stalled one) skips this frame and keeps the event loop answering,
+        // instead of blocking it until the image comes back; the next redraw tries again.
         let image_index = match unsafe {
-            self.swapchain.loader.acquire_next_image(self.swapchain.swapchain, u64::MAX, acquired, vk::Fence::null())
+            self.swapchain.loader.acquire_next_image(self.swapchain.swapchain, ACQUIRE_TIMEOUT_NS, acquired, vk::Fence::null())
         } {
             Ok((i, _)) => i,
             Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
                 self.needs_resize = true;
+                return Ok(());
+            }
+            Err(vk::Result::TIMEOUT | vk::Result::NOT_READY) => {
+                self.skipped_acquires += 1;
+                if self.skipped_acquires == 1 {
+                    println!("window: no swapchain image within {} ms; skipping frames until one is free", ACQUIRE_TIMEOUT_NS / 1_000_000);
+                }
                 return Ok(());
             }
             Err(e) => return Err(anyhow!("acquiring a swapchain image: {e}")),
