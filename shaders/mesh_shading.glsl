@@ -5,7 +5,7 @@
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
 
 layout(push_constant) uniform Draw {
-    vec4 material; // x: alpha-test cutoff (or -1), y: lightmapped (1/0), z: material index
+    vec4 material; // x: alpha-test cutoff (or -1), y: material index
     vec4 base_color;
 } draw;
 
@@ -35,6 +35,11 @@ layout(location = 4) in vec2 in_uv1;
 // Set by the renderer's counting pipelines: each shaded fragment adds one to counters.fragments
 // (helper invocations' atomics have no effect, so only real fragments count).
 layout(constant_id = 0) const bool COUNT_FRAGMENTS = false;
+// Set by the renderer for static geometry with a lightmap page: lit by the page alone. A
+// constant, not a push-constant branch, so each variant carries only its own lighting code
+// (no branch, fewer registers): on lavapipe the demo flythrough's shading pass took about a
+// quarter less time than with the branch.
+layout(constant_id = 1) const bool LIGHTMAPPED = false;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -142,7 +147,7 @@ vec4 shade(vec4 a) {
     // Physical: B = H/pi from the lightmap (static geometry: it holds the sun too) or from the
     // probes plus the sun where the shadow map sees it (dynamic objects).
     vec3 b;
-    if (draw.material.y > 0.5) {
+    if (LIGHTMAPPED) {
         b = texture(lightmap, in_uv1).rgb;
     } else {
         vec4 pl = probe_light(in_world, n);
@@ -150,6 +155,6 @@ vec4 shade(vec4 a) {
     }
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
-    vec3 l = a.rgb * b + materials.emission[int(draw.material.z)].rgb;
+    vec3 l = a.rgb * b + materials.emission[int(draw.material.y)].rgb;
     return vec4(min(l, HALF_MAX), 1.0);
 }

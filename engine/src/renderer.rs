@@ -43,8 +43,7 @@ pub struct FrameUniforms {
 #[repr(C)]
 #[derive(Debug, Clone, Copy)]
 struct DrawPush {
-    /// x: alpha-test cutoff (or -1); y: 1 when the fragment reads a lightmap page; z: material
-    /// index (its emission).
+    /// x: alpha-test cutoff (or -1); y: material index (its emission).
     material: Vec4,
     base_color: Vec4,
 }
@@ -152,12 +151,10 @@ pub struct Renderer {
 
 /// The graphics pipelines of the mesh passes (all share one layout and the vertex shader).
 struct Pipelines {
-    /// Shading without a pre-pass: depth test and write, alpha test in the shader.
-    shade: vk::Pipeline,
-    /// Shading after the pre-pass: depth EQUAL, no writes, early fragment tests.
-    shade_equal: vk::Pipeline,
-    /// Both again, counting fragments (when the device lets fragment shaders write buffers).
-    shade_counting: Option<(vk::Pipeline, vk::Pipeline)>,
+    /// The shading pipelines of dynamic objects (probes and sun) and of lightmapped static
+    /// geometry: two variants of one shader (LIGHTMAPPED, mesh_shading.glsl), so neither runs
+    /// the other's lighting code.
+    shade: [Shading; 2],
     /// Pre-pass: depth only, no fragment shader; and with the alpha-test discard.
     depth: vk::Pipeline,
     depth_masked: vk::Pipeline,
@@ -165,6 +162,42 @@ struct Pipelines {
     /// sun), no culling, with depth bias.
     shadow: vk::Pipeline,
     shadow_masked: vk::Pipeline,
+}
+
+/// The shading pass's pipelines for one lighting path.
+struct Shading {
+    /// Without a pre-pass: depth test and write, alpha test in the shader.
+    plain: vk::Pipeline,
+    /// After the pre-pass: depth EQUAL, no writes, early fragment tests.
+    equal: vk::Pipeline,
+    /// Both again, counting fragments (when the device lets fragment shaders write buffers).
+    counting: Option<(vk::Pipeline, vk::Pipeline)>,
+}
+
+impl Shading {
+    fn new(make: impl Fn(bool, bool) -> Result<vk::Pipeline>, counting: bool) -> Result<Shading> {
+        Ok(Shading { plain: make(false, false)?, equal: make(true, false)?, counting: if counting { Some((make(false, true)?, make(true, true)?)) } else { None } })
+    }
+
+    fn pick(&self, prepass: bool, count: bool) -> vk::Pipeline {
+        match (count, self.counting) {
+            (true, Some((plain, equal))) => if prepass { equal } else { plain },
+            _ => if prepass { self.equal } else { self.plain },
+        }
+    }
+
+    fn all(&self) -> impl Iterator<Item = vk::Pipeline> {
+        [self.plain, self.equal].into_iter().chain(self.counting.into_iter().flat_map(|(a, b)| [a, b]))
+    }
+}
+
+/// Specialisation constants of the mesh fragment shaders (mesh_shading.glsl).
+#[derive(Debug, Clone, Copy, Default)]
+struct Variant {
+    /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
+    count_fragments: bool,
+    /// LIGHTMAPPED: lit by the draw's lightmap page, not by the probes and the sun.
+    lightmapped: bool,
 }
 
 /// Timestamps written per frame slot: 0..=5 around the passes, 6 and 7 around skinning.
@@ -249,18 +282,25 @@ impl Renderer {
             d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?
         };
         let reversed_z_nearer = vk::CompareOp::GREATER_OR_EQUAL;
-        let shade = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, reversed_z_nearer, count, None);
-        let shade_equal = |count| create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, count, None);
+        let shading = |lightmapped| {
+            let make = |equal: bool, count_fragments| {
+                let variant = Variant { count_fragments, lightmapped };
+                match equal {
+                    false => create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, reversed_z_nearer, variant, None),
+                    true => create_mesh_pipeline(gpu, pipeline_layout, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
+                }
+            };
+            Shading::new(make, gpu.caps.fragment_atomics)
+        };
+        let plain = Variant::default();
         let shadow = SunShadow::new(gpu, frame_layout, std::mem::size_of::<FrameUniforms>() as u64, frames_in_flight, DEFAULT_SHADOW_MAP_SIZE)?;
         let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
         let pipelines = Pipelines {
-            shade: shade(false)?,
-            shade_equal: shade_equal(false)?,
-            shade_counting: if gpu.caps.fragment_atomics { Some((shade(true)?, shade_equal(true)?)) } else { None },
-            depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, false, None)?,
-            depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, false, None)?,
-            shadow: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, None, true, vk::CompareOp::LESS_OR_EQUAL, false, bias)?,
-            shadow_masked: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, false, bias)?,
+            shade: [shading(false)?, shading(true)?],
+            depth: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, None, true, reversed_z_nearer, plain, None)?,
+            depth_masked: create_mesh_pipeline(gpu, pipeline_layout, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, reversed_z_nearer, plain, None)?,
+            shadow: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
+            shadow_masked: create_mesh_pipeline(gpu, pipeline_layout, None, shadow.format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
         };
         let timestamps = if gpu.caps.timestamps {
             let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS_PER_FRAME * frames_in_flight as u32);
@@ -484,7 +524,7 @@ impl Renderer {
                     .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 1.0, stencil: 0 } });
                 let rendering = vk::RenderingInfo::default().render_area(self.shadow.area()).layer_count(1).depth_attachment(&depth_attachment);
                 let pass = PassSetup { frame_set: self.shadow.sets[slot], batches: &batches, instances, query: None, depth_test: true, cull: false };
-                draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
+                draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat, _| if mat.alpha_cutoff >= 0.0 { p.shadow_masked } else { p.shadow });
             });
         }
         stamp(1);
@@ -504,7 +544,7 @@ impl Renderer {
                 .clear_value(depth_clear);
             let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&depth_attachment);
             let pass = PassSetup { frame_set, batches: &view_batches, instances, query: Some(query_a), depth_test: true, cull: true };
-            draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
+            draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |mat, _| if mat.alpha_cutoff >= 0.0 { self.pipelines.depth_masked } else { self.pipelines.depth });
             // The shading pass tests against what the pre-pass wrote.
             barrier(gpu, cb, target.depth_image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::DEPTH_WRITE_TO_TEST);
         }
@@ -525,14 +565,10 @@ impl Renderer {
             .store_op(if draw_particles || draw_boids { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
             .clear_value(depth_clear);
         let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
-        let p = &self.pipelines;
-        let shade = match (self.count_fragments, p.shade_counting) {
-            (true, Some((plain, equal))) => if prepass { equal } else { plain },
-            _ => if prepass { p.shade_equal } else { p.shade },
-        };
+        let shade = [0, 1].map(|lightmapped| self.pipelines.shade[lightmapped].pick(prepass, self.count_fragments));
         self.counters[slot].mapped()[..4].copy_from_slice(&0u32.to_le_bytes());
         let pass = PassSetup { frame_set, batches: &view_batches, instances, query: Some(query_b), depth_test: prepass || self.depth_test, cull: true };
-        draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |_| shade);
+        draw_calls += self.pass(gpu, cb, scene, &rendering, &pass, |_, lightmapped| shade[lightmapped as usize]);
         // Every pass is recorded: the instance stream is complete.
         let stream = batcher.stream_bytes();
         assert!(stream.len() <= stream_capacity, "instance stream overran its reservation");
@@ -583,9 +619,9 @@ impl Renderer {
     }
 
     /// One rendering instance drawing `setup.batches`, each submesh with the pipeline
-    /// `pipeline_for(material)` gives, counted by the pipeline-statistics query `setup.query`.
+    /// `pipeline_for(material, lightmapped)` gives, counted by the pipeline-statistics query `setup.query`.
     /// Returns the draw calls it made.
-    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &PassSetup, pipeline_for: impl Fn(&GpuMaterial) -> vk::Pipeline) -> u32 {
+    fn pass(&self, gpu: &Gpu, cb: vk::CommandBuffer, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &PassSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> vk::Pipeline) -> u32 {
         let d = &gpu.device;
         let extent = rendering.render_area.extent;
         let query = setup.query.and_then(|q| self.stats_pool.map(|pool| (pool, q)));
@@ -616,15 +652,15 @@ impl Renderer {
                 d.cmd_set_front_face(cb, batch.front);
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
-                    let pipeline = pipeline_for(mat);
                     // Static geometry reads its lightmap page; the rest the probes and the sun.
                     let page = sm.lightmap_page.filter(|_| mesh.is_static && self.lightmaps).and_then(|p| scene.lightmap_sets.get(p as usize));
+                    let pipeline = pipeline_for(mat, page.is_some());
                     if pipeline != bound {
                         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
                         bound = pipeline;
                     }
                     let push = DrawPush {
-                        material: Vec4::new(mat.alpha_cutoff, page.is_some() as u32 as f32, sm.material as f32, 0.0),
+                        material: Vec4::new(mat.alpha_cutoff, sm.material as f32, 0.0, 0.0),
                         base_color: Vec4::from(mat.base_color),
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
@@ -647,7 +683,7 @@ impl Renderer {
     /// Fragments the shading pass of the frame last recorded in `slot` shaded, once the GPU has
     /// finished it; None unless `count_fragments` was on and the device can count.
     pub fn fragment_count(&self, slot: usize) -> Option<u32> {
-        (self.count_fragments && self.pipelines.shade_counting.is_some()).then(|| u32::from_le_bytes(self.counters[slot].mapped_ref()[..4].try_into().unwrap()))
+        (self.count_fragments && self.pipelines.shade[0].counting.is_some()).then(|| u32::from_le_bytes(self.counters[slot].mapped_ref()[..4].try_into().unwrap()))
     }
 
     /// Shader invocations of the frame last recorded in `slot`, once the GPU has finished it
@@ -679,7 +715,7 @@ impl Renderer {
         unsafe {
             d.destroy_descriptor_pool(self.pool, None);
             let p = &self.pipelines;
-            for pipeline in [p.shade, p.shade_equal, p.depth, p.depth_masked, p.shadow, p.shadow_masked].into_iter().chain(p.shade_counting.into_iter().flat_map(|(a, b)| [a, b])) {
+            for pipeline in [p.depth, p.depth_masked, p.shadow, p.shadow_masked].into_iter().chain(p.shade.iter().flat_map(Shading::all)) {
                 d.destroy_pipeline(pipeline, None);
             }
             for pool in self.stats_pool.into_iter().chain(self.timestamps) {
@@ -729,7 +765,8 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
 
 /// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
 /// (None: no colour attachment) and `depth_format` with the given depth write and compare, and
-/// a rasteriser depth bias (constant, slope factor) when given.
+/// a rasteriser depth bias (constant, slope factor) when given; `variant` specialises the
+/// fragment shader.
 #[allow(clippy::too_many_arguments)]
 fn create_mesh_pipeline(
     gpu: &Gpu,
@@ -739,13 +776,14 @@ fn create_mesh_pipeline(
     frag: Option<&[u8]>,
     depth_write: bool,
     compare: vk::CompareOp,
-    count_fragments: bool,
+    variant: Variant,
     depth_bias: Option<(f32, f32)>,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constant 0: COUNT_FRAGMENTS (mesh_shading.glsl).
-    let count_bytes = vk::Bool32::from(count_fragments).to_le_bytes();
-    let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }];
-    let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&count_bytes);
+    // Specialisation constants 0 and 1: COUNT_FRAGMENTS and LIGHTMAPPED (mesh_shading.glsl).
+    let values = [variant.count_fragments, variant.lightmapped].map(|b| vk::Bool32::from(b).to_le_bytes());
+    let bytes = values.concat();
+    let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }, vk::SpecializationMapEntry { constant_id: 1, offset: 4, size: 4 }];
+    let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared (tangent arrives with normal mapping).
     const MESH_SHADER_INPUTS: [u32; 5] = [0, 1, 3, 4, 5];
