@@ -31,8 +31,8 @@ build: setup
 
 cooker: setup $(VENV)/.cooker-built
 
-$(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt
-	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
+$(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt tools/constraints.txt
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH PIP_CONSTRAINT=$(abspath tools/constraints.txt) \
 	  $(VENV)/bin/maturin develop --release --locked --extras test,denoise,ray -m asset_pipeline/Cargo.toml -q
 	@touch $@
 

@@ -46,6 +46,6 @@ pins=tools/requirements-dev.txt
 stamp=.venv/.pins-installed
 if [ ! -f "$stamp" ] || ! cmp -s "$pins" "$stamp"; then
   echo "setup: installing pinned Python tools into .venv"
-  .venv/bin/python -m pip install -q --disable-pip-version-check -r "$pins"
+  .venv/bin/python -m pip install -q --disable-pip-version-check -r "$pins" -c tools/constraints.txt
   cp "$pins" "$stamp"
 fi
