@@ -158,3 +158,25 @@ def test_sigkill_during_cook_keeps_the_previous_pack(tmp_path):
         assert left == [], f"after kill {k}: temporary files left: {left}"
         current = seed
     print(f"full cook {duration:.2f} s; {KILLS} kills: {outcomes}")
+
+
+def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    """The cooker's small files (stage cache entries, the output stamp, the report) go through
+    `write_atomic`: an exception or Ctrl-C in the middle keeps the previous file and removes the
+    half-written temporary; a finished write replaces the file whole."""
+    from asset_pipeline.cache import write_atomic
+
+    path = tmp_path / "stamp.json"
+    path.write_text("old")
+
+    def interrupted(f):
+        f.write(b"half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(path, interrupted)
+    assert path.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stamp.json"]
+    write_atomic(path, lambda f: f.write(b"new"))
+    assert path.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stamp.json"]

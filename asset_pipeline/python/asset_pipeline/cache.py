@@ -82,6 +82,20 @@ def process_running(pid: int) -> bool:
     return True
 
 
+def write_atomic(path: Path, write) -> None:
+    """Write `path` whole or not at all: `write(file)` fills a hidden temporary beside it named
+    `.<name>.<pid>.tmp` (what the clean-ups of dead cooks' temporaries look for), which is then
+    renamed into place. A reader sees the old file or the new one, never half of one."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 class StageCache:
     def __init__(self, root: Path, enabled: bool = True):
         self.root = Path(root)
@@ -123,8 +137,5 @@ class StageCache:
     def store(self, stage: str, key: str, meta: dict, arrays: list[np.ndarray]) -> None:
         path = self._path(stage, key)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         payload = {"meta": np.array(json.dumps({**meta, "_arrays": len(arrays)})), **{f"a{i}": a for i, a in enumerate(arrays)}}
-        with open(tmp, "wb") as f:
-            np.savez(f, **payload)
-        os.replace(tmp, path)
+        write_atomic(path, lambda f: np.savez(f, **payload))

@@ -25,7 +25,7 @@ import numpy as np
 
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
-from asset_pipeline.cache import Hasher, StageCache, process_running
+from asset_pipeline.cache import Hasher, StageCache, process_running, write_atomic
 from asset_pipeline.gltf_import import import_gltf, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
@@ -237,15 +237,15 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs)
     files = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
-    tmp = stamp.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"key": cook_key, "files": files, "summary": summary}))
-    os.replace(tmp, stamp)
+    record = json.dumps({"key": cook_key, "files": files, "summary": summary}).encode()
+    write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0)
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
-# `.<name>.tmp-<pid>-<n>`; exr_io: `.<name>.<pid>.tmp`; report: `.<name>.tmp`).
+# `.<name>.tmp-<pid>-<n>`; exr_io and cache.write_atomic, the report's writer: `.<name>.<pid>.tmp`;
+# `.<name>.tmp` is what reports were written through before).
 _TEMPORARY = re.compile(r"^\.(?P<name>.+?)(\.tmp-(?P<pid>\d+)-\d+|\.(?P<pid2>\d+)\.tmp|\.tmp)$")
 
 

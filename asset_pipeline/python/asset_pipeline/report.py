@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from asset_pipeline import ir
+from asset_pipeline.cache import write_atomic
 
 
 def _row(*cells) -> str:
@@ -54,9 +55,8 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
 
         lines += ["", "## Bake", "", *describe(bake_stats)]
         lines += [f"- `{os.path.relpath(e, path.parent)}`" for e in exrs]
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    text = ("\n".join(lines) + "\n").encode()
+    write_atomic(path, lambda f: f.write(text))
     return path
 
 
