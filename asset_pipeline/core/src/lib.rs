@@ -123,6 +123,26 @@ pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&
 /// images (lavapipe's `maxImageDimension2D`); a bigger image would cook but never load.
 pub const MAX_TEXTURE_SIZE: u32 = 16384;
 
+/// Decode image bytes (PNG, JPEG, ...; the format from the bytes) as a texture. The size is read
+/// from the header and checked against `MAX_TEXTURE_SIZE` before anything is decoded, so a small
+/// file that claims a huge image is refused without allocating it; the decoder may then allocate
+/// what the largest texture needs (16-bit RGBA) and no more. (The image crate's default limit,
+/// 512 MiB, refused legitimate textures above 8192 px square with a bare "limits exceeded".)
+pub fn decode_texture(bytes: &[u8]) -> Result<image::DynamicImage, String> {
+    let reader = || image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| format!("cannot decode: {e}"));
+    let (w, h) = reader()?.into_dimensions().map_err(|e| format!("cannot decode: {e}"))?;
+    if w.max(h) > MAX_TEXTURE_SIZE {
+        return Err(format!("{w} x {h} texels, larger than the {MAX_TEXTURE_SIZE} per side a texture may have"));
+    }
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_TEXTURE_SIZE);
+    limits.max_image_height = Some(MAX_TEXTURE_SIZE);
+    limits.max_alloc = Some(u64::from(MAX_TEXTURE_SIZE) * u64::from(MAX_TEXTURE_SIZE) * 8);
+    let mut decoder = reader()?;
+    decoder.limits(limits);
+    decoder.decode().map_err(|e| format!("cannot decode: {e}"))
+}
+
 /// Decode a PNG or JPEG file to RGBA8: (width, height, texels).
 pub fn decode_image(path: &Path) -> Result<(u32, u32, Vec<u8>), CookError> {
     let file = path.display().to_string();
@@ -130,11 +150,8 @@ pub fn decode_image(path: &Path) -> Result<(u32, u32, Vec<u8>), CookError> {
         std::io::ErrorKind::NotFound => CookError::NotFound { file: file.clone() },
         _ => CookError::io(&file, e.to_string()),
     })?;
-    let rgba = image::load_from_memory(&bytes).map_err(|e| CookError::invalid(&file, format!("cannot decode image: {e}")))?.to_rgba8();
+    let rgba = decode_texture(&bytes).map_err(|e| CookError::invalid(&file, e.replacen("cannot decode", "cannot decode image", 1)))?.to_rgba8();
     let (w, h) = rgba.dimensions();
-    if w.max(h) > MAX_TEXTURE_SIZE {
-        return Err(CookError::invalid(&file, format!("{w} x {h} texels, larger than the {MAX_TEXTURE_SIZE} per side a texture may have")));
-    }
     Ok((w, h, rgba.into_raw()))
 }
 

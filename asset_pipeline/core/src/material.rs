@@ -81,12 +81,9 @@ fn decode(image: &gltf::Image, src: &Source, usage: Usage) -> Result<TextureIr, 
         (None, None) => return Err("has neither a uri nor a bufferView".into()),
     };
     // The format comes from the bytes, not the declared MIME type, which exporters get wrong.
-    let decoded = image::load_from_memory(&bytes).map_err(|e| format!("cannot decode: {e}"))?;
+    let decoded = crate::decode_texture(&bytes)?;
     let name = image.name().map(str::to_string).or(name).unwrap_or_else(|| format!("image{}", image.index()));
     let (width, height) = (decoded.width(), decoded.height());
-    if width.max(height) > crate::MAX_TEXTURE_SIZE {
-        return Err(format!("{width} x {height} texels, larger than the {} per side a texture may have", crate::MAX_TEXTURE_SIZE));
-    }
     let sixteen_bit = matches!(decoded.color(), image::ColorType::L16 | image::ColorType::La16 | image::ColorType::Rgb16 | image::ColorType::Rgba16);
     let (format, texels) = match usage {
         Usage::Normal if sixteen_bit => (TextureFormat::Rgba16Unorm, decoded.to_rgba16().into_raw().iter().flat_map(|v| v.to_le_bytes()).collect()),

@@ -496,3 +496,18 @@ fn wire_arrays_of_the_wrong_type_or_shape_are_named() {
     let e = crate::wire::from_wire(&json, &bad).unwrap_err();
     assert!(e.contains("out of range"), "{e}");
 }
+
+#[test]
+fn a_texture_larger_than_the_image_crates_default_memory_limit_decodes() {
+    // 16384 x 8448 RGBA8 is 553 MB decoded: over the image crate's default 512 MiB allocation
+    // limit, which refused it with "limits exceeded", and within the cooker's 16384 per side.
+    let (w, h) = (crate::MAX_TEXTURE_SIZE, 8448);
+    let mut png = Vec::new();
+    let encoder = image::codecs::png::PngEncoder::new_with_quality(&mut png, image::codecs::png::CompressionType::Fast, image::codecs::png::FilterType::NoFilter);
+    image::ImageEncoder::write_image(encoder, &vec![0u8; (w * h * 4) as usize], w, h, image::ExtendedColorType::Rgba8).unwrap();
+    let decoded = crate::decode_texture(&png).unwrap();
+    assert_eq!((decoded.width(), decoded.height()), (w, h));
+    // One more row than a texture may have is refused from the header, before decoding.
+    let err = crate::decode_texture(&self::png(1, crate::MAX_TEXTURE_SIZE + 1)).unwrap_err();
+    assert!(err.contains("1 x 16385 texels, larger than the 16384"), "{err}");
+}
