@@ -84,12 +84,17 @@ impl Camera {
         }
     }
 
-    /// Walking: move `local` (right, -, forward) metres in the ground plane, whatever the pitch,
-    /// with the eye at height `eye_y`.
-    pub fn walk(&mut self, local: Vec3, eye_y: f32) {
+    /// Walking: `local` (right, -, forward) metres as a move in the ground plane, whatever the
+    /// pitch.
+    pub fn walk_delta(&self, local: Vec3) -> Vec3 {
         let forward = Vec3::new(self.forward().x, 0.0, self.forward().z).normalize_or_zero();
         let right = Vec3::new(self.right().x, 0.0, self.right().z).normalize_or_zero();
-        self.position += right * local.x + forward * local.z;
+        right * local.x + forward * local.z
+    }
+
+    /// Walking on flat ground: move by `walk_delta(local)` with the eye at height `eye_y`.
+    pub fn walk(&mut self, local: Vec3, eye_y: f32) {
+        self.position += self.walk_delta(local);
         self.position.y = eye_y;
     }
 

@@ -21,6 +21,7 @@ pub mod sim_level;
 pub mod stats;
 pub mod tonemap;
 pub mod visibility;
+pub mod walk;
 pub mod window;
 
 pub use pack;

@@ -9,6 +9,7 @@ use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::sim::World;
 use crate::sim_level;
 use crate::scene::GpuScene;
+use crate::walk::WalkMesh;
 use anyhow::{anyhow, Context, Result};
 use ash::vk;
 use glam::Vec3;
@@ -51,8 +52,8 @@ pub struct WindowRun {
 /// The keys, as `demo --help` and the README list them.
 pub const KEYS: &str = "WASD move, Q/E down/up, Shift faster, drag with a mouse button to look, Esc quits;
 F1 overlay, F2 depth pre-pass, F3 frustum culling, F4 LOD selection, F5 lightmaps (off: probes
-and sun light the static geometry too), F6 walk mode (on the ground at eye height, at the player
-spawn's speed), Tab next scene (when several packs were given).";
+and sun light the static geometry too), F6 walk mode (on the level's floors at eye height, up
+steps, stopped by walls, at the player spawn's speed), Tab next scene (when several packs were given).";
 
 /// Open a window and render `packs[0]` until it is closed (or `max_frames` is reached); Tab
 /// switches to the next pack.
@@ -100,9 +101,12 @@ struct State {
     camera: Camera,
     lighting: Lighting,
     keys: HashSet<KeyCode>,
-    /// Walk mode: the eye's height above the level's ground (None: flying).
+    /// Walk mode: the eye's height above the feet (None: flying).
     walk: Option<f32>,
-    /// The ground's height and the walking speed, from the player spawn.
+    /// What walking stands on and bumps into: the level's static triangles.
+    walk_mesh: WalkMesh,
+    /// Where the feet go where no floor is under the camera, and the walking speed: from the
+    /// player spawn.
     ground: f32,
     walk_speed: f32,
     looking: bool,
@@ -292,6 +296,7 @@ impl State {
             lighting: Lighting::for_pack(&pack.manifest),
             keys: HashSet::new(),
             walk: None,
+            walk_mesh: WalkMesh::from_pack(&pack),
             ground: ground_height(&pack.manifest, min),
             walk_speed: walk_speed(&pack.manifest),
             looking: false,
@@ -305,7 +310,8 @@ impl State {
     }
 
     /// WASD to move, Q/E down/up, Shift to go faster; drag with a mouse button to look. Walking,
-    /// the camera moves in the ground plane at the eye's height and Q/E do nothing.
+    /// the feet follow the level's floors (up steps, down drops), walls stop them, the eye stays
+    /// at its height above them and Q/E do nothing.
     fn update_camera(&mut self, dt: f32) {
         let (min, max) = self.scene.bounds();
         let mut speed = if self.walk.is_some() { self.walk_speed } else { ((max - min).length() * 0.4).max(1.0) };
@@ -315,7 +321,10 @@ impl State {
         let axis = |pos: KeyCode, neg: KeyCode| (self.keys.contains(&pos) as i32 - self.keys.contains(&neg) as i32) as f32;
         let local = Vec3::new(axis(KeyCode::KeyD, KeyCode::KeyA), axis(KeyCode::KeyE, KeyCode::KeyQ), axis(KeyCode::KeyW, KeyCode::KeyS));
         match self.walk {
-            Some(eye) => self.camera.walk(local * speed * dt, self.ground + eye),
+            Some(eye) => {
+                let feet = self.walk_mesh.step(self.camera.position - Vec3::Y * eye, self.camera.walk_delta(local * speed * dt));
+                self.camera.position = feet + Vec3::Y * eye;
+            }
             None => self.camera.translate_local(local * speed * dt),
         }
     }
@@ -346,9 +355,7 @@ impl State {
                     Some(_) => None,
                     None => Some(crate::camera::EYE_HEIGHT_M),
                 };
-                if let Some(eye) = self.walk {
-                    self.camera.walk(Vec3::ZERO, self.ground + eye);
-                }
+                self.land();
                 format!("walk mode {}", on_off(self.walk.is_some()))
             }
             _ => return None,
@@ -371,12 +378,21 @@ impl State {
         sim_level::warm_up(&mut self.world);
         self.camera = Camera::for_pack(&pack.manifest, min, max);
         self.lighting = Lighting::for_pack(&pack.manifest);
+        self.walk_mesh = WalkMesh::from_pack(pack);
         self.ground = ground_height(&pack.manifest, min);
         self.walk_speed = walk_speed(&pack.manifest);
-        if let Some(eye) = self.walk {
-            self.camera.walk(Vec3::ZERO, self.ground + eye);
-        }
+        self.land();
         Ok(())
+    }
+
+    /// Walking, put the feet on the floor under the camera (the spawn's height where there is
+    /// none) and the eye above them.
+    fn land(&mut self) {
+        if let Some(eye) = self.walk {
+            let p = self.camera.position;
+            let floor = self.walk_mesh.floor(glam::Vec2::new(p.x, p.z), p.y).unwrap_or(self.ground);
+            self.camera.position.y = floor + eye;
+        }
     }
 
     fn frame(&mut self) -> Result<()> {
@@ -662,9 +678,8 @@ impl Swapchain {
     }
 }
 
-/// The height walking keeps to: the player spawn's (it stands on the floor), else the bottom of
-/// the scene. One height for the whole level: the demo level's courtyard is flat; walking up
-/// steps would need the runtime to query the level's geometry, which it does not keep on the CPU.
+/// Where walking puts the feet when no floor is under the camera: the player spawn's height (it
+/// stands on the floor), else the bottom of the scene.
 fn ground_height(manifest: &pack::Manifest, min: Vec3) -> f32 {
     manifest.spawns.iter().find(|s| s.kind == "player").map_or(min.y, |s| s.position[1])
 }
