@@ -166,7 +166,7 @@ fn height_at(p: Vec2, [a, b, c]: [Vec3; 3]) -> Option<f32> {
     let u = (c2 - b2).perp_dot(p - b2) / area;
     let v = (a2 - c2).perp_dot(p - c2) / area;
     let w = 1.0 - u - v;
-    (u >= -1e-6 && v >= -1e-6 && w >= -1e-6).then(|| u * a.y + v * b.y + w * c.y)
+    (u >= -1e-6 && v >= -1e-6 && w >= -1e-6).then_some(u * a.y + v * b.y + w * c.y)
 }
 
 /// The part of triangle `t` with y in [y0, y1], as a polygon (empty when it misses the slab).

@@ -296,7 +296,7 @@ impl State {
             lighting: Lighting::for_pack(&pack.manifest),
             keys: HashSet::new(),
             walk: None,
-            walk_mesh: WalkMesh::from_pack(&pack),
+            walk_mesh: WalkMesh::from_pack(pack),
             ground: ground_height(&pack.manifest, min),
             walk_speed: walk_speed(&pack.manifest),
             looking: false,
