@@ -73,8 +73,9 @@ def main() -> int:
         local = bake.bake_level(scene, base)
         local_total = time.perf_counter() - t
         local_trace = trace_seconds(local.stats)
+        rays = local.stats["rays"] + local.stats["probes"]["rays"]
         print(f"\n{k} worker(s): local on {k} thread(s): tracing {local_trace:.2f} s, bake_level {local_total:.2f} s, "
-              f"{local.stats['texels']} texels, {(local.stats['rays'] + local.stats['probes']['rays']) / 1e6:.1f} M rays")
+              f"{local.stats['texels']} texels, {rays / 1e6:.1f} M rays ({rays / local_trace / k / 1e6:.2f} M rays/s per thread)")
         cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": k, "node_ip_address": "127.0.0.1", "include_dashboard": False,
                                                                 "object_store_memory": 200 * 1024 * 1024})
         try:
@@ -95,8 +96,12 @@ def main() -> int:
                 # of the workers' wall time spent outside the tasks (scheduling, transfers, the tail).
                 idle = 1.0 - r["task_seconds"] / (r["wall_seconds"] * k)
                 rows.append((k, tile, overhead))
+                # Rays per second of task time: the workers' tracing speed itself, apart from what
+                # scheduling costs (compare with the local bake's per thread).
+                in_task = r["rays_per_s"] * r["wall_seconds"] / r["task_seconds"]
                 print(f"  tile {tile:>6}: {r['tiles']:>4} tiles + {r['probe_batches']} probe batches, tracing {r['wall_seconds']:.2f} s "
-                      f"({r['rays_per_s'] / 1e6:.2f} M rays/s), bake_level {total:.2f} s; overhead {overhead * 100:+.1f}%, workers idle {idle * 100:.1f}%; "
+                      f"({r['rays_per_s'] / 1e6:.2f} M rays/s; {in_task / 1e6:.2f} per worker in tasks), bake_level {total:.2f} s; "
+                      f"overhead {overhead * 100:+.1f}%, workers idle {idle * 100:.1f}%; "
                       f"scene built {r['scene_builds']}x on {r['workers']} worker(s); identical: {same(got, local)}")
         finally:
             ray.shutdown()
