@@ -131,12 +131,17 @@ def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room,
     killed: list[int] = []
 
     def kill_one(stage, done, total):
-        # Once some tiles are in and most are still to come, kill a worker that is inside a tile.
+        # Once some tiles are in and most are still to come, kill the worker node's worker while
+        # it is inside a tile. A tile takes milliseconds, and the worker may be between two just
+        # as a result comes in: look for a while (the nodes keep working through their queues
+        # while this callback holds the driver).
         if stage == "bake tiles" and not killed and 2 <= done < total // 2:
-            for pid in _busy_workers(raylet_pid, "bake_tile"):
-                os.kill(pid, signal.SIGKILL)
-                killed.append(pid)
-                break
+            deadline = time.monotonic() + 5.0
+            while not killed and time.monotonic() < deadline:
+                for pid in _busy_workers(raylet_pid, "bake_tile")[:1]:
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
+                time.sleep(0.002)
 
     out = tmp_path / "ray" / "room.pack"
     out.parent.mkdir()
