@@ -98,7 +98,7 @@ def main() -> int:
                 rows.append((k, tile, overhead))
                 # Rays per second of task time: the workers' tracing speed itself, apart from what
                 # scheduling costs (compare with the local bake's per thread).
-                in_task = r["rays_per_s"] * r["wall_seconds"] / r["task_seconds"]
+                in_task = (got.stats["rays"] + got.stats["probes"]["rays"]) / r["task_seconds"]
                 print(f"  tile {tile:>6}: {r['tiles']:>4} tiles + {r['probe_batches']} probe batches, tracing {r['wall_seconds']:.2f} s "
                       f"({r['rays_per_s'] / 1e6:.2f} M rays/s; {in_task / 1e6:.2f} per worker in tasks), bake_level {total:.2f} s; "
                       f"overhead {overhead * 100:+.1f}%, workers idle {idle * 100:.1f}%; "

@@ -61,7 +61,7 @@ pub struct Batch {
 pub struct Batcher {
     order: Vec<(u32, u8, bool, u32)>,
     /// This frame's instance stream so far (copied to the GPU's instance buffer after recording).
-    pub stream: Vec<InstanceData>,
+    stream: Vec<InstanceData>,
 }
 
 impl Batcher {
@@ -75,7 +75,6 @@ impl Batcher {
     /// result does not depend on sort stability); an animated instance, which draws its own
     /// skinned vertices in world space, is a batch of its own. Without, every draw is a batch,
     /// in draw-list order (for comparison).
-    #[allow(clippy::too_many_arguments)]
     pub fn batch(&mut self, scene: &GpuScene, animation: Option<&AnimatedScene>, slot: usize, draws: &[Draw], instancing: bool, out: &mut Vec<Batch>) {
         out.clear();
         self.order.clear();

@@ -85,17 +85,11 @@ impl Camera {
     }
 
     /// Walking: `local` (right, -, forward) metres as a move in the ground plane, whatever the
-    /// pitch.
+    /// pitch (`walk::WalkMesh::step` takes it from there).
     pub fn walk_delta(&self, local: Vec3) -> Vec3 {
         let forward = Vec3::new(self.forward().x, 0.0, self.forward().z).normalize_or_zero();
         let right = Vec3::new(self.right().x, 0.0, self.right().z).normalize_or_zero();
         right * local.x + forward * local.z
-    }
-
-    /// Walking on flat ground: move by `walk_delta(local)` with the eye at height `eye_y`.
-    pub fn walk(&mut self, local: Vec3, eye_y: f32) {
-        self.position += self.walk_delta(local);
-        self.position.y = eye_y;
     }
 
     /// Move relative to the view: `local` is (right, up, forward) in metres.
@@ -120,13 +114,13 @@ mod tests {
     }
 
     #[test]
-    fn walking_stays_at_eye_height_and_moves_level_whatever_the_pitch() {
+    fn walking_moves_level_whatever_the_pitch() {
         let mut c = Camera { position: Vec3::new(0.0, 5.0, 0.0), yaw: 0.0, pitch: -1.2, fov_y: 1.0, near: 0.1 };
-        c.walk(Vec3::new(0.0, 7.0, 2.0), 1.7); // 2 m forward (-Z at yaw 0); the up component is ignored
-        assert!((c.position - Vec3::new(0.0, 1.7, -2.0)).length() < 1e-5, "{}", c.position);
+        let d = c.walk_delta(Vec3::new(0.0, 7.0, 2.0)); // 2 m forward (-Z at yaw 0); the up component is ignored
+        assert!((d - Vec3::new(0.0, 0.0, -2.0)).length() < 1e-5, "{d}");
         c.yaw = std::f32::consts::FRAC_PI_2; // looking down -X
-        c.walk(Vec3::new(1.0, 0.0, 0.0), 1.7); // 1 m to the right: -Z
-        assert!((c.position - Vec3::new(0.0, 1.7, -3.0)).length() < 1e-5, "{}", c.position);
+        let d = c.walk_delta(Vec3::new(1.0, 0.0, 0.0)); // 1 m to the right: -Z
+        assert!((d - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-5, "{d}");
     }
 
     #[test]
