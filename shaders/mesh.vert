@@ -1,18 +1,24 @@
 #version 450
 #include "frame.glsl"
+#include "mesh_draw.glsl"
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 3) in vec2 in_uv0;
 layout(location = 4) in vec2 in_uv1;
 layout(location = 5) in vec4 in_color;
+layout(location = 13) in vec2 in_texcoord1;
 // Location 2 (tangent) exists in the vertex format but is not read yet.
 
 // Per instance (binding 1, the renderer's instance stream; `InstanceData` in batches.rs): the
-// model matrix and its normal matrix, the inverse-transpose of the 3x3 (non-uniform and mirrored
-// scale).
+// model matrix, the columns of its normal matrix (the inverse-transpose of the 3x3: non-uniform
+// and mirrored scale), the w of the first being the page of the instance's lightmap region, and
+// the region's transform of uv1 (xy scale, zw offset; zero without a region).
 layout(location = 6) in mat4 in_model;
-layout(location = 10) in mat3 in_normal_matrix;
+layout(location = 10) in vec4 in_normal0;
+layout(location = 11) in vec3 in_normal1;
+layout(location = 12) in vec3 in_normal2;
+layout(location = 14) in vec4 in_lightmap;
 
 layout(location = 0) out vec3 out_normal;
 // The depth pre-pass and the shading pass run this same shader, and the shading pass's EQUAL
@@ -21,17 +27,31 @@ layout(location = 0) out vec3 out_normal;
 // says the same but glslang puts it on a member of the gl_PerVertex block, which the validation
 // layer's SPIR-V checker flags with a warning on every pipeline.)
 precise gl_Position;
-layout(location = 1) out vec2 out_uv0;
+layout(location = 1) out vec2 out_base_color_uv;
 layout(location = 2) out vec4 out_color;
 layout(location = 3) out vec3 out_world;
-layout(location = 4) out vec2 out_uv1;
+layout(location = 4) out vec2 out_lightmap_uv;
+layout(location = 5) out vec2 out_emissive_uv;
+// The lightmap array's layer: the region's page plus the submesh's block.
+layout(location = 6) flat out float out_lightmap_layer;
+
+// A texture slot's coordinates (`MaterialConstants` rows). Per vertex rather than per fragment:
+// the transform is affine, so interpolating its result is the same as transforming the
+// interpolated coordinates.
+vec2 slot_uv(vec4 row0, vec4 row1) {
+    vec3 uv = vec3(row0.w > 0.5 ? in_texcoord1 : in_uv0, 1.0);
+    return vec2(dot(row0.xyz, uv), dot(row1.xyz, uv));
+}
 
 void main() {
     vec4 world = in_model * vec4(in_position, 1.0);
-    out_normal = in_normal_matrix * in_normal;
-    out_uv0 = in_uv0;
+    out_normal = mat3(in_normal0.xyz, in_normal1, in_normal2) * in_normal;
+    uint m = uint(draw.material.y);
+    out_base_color_uv = slot_uv(materials[m].base_color_uv[0], materials[m].base_color_uv[1]);
+    out_emissive_uv = slot_uv(materials[m].emissive_uv[0], materials[m].emissive_uv[1]);
     out_color = in_color;
     out_world = world.xyz;
-    out_uv1 = in_uv1;
+    out_lightmap_uv = in_uv1 * in_lightmap.xy + in_lightmap.zw;
+    out_lightmap_layer = in_normal0.w + draw.material.z;
     gl_Position = frame.view_proj * world;
 }

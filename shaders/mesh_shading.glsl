@@ -1,44 +1,42 @@
-// What every mesh fragment shader shares: the draw's push constants (mirrors `DrawPush` in
-// engine/src/renderer.rs), the base colour texture, the interpolated inputs, and the shading.
+// What every mesh fragment shader shares: the draw's push constants and material constants
+// (mesh_draw.glsl), the material's textures, the interpolated inputs, and the shading.
 #include "frame.glsl"
+#include "mesh_draw.glsl"
 
+// Set 1: the material's textures, each with its own sampler; white where the slot is empty.
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
+layout(set = 1, binding = 1) uniform sampler2D emissive_tex;   // _SRGB format: sampled as linear
 
-layout(push_constant) uniform Draw {
-    vec4 material; // x: alpha-test cutoff (or -1), y: material index
-    vec4 base_color;
-} draw;
-
-// Set 2: the scene's baked light (engine/src/scene.rs). The draw's lightmap page (a black
-// texel for geometry without one), the probe grid, and every material's emission.
-layout(set = 2, binding = 0) uniform sampler2D lightmap; // B = H/pi in nits, half float
+// Set 2: the scene's baked light (engine/src/scene.rs). The lightmap pages as the layers of one
+// array (one black layer without a bake), the probe grid, and the material constants.
+layout(set = 2, binding = 0) uniform sampler2DArray lightmap; // B = H/pi in nits, half float
 layout(std430, set = 2, binding = 1) readonly buffer Probes {
     vec4 origin;   // probe (i, j, k) at origin + (i, j, k) * spacing
     vec4 spacing;
     uvec4 counts;  // 0 when the pack has no probes
     float data[];  // per probe: 27 SH floats (9 x rgb, B = E/pi without the sun), sun visibility
 } probes;
-layout(std430, set = 2, binding = 2) readonly buffer Emission {
-    vec4 emission[]; // rgb emitted radiance per material
-} materials;
 
 // The sun's shadow map (depth, 0 nearest the sun), sampled with a LESS_OR_EQUAL comparison and
 // linear filtering: each lookup is a 2x2 PCF in hardware. Set 0 is the renderer's.
 layout(set = 0, binding = 2) uniform sampler2DShadow sun_shadow_map;
 
 layout(location = 0) in vec3 in_normal;
-layout(location = 1) in vec2 in_uv0;
+layout(location = 1) in vec2 in_base_color_uv;
 layout(location = 2) in vec4 in_color;
 layout(location = 3) in vec3 in_world;
-layout(location = 4) in vec2 in_uv1;
+layout(location = 4) in vec2 in_lightmap_uv;
+layout(location = 5) in vec2 in_emissive_uv;
+layout(location = 6) flat in float in_lightmap_layer;
 
 // Set by the renderer's counting pipelines: each shaded fragment adds one to counters.fragments
 // (helper invocations' atomics have no effect, so only real fragments count).
 layout(constant_id = 0) const bool COUNT_FRAGMENTS = false;
-// Set by the renderer for static geometry with a lightmap page: lit by the page alone. A
-// constant, not a push-constant branch, so each variant carries only its own lighting code
-// (no branch, fewer registers): on lavapipe the demo flythrough's shading pass took about a
-// third less time than with the branch (relative to the tone-map pass in the same frames).
+// Set by the renderer for instances with a lightmap region (submeshes with a lightmap block):
+// lit by the lightmap alone. A constant, not a push-constant branch, so each variant carries
+// only its own lighting code (no branch, fewer registers): on lavapipe the demo flythrough's
+// shading pass took about a third less time than with the branch (relative to the tone-map
+// pass in the same frames).
 layout(constant_id = 1) const bool LIGHTMAPPED = false;
 
 void count_fragment() {
@@ -48,7 +46,7 @@ void count_fragment() {
 }
 
 vec4 albedo() {
-    return texture(base_color_tex, in_uv0) * draw.base_color * in_color;
+    return texture(base_color_tex, in_base_color_uv) * draw.base_color * in_color;
 }
 
 bool alpha_tested_away(vec4 a) {
@@ -144,17 +142,18 @@ vec4 shade(vec4 a) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    // Physical: B = H/pi from the lightmap (static geometry: it holds the sun too) or from the
-    // probes plus the sun where the shadow map sees it (dynamic objects).
+    // Physical: B = H/pi from the lightmap (baked static instances: it holds the sun too) or
+    // from the probes plus the sun where the shadow map sees it (dynamic objects).
     vec3 b;
     if (LIGHTMAPPED) {
-        b = texture(lightmap, in_uv1).rgb;
+        b = texture(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
     } else {
         vec4 pl = probe_light(in_world, n);
         b = pl.rgb + frame.sun_color.rgb * ndotl * sun_visibility(in_world, n, pl.w) / PI;
     }
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
-    vec3 l = a.rgb * b + materials.emission[int(draw.material.y)].rgb;
+    vec3 emission = materials[uint(draw.material.y)].emission.rgb * texture(emissive_tex, in_emissive_uv).rgb;
+    vec3 l = a.rgb * b + emission;
     return vec4(min(l, HALF_MAX), 1.0);
 }

@@ -1,12 +1,12 @@
 #version 450
-// Skinning and morph targets, once per frame; the output has the pack's 64-byte vertex layout,
+// Skinning and morph targets, once per frame; the output has the pack's 80-byte vertex layout,
 // so every later pass binds it as its vertex buffer. Same maths as anim::skin_cpu (the tests
 // compare the two): morph deltas first, then linear blend skinning; normals by the inverse
 // transpose of the blended matrix, tangents by the matrix itself (w kept).
 
 layout(local_size_x = 64) in;
 
-// Vertices as four uvec4 of raw words each (64 bytes): a struct with vec3 members would get
+// Vertices as five uvec4 of raw words each (80 bytes): a struct with vec3 members would get
 // std430's 16-byte alignment and no longer match the packed layout, and whole-uvec4 loads and
 // stores are several times faster than single words on lavapipe, which runs 8 vertices per
 // SIMD lane group and turns each scalar access into a gather or scatter.
@@ -37,10 +37,12 @@ void main() {
     if (v >= params.vertex_count) {
         return;
     }
-    // Layout: position (0..2), normal (3..5), tangent (6..9), uv0, uv1, colour, padding.
-    vec4 w0 = uintBitsToFloat(bind[v * 4]);
-    vec4 w1 = uintBitsToFloat(bind[v * 4 + 1]);
-    vec4 w2 = uintBitsToFloat(bind[v * 4 + 2]);
+    // The five words of a pack::Vertex: [position, normal.x] [normal.yz, tangent.xy]
+    // [tangent.zw, uv0] [uv1, texcoord1] [colour, padding].
+    uint base = v * 5u;
+    vec4 w0 = uintBitsToFloat(bind[base]);
+    vec4 w1 = uintBitsToFloat(bind[base + 1]);
+    vec4 w2 = uintBitsToFloat(bind[base + 2]);
     vec3 p = w0.xyz;
     vec3 n = vec3(w0.w, w1.xy);
     vec4 t = vec4(w1.zw, w2.xy);
@@ -78,9 +80,10 @@ void main() {
     vec3 sp = (m * vec4(p, 1.0)).xyz;
     sn = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
     st = dot(st, st) > 0.0 ? normalize(st) : vec3(0.0);
-    skinned[v * 4] = floatBitsToUint(vec4(sp, sn.x));
-    skinned[v * 4 + 1] = floatBitsToUint(vec4(sn.yz, st.xy));
-    skinned[v * 4 + 2] = floatBitsToUint(vec4(st.z, t.w, w2.zw));
-    // uv1, colour and padding pass through unchanged.
-    skinned[v * 4 + 3] = bind[v * 4 + 3];
+    skinned[base] = floatBitsToUint(vec4(sp, sn.x));
+    skinned[base + 1] = floatBitsToUint(vec4(sn.yz, st.xy));
+    skinned[base + 2] = floatBitsToUint(vec4(st.z, t.w, w2.zw));
+    // uv1, texcoord1, colour and padding pass through unchanged.
+    skinned[base + 3] = bind[base + 3];
+    skinned[base + 4] = bind[base + 4];
 }

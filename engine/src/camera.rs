@@ -19,6 +19,9 @@ pub fn perspective_reverse_z(fov_y: f32, aspect: f32, near: f32) -> Mat4 {
 
 /// A standing person's eye height above the ground (player spawns stand on the floor).
 pub const EYE_HEIGHT_M: f32 = 1.7;
+/// The field of view (radians) and near plane of a camera at a spawn that does not give its own.
+const SPAWN_FOV_Y: f32 = 70f32.to_radians();
+const SPAWN_NEAR_M: f32 = 0.05;
 
 /// A fly camera: position plus yaw (about +Y, 0 looks down -Z) and pitch, in radians.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,21 +70,35 @@ impl Camera {
         }
     }
 
-    /// The camera a pack asks for: at its `player` spawn point (eye height above it, looking
-    /// along the spawn's rotation) when it has one, else framing the scene's bounds.
+    /// The camera a pack asks for: at its `player` spawn (eye height above it, looking along
+    /// the spawn's rotation); else at its first `camera` spawn (`camera_spawn`); else framing
+    /// the scene's bounds.
     pub fn for_pack(manifest: &pack::Manifest, min: Vec3, max: Vec3) -> Camera {
-        let Some(spawn) = manifest.spawns.iter().find(|s| s.kind == "player") else {
-            return Camera::framing(min, max);
-        };
-        let rotation = glam::Quat::from_array(spawn.rotation).normalize();
-        let forward = rotation * Vec3::NEG_Z;
-        Camera {
-            position: Vec3::from(spawn.position) + Vec3::Y * EYE_HEIGHT_M,
-            yaw: (-forward.x).atan2(-forward.z),
-            pitch: forward.y.clamp(-1.0, 1.0).asin(),
-            fov_y: 70f32.to_radians(),
-            near: 0.05,
+        let first = |kind: &str| manifest.spawns.iter().find(|s| s.kind == kind);
+        if let Some(player) = first("player") {
+            return Camera::looking_along(Vec3::from(player.position) + Vec3::Y * EYE_HEIGHT_M, player.rotation, SPAWN_FOV_Y, SPAWN_NEAR_M);
         }
+        match first("camera") {
+            Some(camera) => Camera::camera_spawn(camera),
+            None => Camera::framing(min, max),
+        }
+    }
+
+    /// A `camera` spawn (the cooker writes one from a glTF scene's first camera): exactly at its
+    /// position, looking along its rotation's -Z, with its vertical field of view `yfov`
+    /// (radians) and near plane `znear` (metres) where it gives usable ones. Its far plane does
+    /// not matter (the projection's is infinite), nor does its roll (the camera keeps +Y up).
+    fn camera_spawn(spawn: &pack::Spawn) -> Camera {
+        let param = |key: &str| spawn.params.get(key).and_then(|v| v.as_f64()).map(|v| v as f32);
+        let fov_y = param("yfov").filter(|f| *f > 0.0 && *f < std::f32::consts::PI).unwrap_or(SPAWN_FOV_Y);
+        let near = param("znear").filter(|n| *n > 0.0 && n.is_finite()).unwrap_or(SPAWN_NEAR_M);
+        Camera::looking_along(Vec3::from(spawn.position), spawn.rotation, fov_y, near)
+    }
+
+    /// A camera at `position` looking along the quaternion (xyzw) `rotation` applied to -Z.
+    fn looking_along(position: Vec3, rotation: [f32; 4], fov_y: f32, near: f32) -> Camera {
+        let forward = glam::Quat::from_array(rotation).normalize() * Vec3::NEG_Z;
+        Camera { position, yaw: (-forward.x).atan2(-forward.z), pitch: forward.y.clamp(-1.0, 1.0).asin(), fov_y, near }
     }
 
     /// Walking: `local` (right, -, forward) metres as a move in the ground plane, whatever the
@@ -168,6 +185,28 @@ mod tests {
         let c = Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE);
         assert!((c.position - Vec3::new(1.0, 1.7, 2.0)).length() < 1e-6);
         assert!((c.forward() - Vec3::NEG_X).length() < 1e-5, "{}", c.forward());
+    }
+
+    #[test]
+    fn a_camera_spawn_places_the_camera_exactly_with_its_own_lens_unless_a_player_spawn_exists() {
+        let mut m = pack::Manifest::default();
+        // Rotated -90 degrees about +Y, then tilted 30 degrees down about its own x: -Z turns
+        // into +X, looking down.
+        let q = glam::Quat::from_rotation_y(-std::f32::consts::FRAC_PI_2) * glam::Quat::from_rotation_x(-30f32.to_radians());
+        let params = serde_json::json!({ "yfov": 0.4, "znear": 0.25 });
+        m.spawns.push(pack::Spawn { name: "Camera".into(), kind: "camera".into(), position: [1.0, 2.0, 3.0], rotation: q.to_array(), params });
+        let c = Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE);
+        assert_eq!(c.position, Vec3::new(1.0, 2.0, 3.0), "no eye height above a camera spawn");
+        let down = -30f32.to_radians();
+        assert!((c.forward() - Vec3::new(down.cos(), down.sin(), 0.0)).length() < 1e-5, "{}", c.forward());
+        assert_eq!((c.fov_y, c.near), (0.4, 0.25));
+        // Unusable lens parameters fall back to the spawn defaults.
+        m.spawns[0].params = serde_json::json!({ "yfov": 4.0, "znear": -1.0 });
+        let c = Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE);
+        assert_eq!((c.fov_y, c.near), (SPAWN_FOV_Y, SPAWN_NEAR_M));
+        // The player's spawn comes first, wherever it is listed.
+        m.spawns.push(pack::Spawn { name: "p".into(), kind: "player".into(), position: [5.0, 0.0, 0.0], rotation: [0.0, 0.0, 0.0, 1.0], params: Default::default() });
+        assert_eq!(Camera::for_pack(&m, Vec3::ZERO, Vec3::ONE).position, Vec3::new(5.0, EYE_HEIGHT_M, 0.0));
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod lod_select;
 pub mod overlay;
 pub mod particles_pass;
 pub mod renderer;
+pub mod samplers;
 pub mod scene;
 pub mod shaders;
 pub mod shadow;

@@ -4,7 +4,7 @@
 
 use crate::animated::AnimatedScene;
 use crate::camera::Camera;
-use crate::batches::{instance_attributes, Batch, Batcher, INSTANCE_STRIDE};
+use crate::batches::{instance_attributes, Batch, BatchMode, Batcher, INSTANCE_STRIDE};
 use crate::gpu::{barrier, full_range, opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers, Transition};
 use crate::boids_draw::BoidsDraw;
 use crate::particles_pass::ParticlePass;
@@ -38,12 +38,14 @@ pub struct FrameUniforms {
     pub shadow: Vec4,
 }
 
-/// Mirrors the push-constant block of shaders/mesh_shading.glsl: what a submesh's material
-/// gives its fragments (the transforms are per instance, in the instance stream).
+/// Mirrors the push-constant block of shaders/mesh_draw.glsl: what a submesh gives its
+/// vertices and fragments (the transforms and lightmap regions are per instance, in the
+/// instance stream).
 #[repr(C)]
 #[derive(Debug, Clone, Copy)]
 struct DrawPush {
-    /// x: alpha-test cutoff (or -1); y: material index (its emission).
+    /// x: alpha-test cutoff (or -1); y: material index (its constants); z: the submesh's
+    /// lightmap block (added to the instance's page).
     material: Vec4,
     base_color: Vec4,
 }
@@ -135,8 +137,8 @@ pub struct Renderer {
     pub count_fragments: bool,
     /// Depth testing in the shading pass without a pre-pass (off only to count raw fragments).
     pub depth_test: bool,
-    /// Static geometry reads its baked lightmap (on by default); off, it is lit like dynamic
-    /// geometry, by the probes and the sun, to compare the two.
+    /// Instances with a lightmap region read their baked lightmap (on by default); off, they are
+    /// lit like dynamic geometry, by the probes and the sun, to compare the two.
     pub lightmaps: bool,
     counters: Vec<Buffer>,
     /// One uniform buffer and descriptor set per frame in flight.
@@ -196,9 +198,13 @@ impl Shading {
 struct Variant {
     /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
     count_fragments: bool,
-    /// LIGHTMAPPED: lit by the draw's lightmap page, not by the probes and the sun.
+    /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
     lightmapped: bool,
 }
+
+/// The stages that read the mesh passes' push constants and material constants: the vertex
+/// shader transforms the texture coordinates and picks the lightmap layer.
+const MESH_STAGES: vk::ShaderStageFlags = vk::ShaderStageFlags::from_raw(vk::ShaderStageFlags::VERTEX.as_raw() | vk::ShaderStageFlags::FRAGMENT.as_raw());
 
 /// Timestamps written per frame slot: 0..=5 around the passes, 6 and 7 around skinning.
 const TIMESTAMPS_PER_FRAME: u32 = 8;
@@ -257,27 +263,30 @@ impl Renderer {
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::FRAGMENT),
         ];
-        let material_binding = [vk::DescriptorSetLayoutBinding::default()
-            .binding(0)
-            .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
-            .descriptor_count(1)
-            .stage_flags(vk::ShaderStageFlags::FRAGMENT)];
+        // Set 1: the material's base colour (0) and emissive (1) textures.
+        let material_binding = [0, 1].map(|binding| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(binding)
+                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT)
+        });
         let frame_layout = unsafe {
             d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&frame_binding), None)?
         };
         let material_layout = unsafe {
             d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&material_binding), None)?
         };
+        // Set 2: the lightmap array, the probes, and the material constants (their UV
+        // transforms are applied per vertex).
         let scene_bindings = [
             vk::DescriptorSetLayoutBinding::default().binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
             vk::DescriptorSetLayoutBinding::default().binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
-            vk::DescriptorSetLayoutBinding::default().binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            vk::DescriptorSetLayoutBinding::default().binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(MESH_STAGES),
         ];
         let scene_layout = unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&scene_bindings), None)? };
         let set_layouts = [frame_layout, material_layout, scene_layout];
-        let push = [vk::PushConstantRange::default()
-            .stage_flags(vk::ShaderStageFlags::FRAGMENT)
-            .size(std::mem::size_of::<DrawPush>() as u32)];
+        let push = [vk::PushConstantRange::default().stage_flags(MESH_STAGES).size(std::mem::size_of::<DrawPush>() as u32)];
         let pipeline_layout = unsafe {
             d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?
         };
@@ -437,7 +446,7 @@ impl Renderer {
         // The shadow map serves dynamic objects lit by a physical sun: skip it when none is in
         // view (and lavapipe 22.3 crashes on a depth-only rendering without draws).
         let sun = scene.baked.filter(|b| b.sun_lux.max_element() > 0.0);
-        let dynamic_in_view = self.visibility.draws.iter().any(|dr| !scene.meshes[scene.instances[dr.instance as usize].mesh as usize].is_static);
+        let dynamic_in_view = self.visibility.draws.iter().any(|dr| !scene.instances[dr.instance as usize].is_static);
         let draw_shadow = match sun {
             Some(b) if dynamic_in_view && !scene.instances.is_empty() => {
                 self.shadow.prepare(scene, b.sun_dir);
@@ -452,7 +461,9 @@ impl Renderer {
         let mut batcher = std::mem::take(&mut self.batcher);
         let mut view_batches = std::mem::take(&mut self.view_batches);
         batcher.clear();
-        batcher.batch(scene, self.animation.as_ref(), slot, &self.visibility.draws, self.instancing, &mut view_batches);
+        // Lightmaps are read when there are baked pages and they are switched on.
+        let mode = BatchMode { instancing: self.instancing, lightmaps: self.lightmaps && scene.baked.is_some() };
+        batcher.batch(scene, self.animation.as_ref(), slot, &self.visibility.draws, mode, &mut view_batches);
         let stream_capacity = (self.shadow_casters as usize + self.visibility.draws.len()) * INSTANCE_STRIDE as usize;
         let instances = self.instance_buffers.reserve(gpu, slot, stream_capacity)?.buffer;
         let mut draw_calls = 0;
@@ -514,8 +525,10 @@ impl Renderer {
         if draw_shadow {
             let p = &self.pipelines;
             let mut batches = Vec::new();
+            // Depth only: lightmapped or not, the casters of one mesh share a call.
+            let casters_mode = BatchMode { lightmaps: false, ..mode };
             self.shadow.record(gpu, cb, |view, load_op, casters| {
-                batcher.batch(scene, self.animation.as_ref(), slot, casters, self.instancing, &mut batches);
+                batcher.batch(scene, self.animation.as_ref(), slot, casters, casters_mode, &mut batches);
                 let depth_attachment = vk::RenderingAttachmentInfo::default()
                     .image_view(view)
                     .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
@@ -635,6 +648,7 @@ impl Renderer {
             d.cmd_set_scissor(cb, 0, &[rendering.render_area]);
             d.cmd_set_depth_test_enable(cb, setup.depth_test);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 2, &[scene.scene_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, setup.instances], &[0, 0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
             let mut bound = vk::Pipeline::null();
@@ -652,22 +666,22 @@ impl Renderer {
                 d.cmd_set_front_face(cb, batch.front);
                 for sm in &lod.submeshes {
                     let mat = &scene.materials[sm.material as usize];
-                    // Static geometry reads its lightmap page; the rest the probes and the sun.
-                    let page = sm.lightmap_page.filter(|_| mesh.is_static && self.lightmaps).and_then(|p| scene.lightmap_sets.get(p as usize));
-                    let pipeline = pipeline_for(mat, page.is_some());
+                    // Instances with a lightmap region read it where the submesh has a block;
+                    // the rest the probes and the sun.
+                    let pipeline = pipeline_for(mat, batch.lightmapped && sm.lightmap_block.is_some());
                     if pipeline != bound {
                         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
                         bound = pipeline;
                     }
                     let push = DrawPush {
-                        material: Vec4::new(mat.alpha_cutoff, sm.material as f32, 0.0, 0.0),
+                        material: Vec4::new(mat.alpha_cutoff, sm.material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
                         base_color: Vec4::from(mat.base_color),
                     };
                     let push_bytes = std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<DrawPush>());
-                    d.cmd_push_constants(cb, self.pipeline_layout, vk::ShaderStageFlags::FRAGMENT, 0, push_bytes);
+                    d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, push_bytes);
                     let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
                     d.cmd_set_cull_mode(cb, cull);
-                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set, *page.unwrap_or(&scene.unlit_set)], &[]);
+                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
                     d.cmd_draw_indexed(cb, sm.index_count, batch.count, lod.first_index + sm.first_index, batch.base_vertex, batch.first_instance);
                     calls += 1;
                 }
@@ -786,7 +800,7 @@ fn create_mesh_pipeline(
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared (tangent arrives with normal mapping).
-    const MESH_SHADER_INPUTS: [u32; 5] = [0, 1, 3, 4, 5];
+    const MESH_SHADER_INPUTS: [u32; 6] = [0, 1, 3, 4, 5, 13];
     // Binding 1: the instance stream (batches.rs).
     let bindings = [
         vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX },

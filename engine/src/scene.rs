@@ -1,12 +1,14 @@
 //! A cooked pack on the GPU: one vertex and one index buffer for all meshes, textures, material
-//! descriptor sets, and instances (mesh + world transform) from the node hierarchy.
+//! descriptor sets, the baked lightmap pages as one array texture, and instances (mesh, world
+//! transform, lightmap region) from the node hierarchy.
 
 use crate::cull::{world_sphere, Spheres};
 use crate::gpu::{Buffer, Gpu, Image};
+use crate::samplers::SamplerCache;
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::{Mat4, Vec3};
-use pack::{Pack, TextureFormat};
+use pack::{Pack, TextureFormat, TextureTransform};
 
 /// Where one level of detail of a mesh lives inside the shared buffers.
 #[derive(Debug, Clone)]
@@ -26,8 +28,6 @@ pub struct GpuMesh {
     pub lods: Vec<GpuLod>,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
-    /// Static level geometry: lit by its lightmap rather than the probes and the sun.
-    pub is_static: bool,
     /// `lods[i].error` for every LOD (what LOD selection reads, without gathering it per draw).
     pub errors: Vec<f32>,
 }
@@ -35,8 +35,6 @@ pub struct GpuMesh {
 #[derive(Debug, Clone, Copy)]
 pub struct GpuMaterial {
     pub base_color: [f32; 4],
-    /// Emitted radiance (nits in a baked level).
-    pub emissive: [f32; 3],
     /// Alpha-test threshold, or a negative value for "no alpha test".
     pub alpha_cutoff: f32,
     pub double_sided: bool,
@@ -50,6 +48,12 @@ pub struct Instance {
     pub world: Mat4,
     /// Largest axis scale of `world` (object-space errors and radii to world metres).
     pub scale: f32,
+    /// A static placement (`pack::Node::is_static`): it never moves, so its shadow is cached
+    /// and the sun's shadow map is not drawn for it alone.
+    pub is_static: bool,
+    /// Where its lightmap lies in the atlas (`pack::Node::lightmap`): with baked pages it is lit
+    /// by them rather than by the probes and the sun.
+    pub lightmap: Option<pack::LightmapRegion>,
 }
 
 /// Baked light the renderer reads (pack lightmaps and probes), in physical units.
@@ -74,17 +78,19 @@ pub struct GpuScene {
     pub spheres: Spheres,
     pub vertex_buffer: Buffer,
     pub index_buffer: Buffer,
-    textures: Vec<Image>,
+    /// The pack's textures by index; None for the baked lightmap pages, which live in `lightmaps`.
+    textures: Vec<Option<Image>>,
     white: Image,
-    black: Image,
-    samplers: [vk::Sampler; 3],
+    /// Every baked lightmap page as one layer of a 2D array (pages have one size), so instances
+    /// on different pages still draw in one instanced call; one black layer without a bake.
+    lightmaps: Image,
+    samplers: SamplerCache,
     pool: vk::DescriptorPool,
-    /// Set 2 per lightmap page, and one for meshes without a lightmap (a black page); each also
-    /// holds the probe grid and the materials' emission.
-    pub lightmap_sets: Vec<vk::DescriptorSet>,
-    pub unlit_set: vk::DescriptorSet,
+    /// Set 2, bound once per pass: the lightmap array, the probe grid and every material's
+    /// constants.
+    pub scene_set: vk::DescriptorSet,
     probes: Buffer,
-    emission: Buffer,
+    material_constants: Buffer,
     /// Present when the pack has baked lightmaps: the renderer then shades in physical units.
     pub baked: Option<BakedLighting>,
 }
@@ -92,10 +98,28 @@ pub struct GpuScene {
 /// The descriptor set layouts a scene's sets are made for (the renderer's).
 #[derive(Debug, Clone, Copy)]
 pub struct SceneLayouts {
-    /// Set 1: the base colour texture.
+    /// Set 1: the base colour and emissive textures.
     pub material: vk::DescriptorSetLayout,
-    /// Set 2: lightmap page, probe grid, material emission.
+    /// Set 2: lightmap array, probe grid, material constants.
     pub scene: vk::DescriptorSetLayout,
+}
+
+/// What the mesh shaders read per material (set 2 binding 2, std430; `MaterialConstants` in
+/// shaders/mesh_draw.glsl): the emission and the UV transforms of the slots they sample.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+struct MaterialConstants {
+    /// rgb: emitted radiance factor (multiplies the emissive texture).
+    emission: [f32; 4],
+    base_color_uv: [[f32; 4]; 2],
+    emissive_uv: [[f32; 4]; 2],
+}
+
+/// A slot's transform as two rows `(a, b, c, tex_coord)`, `(d, e, f, 0)`: `uv' = (a u + b v + c,
+/// d u + e v + f)` of the vertex's uv0 (tex_coord 0) or texcoord1 (1).
+fn uv_rows(t: &TextureTransform) -> [[f32; 4]; 2] {
+    let [r0, r1] = t.matrix();
+    [[r0[0], r0[1], r0[2], t.tex_coord as f32], [r1[0], r1[1], r1[2], 0.0]]
 }
 
 fn vk_format(f: TextureFormat) -> vk::Format {
@@ -158,35 +182,6 @@ pub fn transform_bounds(m: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
-/// Trilinear, repeating (clamped for lightmap pages); anisotropic (up to 16x) when asked and the
-/// device offers it.
-/// The anisotropy of mipmapped textures' sampler: up to 16x where the device offers it, none on
-/// a CPU device. Lavapipe's (Mesa 22.3) anisotropic sampling can spin for minutes on a single
-/// frame: the validation soak stalled at frame 909 of the demo's flight (64x36, 16x), a frame
-/// that renders in 0.1 s without it. There it also costs 10-20% of the shading pass.
-pub fn max_anisotropy(gpu: &Gpu) -> Option<f32> {
-    if gpu.caps.device_type == vk::PhysicalDeviceType::CPU {
-        return None;
-    }
-    gpu.caps.sampler_anisotropy.map(|max| max.min(16.0))
-}
-
-fn create_sampler(gpu: &Gpu, anisotropic: bool, clamp: bool) -> Result<vk::Sampler> {
-    let mode = if clamp { vk::SamplerAddressMode::CLAMP_TO_EDGE } else { vk::SamplerAddressMode::REPEAT };
-    let mut info = vk::SamplerCreateInfo::default()
-        .mag_filter(vk::Filter::LINEAR)
-        .min_filter(vk::Filter::LINEAR)
-        .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
-        .address_mode_u(mode)
-        .address_mode_v(mode)
-        .address_mode_w(mode)
-        .max_lod(vk::LOD_CLAMP_NONE);
-    if let (true, Some(max)) = (anisotropic, max_anisotropy(gpu)) {
-        info = info.anisotropy_enable(true).max_anisotropy(max);
-    }
-    Ok(unsafe { gpu.device.create_sampler(&info, None)? })
-}
-
 impl GpuScene {
     pub fn upload(gpu: &Gpu, pack: &Pack, layouts: SceneLayouts) -> Result<GpuScene> {
         let material_layout = layouts.material;
@@ -213,15 +208,20 @@ impl GpuScene {
                 lods,
                 bounds_min: Vec3::from(mesh.bounds_min),
                 bounds_max: Vec3::from(mesh.bounds_max),
-                is_static: mesh.is_static,
                 errors: mesh.lods.iter().map(|l| l.error).collect(),
             });
         }
         let vertex_buffer = Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
         let index_buffer = Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?;
 
+        // The lightmap pages go into one array texture below, not into images of their own.
+        let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
         let mut textures = Vec::with_capacity(m.textures.len());
-        for t in &m.textures {
+        for (i, t) in m.textures.iter().enumerate() {
+            if pages.contains(&(i as u32)) {
+                textures.push(None);
+                continue;
+            }
             let mut format = vk_format(t.format);
             let mut mips: Vec<std::borrow::Cow<[u8]>> = t.mips.iter().map(|r| pack.bytes(*r).into()).collect();
             if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, format) {
@@ -230,28 +230,32 @@ impl GpuScene {
             }
             let mips: Vec<&[u8]> = mips.iter().map(|m| m.as_ref()).collect();
             let extent = vk::Extent2D { width: t.width, height: t.height };
-            textures.push(
+            textures.push(Some(
                 Image::sampled_with_mips(gpu, &t.name, format, extent, &mips)
                     .with_context(|| format!("uploading texture '{}'", t.name))?,
-            );
+            ));
         }
-        // Materials without a base colour texture sample this instead: no shader variants.
+        // Empty texture slots sample this instead: no shader variants.
         let white = Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?;
+        let lightmaps = match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
+            Some(l) => {
+                let layers: Vec<&[u8]> = pages.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
+                let [width, height] = l.pages[0];
+                Image::sampled_array(gpu, "lightmaps", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width, height }, &layers)
+                    .with_context(|| format!("uploading {} lightmap pages of {width}x{height}", layers.len()))?
+            }
+            None => Image::sampled_array(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
+        };
+        let mut samplers = SamplerCache::default();
 
-        let black = Image::sampled_with_mips(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?;
-        let sampler = create_sampler(gpu, false, false)?;
-        let sampler_aniso = create_sampler(gpu, true, false)?;
-        let sampler_clamp = create_sampler(gpu, false, true)?;
-
-        let pages = m.lightmap.as_ref().map_or(&[][..], |l| &l.textures[..]);
-        let set_count = (m.materials.len() + pages.len() + 1) as u32;
+        let material_count = m.materials.len() as u32;
         let pool_sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: set_count },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 * set_count },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: 2 * material_count + 1 },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 },
         ];
         let pool = unsafe {
             gpu.device.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default().max_sets(set_count).pool_sizes(&pool_sizes),
+                &vk::DescriptorPoolCreateInfo::default().max_sets(material_count + 1).pool_sizes(&pool_sizes),
                 None,
             )?
         };
@@ -261,23 +265,19 @@ impl GpuScene {
             let set = unsafe {
                 gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0]
             };
-            let image = match mat.base_color_texture {
-                Some(t) => &textures[t as usize],
-                None => &white,
+            // Each slot's texture with its own sampler state; white for an empty slot.
+            let mut slot = |texture: Option<u32>| -> Result<[vk::DescriptorImageInfo; 1]> {
+                let (image, state) = texture
+                    .and_then(|t| Some((textures[t as usize].as_ref()?, m.textures[t as usize].sampler)))
+                    .unwrap_or((&white, pack::Sampler::default()));
+                let sampler = samplers.for_texture(gpu, state, image.mip_levels)?;
+                Ok([vk::DescriptorImageInfo { sampler, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }])
             };
-            // Anisotropic filtering only pays with a mip chain to filter: without one it makes
-            // lavapipe take ~18x longer per frame (257 ms vs 14 ms on the temple level).
-            let sampler = if image.mip_levels > 1 { sampler_aniso } else { sampler };
-            let image_info = [vk::DescriptorImageInfo { sampler, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
-            let write = vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
-                .image_info(&image_info);
-            unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
+            let (base_color, emissive) = (slot(mat.base_color_texture)?, slot(mat.emissive_texture)?);
+            let write = |binding: u32, info| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(binding).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(info);
+            unsafe { gpu.device.update_descriptor_sets(&[write(0, &base_color), write(1, &emissive)], &[]) };
             materials.push(GpuMaterial {
                 base_color: mat.base_color,
-                emissive: mat.emissive,
                 alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
                 double_sided: mat.double_sided,
                 descriptor_set: set,
@@ -289,7 +289,7 @@ impl GpuScene {
             .nodes
             .iter()
             .zip(&world)
-            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w, scale: max_scale(*w) }))
+            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w, scale: max_scale(*w), is_static: n.is_static, lightmap: n.lightmap }))
             .collect();
         let mut spheres = Spheres::default();
         for i in &instances {
@@ -298,27 +298,39 @@ impl GpuScene {
             spheres.push(c, r);
         }
 
-        // Set 2: probes and emission are shared by every page's set.
+        // Set 2: one for the whole scene.
         let probe_bytes = probe_buffer_bytes(pack);
         let probes = Buffer::with_data(gpu, "probes", &probe_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
-        let emission_bytes: Vec<u8> = materials.iter().flat_map(|mt| [mt.emissive[0], mt.emissive[1], mt.emissive[2], 0.0]).chain([0.0; 4]).flat_map(f32::to_le_bytes).collect();
-        let emission = Buffer::with_data(gpu, "material emission", &emission_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
-        let scene_set = |image: &Image| -> Result<vk::DescriptorSet> {
-            let layouts = [layouts.scene];
-            let set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
-            let image_info = [vk::DescriptorImageInfo { sampler: sampler_clamp, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
-            let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
-            let emission_info = [vk::DescriptorBufferInfo { buffer: emission.buffer, offset: 0, range: vk::WHOLE_SIZE }];
-            let writes = [
-                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&image_info),
-                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&probe_info),
-                vk::WriteDescriptorSet::default().dst_set(set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&emission_info),
-            ];
-            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
-            Ok(set)
-        };
-        let lightmap_sets = pages.iter().map(|&t| scene_set(&textures[t as usize])).collect::<Result<Vec<_>>>()?;
-        let unlit_set = scene_set(&black)?;
+        let mut constants: Vec<MaterialConstants> = m
+            .materials
+            .iter()
+            .map(|mt| MaterialConstants {
+                emission: [mt.emissive[0], mt.emissive[1], mt.emissive[2], 0.0],
+                base_color_uv: uv_rows(&mt.base_color_uv),
+                emissive_uv: uv_rows(&mt.emissive_uv),
+            })
+            .collect();
+        if constants.is_empty() {
+            // A buffer cannot be empty.
+            constants.push(MaterialConstants::default());
+        }
+        // SAFETY: MaterialConstants is repr(C) plain floats.
+        let constant_bytes = unsafe { std::slice::from_raw_parts(constants.as_ptr() as *const u8, std::mem::size_of_val(constants.as_slice())) };
+        let material_constants = Buffer::with_data(gpu, "material constants", constant_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
+        // Lightmaps are read between their texels, never past the page's edge.
+        let clamped = pack::Sampler { wrap_s: pack::Wrap::Clamp, wrap_t: pack::Wrap::Clamp, mipmap_filter: None, ..Default::default() };
+        let lightmap_sampler = samplers.get(gpu, clamped, false)?;
+        let scene_layout = [layouts.scene];
+        let scene_set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&scene_layout))?[0] };
+        let image_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmaps.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+        let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+        let constants_info = [vk::DescriptorBufferInfo { buffer: material_constants.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+        let writes = [
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&image_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&probe_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&constants_info),
+        ];
+        unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
 
         static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -332,13 +344,12 @@ impl GpuScene {
             index_buffer,
             textures,
             white,
-            black,
-            samplers: [sampler, sampler_aniso, sampler_clamp],
+            lightmaps,
+            samplers,
             pool,
-            lightmap_sets,
-            unlit_set,
+            scene_set,
             probes,
-            emission,
+            material_constants,
             baked,
         })
     }
@@ -366,19 +377,15 @@ impl GpuScene {
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
-        unsafe {
-            gpu.device.destroy_descriptor_pool(self.pool, None);
-            for s in self.samplers {
-                gpu.device.destroy_sampler(s, None);
-            }
-        }
-        for t in &mut self.textures {
+        unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
+        self.samplers.destroy(gpu);
+        for t in self.textures.iter_mut().flatten() {
             t.destroy(gpu);
         }
         self.white.destroy(gpu);
-        self.black.destroy(gpu);
+        self.lightmaps.destroy(gpu);
         self.probes.destroy(gpu);
-        self.emission.destroy(gpu);
+        self.material_constants.destroy(gpu);
         self.vertex_buffer.destroy(gpu);
         self.index_buffer.destroy(gpu);
     }

@@ -82,7 +82,7 @@ pub struct SunShadow {
     pub texel_m: f32,
     /// This frame's casters: every instance at its shadow LOD.
     pub casters: Vec<Draw>,
-    /// The same split: instances of static meshes, and the rest.
+    /// The same split: static instances (`Instance::is_static`), and the rest.
     pub static_casters: Vec<Draw>,
     pub dynamic_casters: Vec<Draw>,
     /// The static casters' depth alone, copied into `image` every frame.
@@ -216,7 +216,7 @@ impl SunShadow {
                 lod: shadow_lod(&mesh.errors, inst.scale, self.texel_m) as u8,
             };
             self.casters.push(draw);
-            if mesh.is_static {
+            if inst.is_static {
                 (draw.instance, draw.lod, inst.mesh, inst.world.to_cols_array().map(f32::to_bits)).hash(&mut key);
                 self.static_casters.push(draw);
             } else {

@@ -1,7 +1,7 @@
 //! Walking on the level (the demo's walk mode): the feet stay on the highest floor under them,
 //! climbing ledges no higher than a step and dropping down any height, while walls, pillars and
 //! ledges too high to climb stop the body, which slides along them. Collision is against the
-//! pack's static triangles (LOD 0, world space), bucketed in a grid over x and z so that a move
+//! pack's static instances' triangles (LOD 0, world space), bucketed in a grid over x and z so that a move
 //! looks only at the triangles near the player.
 
 use glam::{Mat4, Vec2, Vec3, Vec3Swizzles};
@@ -32,13 +32,13 @@ pub struct WalkMesh {
 }
 
 impl WalkMesh {
-    /// The static meshes' LOD 0 triangles of `pack`, placed by their nodes.
+    /// The LOD 0 triangles of `pack`'s static instances (`Node::is_static`), placed by their nodes.
     pub fn from_pack(pack: &pack::Pack) -> WalkMesh {
         let m = &pack.manifest;
         let world = crate::scene::world_transforms(&m.nodes);
         let mut triangles = Vec::new();
         for (node, w) in m.nodes.iter().zip(&world) {
-            let Some(mesh) = node.mesh.and_then(|i| m.meshes.get(i as usize)).filter(|mesh| mesh.is_static) else { continue };
+            let Some(mesh) = node.mesh.filter(|_| node.is_static).and_then(|i| m.meshes.get(i as usize)) else { continue };
             let Some(lod) = mesh.lods.first() else { continue };
             triangles.extend(lod_triangles(pack.bytes(lod.vertices), pack.bytes(lod.indices), *w));
         }
@@ -307,9 +307,11 @@ mod tests {
             lods: vec![pack::MeshLod { vertices, vertex_count: 6, indices, index_count: 6, submeshes: vec![], error: 0.0 }],
             bounds_min: [-2.0, 0.0, -2.0],
             bounds_max: [2.0, 0.0, 2.0],
-            is_static: true,
         });
-        b.manifest.nodes.push(pack::Node { name: "floor".into(), parent: None, local: Mat4::from_translation(Vec3::Y).to_cols_array(), mesh: Some(0) });
+        let floor_node = |name: &str, y: f32, is_static| pack::Node { name: name.into(), local: Mat4::from_translation(Vec3::Y * y).to_cols_array(), mesh: Some(0), is_static, ..Default::default() };
+        b.manifest.nodes.push(floor_node("floor", 1.0, true));
+        // The same mesh placed again as a dynamic instance (a prop that may move): not walked on.
+        b.manifest.nodes.push(floor_node("raft", 3.0, false));
         let m = WalkMesh::from_pack(&b.finish());
         assert_eq!(m.floor(Vec2::ZERO, 5.0), Some(1.0));
         assert_eq!(m.floor(Vec2::ZERO, 0.5), None, "a floor above `top` is not under the feet");

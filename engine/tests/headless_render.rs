@@ -5,12 +5,14 @@ use engine::camera::Camera;
 use engine::gpu::Gpu;
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::overlay::{headless_input, FrameStats, Overlay};
-use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::renderer::{Lighting, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
-use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Texture, TextureFormat, Vertex};
+use pack::{LightmapRegion, Material, Node, Pack, PackBuilder, TextureFormat, Vertex};
 
 mod common;
+use common::frames::{assert_bytes_near, auto_exposure, auto_exposure_of, looking_down_neg_z, pixel, render, screen_pixel, srgb_decode, srgb_encode, tone_mapped_bytes, Rig};
+use common::packs::{add_lightmap_page, add_lightmap_pages, node, push_mesh, push_uniform_probes, quad_vertices, static_node, texture};
 use common::{assert_clean, gpu};
 
 /// An axis-aligned unit cube centred on the origin with per-face normals (so lighting tells the
@@ -51,90 +53,21 @@ fn cube_pack(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> P
     cube_builder(placements, colors, material).finish()
 }
 
-/// Append a one-LOD mesh of `verts` and `idx` (one submesh, material 0) with bounds from its
-/// vertices; returns its mesh index.
-fn push_mesh(b: &mut PackBuilder, name: &str, verts: &[Vertex], idx: &[u32], lightmap_page: Option<u32>, is_static: bool) -> u32 {
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(verts));
-    let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
-    let indices = b.push_bytes(&index_bytes);
-    let (lo, hi) = verts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| (lo.min(Vec3::from(v.position)), hi.max(Vec3::from(v.position))));
-    let count = idx.len() as u32;
-    b.manifest.meshes.push(Mesh {
-        name: name.into(),
-        lods: vec![MeshLod { vertices, vertex_count: verts.len() as u32, indices, index_count: count, submeshes: vec![Submesh { first_index: 0, index_count: count, material: 0, lightmap_page }], error: 0.0 }],
-        bounds_min: lo.to_array(),
-        bounds_max: hi.to_array(),
-        is_static,
-    });
-    b.manifest.meshes.len() as u32 - 1
-}
-
 /// `cube_pack`, still open for more.
 fn cube_builder(placements: &[Mat4], colors: [[u8; 4]; 4], material: Material) -> PackBuilder {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = cube_vertices();
-    push_mesh(&mut b, "cube", &verts, &idx, None, false);
+    push_mesh(&mut b, "cube", &verts, &idx, None);
     let texels: Vec<u8> = colors.iter().flatten().copied().collect();
-    let mip0 = b.push_bytes(&texels);
-    b.manifest.textures.push(Texture { name: "checker".into(), width: 2, height: 2, format: TextureFormat::Rgba8Srgb, mips: vec![mip0] });
-    b.manifest.materials.push(Material { base_color_texture: Some(0), ..material });
+    let checker = texture(&mut b, "checker", TextureFormat::Rgba8Srgb, [2, 2], &[&texels]);
+    b.manifest.materials.push(Material { base_color_texture: Some(checker), ..material });
     for (i, m) in placements.iter().enumerate() {
-        b.manifest.nodes.push(Node { name: format!("cube{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
+        b.manifest.nodes.push(node(&format!("cube{i}"), *m, 0));
     }
     b
 }
 
 const WHITE4: [[u8; 4]; 4] = [[255; 4]; 4];
-
-/// A headless target, a renderer and an uploaded pack: what the renderer tests draw with.
-struct Rig {
-    target: Offscreen,
-    renderer: Renderer,
-    scene: GpuScene,
-}
-
-impl Rig {
-    fn new(gpu: &Gpu, pack: &Pack, w: u32, h: u32) -> Rig {
-        let target = Offscreen::new(gpu, w, h).unwrap();
-        let renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1).unwrap();
-        let scene = GpuScene::upload(gpu, pack, renderer.layouts()).unwrap();
-        Rig { target, renderer, scene }
-    }
-
-    /// Draw another pack with the same target and renderer (and its state).
-    fn reload(&mut self, gpu: &Gpu, pack: &Pack) {
-        self.scene.destroy(gpu);
-        self.scene = GpuScene::upload(gpu, pack, self.renderer.layouts()).unwrap();
-    }
-
-    fn destroy(mut self, gpu: &Gpu) {
-        self.scene.destroy(gpu);
-        self.renderer.destroy(gpu);
-        self.target.destroy(gpu);
-    }
-}
-
-fn render(gpu: &Gpu, pack: &Pack, camera: &Camera, w: u32, h: u32) -> Vec<u8> {
-    let mut rig = Rig::new(gpu, pack, w, h);
-    rig.target.render(gpu, &mut rig.renderer, &rig.scene, camera, &Lighting::default(), true).unwrap();
-    let px = rig.target.pixels().to_vec();
-    rig.destroy(gpu);
-    px
-}
-
-fn pixel(px: &[u8], w: u32, x: u32, y: u32) -> [u8; 4] {
-    let i = ((y * w + x) * 4) as usize;
-    px[i..i + 4].try_into().unwrap()
-}
-
-fn srgb_encode(linear: f32) -> u8 {
-    let c = if linear <= 0.0031308 { linear * 12.92 } else { 1.055 * linear.powf(1.0 / 2.4) - 0.055 };
-    (c.clamp(0.0, 1.0) * 255.0).round() as u8
-}
-
-fn looking_down_neg_z(z: f32) -> Camera {
-    Camera { position: Vec3::new(0.0, 0.0, z), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 }
-}
 
 #[test]
 fn clear_colour_where_nothing_is_drawn() {
@@ -278,6 +211,41 @@ fn rendering_is_deterministic() {
 }
 
 #[test]
+fn a_camera_spawn_sets_the_view_position_field_of_view_and_near_plane() {
+    // A pack with a camera spawn (as the cooker writes a glTF scene's camera) 5 m out on +X,
+    // turned to look along -X at a unit cube, with the field of view that makes the cube's near
+    // face (4.5 m away, 1 m tall) half the frame's height: `Camera::for_pack` sees the face over
+    // exactly the middle 64 of 128 rows and columns. At eye height above the spawn the face
+    // would be out of view, with the default 70 degrees a fifth as tall; with the near plane
+    // past the face it is clipped and nothing is drawn.
+    let gpu = gpu();
+    let (w, h) = (128u32, 128u32);
+    let yfov = 2.0 * (1.0f32 / 4.5).atan();
+    let frame = |znear: f32| {
+        let mut pack = cube_pack(&[Mat4::IDENTITY], WHITE4, Material::default());
+        let rotation = glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2).to_array();
+        let params = serde_json::json!({ "yfov": yfov, "znear": znear });
+        pack.manifest.spawns.push(pack::Spawn { name: "Camera".into(), kind: "camera".into(), position: [5.0, 0.0, 0.0], rotation, params });
+        let mut rig = Rig::new(&gpu, &pack, w, h);
+        let (min, max) = rig.scene.bounds();
+        let cam = Camera::for_pack(&pack.manifest, min, max);
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+        let px = rig.target.pixels().to_vec();
+        rig.destroy(&gpu);
+        px
+    };
+    let px = frame(0.1);
+    let clear = pixel(&px, w, 0, 0);
+    let rows: Vec<u32> = (0..h).filter(|&y| pixel(&px, w, w / 2, y) != clear).collect();
+    let columns: Vec<u32> = (0..w).filter(|&x| pixel(&px, w, x, h / 2) != clear).collect();
+    assert_eq!((rows.first(), rows.len()), (Some(&32), 64), "rows {rows:?}");
+    assert_eq!((columns.first(), columns.len()), (Some(&32), 64), "columns {columns:?}");
+    let clipped = frame(4.6);
+    assert!(clipped.chunks_exact(4).all(|p| p == clear), "a near plane past the face must clip it");
+    assert_clean(&gpu);
+}
+
+#[test]
 fn renderer_culls_the_notes_known_scene_exactly() {
     // pipeline.md T3.1 through the renderer: 441 cubes whose bounding spheres have radius 0.5
     // (scale 1/sqrt 3) on the integer grid x, z in -10..10, a 90 degree camera at the origin
@@ -406,12 +374,12 @@ fn screen_triangles_pack(depths: &[f32]) -> Pack {
         .iter()
         .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], color: [255; 4], ..Default::default() })
         .collect();
-    push_mesh(&mut b, "triangle", &verts, &[0, 1, 2], None, false);
+    push_mesh(&mut b, "triangle", &verts, &[0, 1, 2], None);
     b.manifest.materials.push(Material::default());
     for (i, d) in depths.iter().enumerate() {
         // Centred on the view axis: the triangle's inscribed centre is at (1/3, 1/3).
         let m = Mat4::from_translation(Vec3::new(0.0, 0.0, -d)) * Mat4::from_scale(Vec3::splat(4.0 * d)) * Mat4::from_translation(Vec3::new(-1.0 / 3.0, -1.0 / 3.0, 0.0));
-        b.manifest.nodes.push(Node { name: format!("t{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
+        b.manifest.nodes.push(node(&format!("t{i}"), m, 0));
     }
     b.finish()
 }
@@ -479,6 +447,75 @@ fn baked_light_lightmaps_for_static_geometry_probes_for_dynamic() {
     assert_clean(&gpu);
 }
 
+/// Where `lightmap_regions_pack` puts its four quads along x (z = 0).
+const REGION_QUADS_X: [f32; 4] = [-1.8, -0.6, 0.6, 1.8];
+
+/// Four unit quads facing +Z, white, in a baked scene of three 4x4 lightmap pages (B in nits:
+/// page 0 is 400 on its left half and 50 on its right, page 1 is 25, page 2 is 200) and probes
+/// of B = 100 (no sun). At `REGION_QUADS_X`: two static instances of one mesh (its submesh in
+/// block 0) with regions of their own, the left half of page 0 and the whole of page 1; a
+/// dynamic instance of the same mesh, without a region; and a static instance of a second mesh
+/// whose submesh is in block 1, on page 1 (so it reads page 2). Returns the pack and every
+/// lightmap texel's B (for the exposure).
+fn lightmap_regions_pack() -> (Pack, Vec<f32>) {
+    let mut b = PackBuilder::new("generated", "test");
+    b.manifest.materials.push(Material::default());
+    let (verts, idx) = quad_vertices();
+    let panel = push_mesh(&mut b, "panel", &verts, &idx, Some(0));
+    let second = push_mesh(&mut b, "panel in block 1", &verts, &idx, Some(1));
+    let pages = [[[400.0, 400.0, 50.0, 50.0]; 4], [[25.0; 4]; 4], [[200.0; 4]; 4]];
+    add_lightmap_pages(&mut b, &pages);
+    push_uniform_probes(&mut b, 100.0, 0.0);
+    let at = |i: usize| Mat4::from_translation(Vec3::new(REGION_QUADS_X[i], 0.0, 0.0));
+    let left_half = Some(LightmapRegion { page: 0, scale: [0.5, 1.0], offset: [0.0, 0.0] });
+    b.manifest.nodes.push(Node { lightmap: left_half, ..static_node("left half of page 0", at(0), panel, 0) });
+    b.manifest.nodes.push(static_node("page 1", at(1), panel, 1));
+    b.manifest.nodes.push(node("dynamic", at(2), panel));
+    b.manifest.nodes.push(static_node("block 1 on page 1", at(3), second, 1));
+    (b.finish(), pages.iter().flatten().flatten().copied().collect())
+}
+
+#[test]
+fn static_instances_of_one_mesh_read_their_own_lightmap_regions_in_one_instanced_call() {
+    // Each quad's centre (uv1 = 0.5, 0.5) shows the B its instance's region and its submesh's
+    // block pick, exposed and tone-mapped: the left-half region maps u to 0.25, between two
+    // B = 400 texels (the page's own u = 0.5 would blend 400 with 50); the page-1 region reads
+    // page 1 (page 0 there is the 225 blend); the dynamic instance the probes; block 1 on page 1
+    // page 2. The two static instances of the first mesh share one instanced call per pass, the
+    // dynamic one (other pipeline) and the second mesh have one each: 3 calls per pass (pre-pass
+    // and shading; no sun, no shadow pass), 4 without instancing, the same image.
+    let gpu = gpu();
+    let (pack, texels) = lightmap_regions_pack();
+    let (w, h) = (96u32, 64u32);
+    let mut rig = Rig::new(&gpu, &pack, w, h);
+    let cam = looking_down_neg_z(3.0);
+    let exposure = auto_exposure_of(&texels);
+    let s = rig.renderer.tonemap.saturation;
+    let centres = |rig: &mut Rig| {
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+        let px: Vec<[u8; 4]> = REGION_QUADS_X.iter().map(|&x| screen_pixel(&cam, w, h, Vec3::new(x, 0.0, 0.0))).map(|(x, y)| pixel(rig.target.pixels(), w, x, y)).collect();
+        (px, rig.target.pixels().to_vec(), rig.renderer.draw_calls)
+    };
+    let (px, image, calls) = centres(&mut rig);
+    for (what, p, b) in [("left half of page 0", px[0], 400.0), ("page 1", px[1], 25.0), ("dynamic, probes", px[2], 100.0), ("block 1 on page 1", px[3], 200.0)] {
+        assert_bytes_near(what, p, tone_mapped_bytes([b; 3], exposure, s), 1);
+    }
+    assert_eq!((rig.renderer.visibility.draws.len(), calls), (4, 2 * 3));
+    rig.renderer.instancing = false;
+    let (_, one_each, calls) = centres(&mut rig);
+    assert_eq!(calls, 2 * 4);
+    assert!(one_each == image, "instancing changed the image");
+    // Lightmaps off: every instance is lit by the probes, and the first mesh's three share a call.
+    (rig.renderer.instancing, rig.renderer.lightmaps) = (true, false);
+    let (px, _, calls) = centres(&mut rig);
+    for p in px {
+        assert_bytes_near("lightmaps off", p, tone_mapped_bytes([100.0; 3], exposure, s), 1);
+    }
+    assert_eq!(calls, 2 * 2);
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
 /// The cube pack plus a static quad on the left (lightmap page 0, uniform B) and a 2x2x2 probe
 /// grid around the cube whose probes all hold B = `b` (DC only), sun visibility 0.
 fn quads_like_lightmapped(b: f32) -> Pack {
@@ -488,24 +525,12 @@ fn quads_like_lightmapped(b: f32) -> Pack {
         .iter()
         .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [(x + 1.0) * 0.5, (1.0 - y) * 0.5], color: [255; 4], ..Default::default() })
         .collect();
-    let floor = push_mesh(&mut bld, "floor", &verts, &[0, 1, 2, 0, 2, 3], Some(0), true);
+    let floor = push_mesh(&mut bld, "floor", &verts, &[0, 1, 2, 0, 2, 3], Some(0));
     let quad_at = Mat4::from_translation(Vec3::new(-1.3, 0.0, 0.0)) * Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
-    bld.manifest.nodes.push(Node { name: "floor".into(), parent: None, local: quad_at.to_cols_array(), mesh: Some(floor) });
-    let half = half_bits(b);
-    let texel: Vec<u8> = [half, half, half, half_bits(1.0)].iter().flat_map(|v| v.to_le_bytes()).collect();
-    let page = bld.push_bytes(&texel.repeat(16));
-    let t = bld.manifest.textures.len() as u32;
-    bld.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![page] });
-    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![t] });
+    bld.manifest.nodes.push(static_node("floor", quad_at, floor, 0));
+    add_lightmap_page(&mut bld, b);
     push_uniform_probes(&mut bld, b, 0.0);
     bld.finish()
-}
-
-/// f32 -> IEEE half (round to nearest; normal range only, which these tests stay in).
-fn half_bits(v: f32) -> u16 {
-    let b = v.to_bits();
-    let (sign, exp, man) = ((b >> 16) & 0x8000, ((b >> 23) & 0xff) as i32 - 127 + 15, b & 0x7f_ffff);
-    (sign | ((exp as u32) << 10) | ((man + 0x1000) >> 13)) as u16
 }
 
 #[test]
@@ -540,17 +565,12 @@ fn backface_culling_shades_a_closed_mesh_once_per_pixel_and_twice_without() {
 /// given levels (level 0 first, tightly packed RGBA8).
 fn mesh_pack(verts: &[Vertex], idx: &[u32], format: TextureFormat, size: u32, levels: &[Vec<u8>], material: Material) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
-    push_mesh(&mut b, "mesh", verts, idx, None, true);
-    let mips = levels.iter().map(|l| b.push_bytes(l)).collect();
-    b.manifest.textures.push(Texture { name: "tex".into(), width: size, height: size, format, mips });
-    b.manifest.materials.push(Material { base_color_texture: Some(0), ..material });
-    b.manifest.nodes.push(Node { name: "mesh".into(), parent: None, local: Mat4::IDENTITY.to_cols_array(), mesh: Some(0) });
+    push_mesh(&mut b, "mesh", verts, idx, None);
+    let levels: Vec<&[u8]> = levels.iter().map(|l| l.as_slice()).collect();
+    let t = texture(&mut b, "tex", format, [size, size], &levels);
+    b.manifest.materials.push(Material { base_color_texture: Some(t), ..material });
+    b.manifest.nodes.push(node("mesh", Mat4::IDENTITY, 0));
     b.finish()
-}
-
-fn srgb_decode(byte: u8) -> f32 {
-    let v = byte as f32 / 255.0;
-    if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
 }
 
 #[test]
@@ -667,56 +687,7 @@ fn a_grazing_floor_does_not_shimmer_when_the_camera_moves_one_texel() {
     assert_clean(&gpu);
 }
 
-/// A 2x2x2 probe grid over [-2, 2]^3 whose every probe sees the constant `radiance` (SH band 0
-/// only: L0 = radiance / Y00) and the sun with visibility `sun_visibility`.
-fn push_uniform_probes(b: &mut PackBuilder, radiance: f32, sun_visibility: f32) {
-    let mut sh = Vec::new();
-    for _ in 0..8 {
-        let mut probe = [0.0f32; 27];
-        probe[..3].copy_from_slice(&[radiance / 0.282_094_8; 3]);
-        sh.extend(probe.iter().flat_map(|v| v.to_le_bytes()));
-    }
-    let sh = b.push_bytes(&sh);
-    let vis = b.push_bytes(&[sun_visibility; 8].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
-    b.manifest.probes = Some(pack::ProbeGrid { origin: [-2.0; 3], spacing: [4.0; 3], counts: [2, 2, 2], sh, sun_visibility: vis });
-}
-
 // ---- HDR target, tone map, emission, sun shadow map ------------------------------------------
-
-/// A unit quad in the z = 0 plane facing +Z (counter-clockwise seen from +Z), uv1 over [0, 1].
-fn quad_vertices() -> (Vec<Vertex>, Vec<u32>) {
-    let v = [(-0.5f32, -0.5f32), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)]
-        .iter()
-        .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [x + 0.5, 0.5 - y], color: [255; 4], ..Default::default() })
-        .collect();
-    (v, vec![0, 1, 2, 0, 2, 3])
-}
-
-/// A uniform 4x4 lightmap page of B = `b` nits as the pack's only page: the pack is then baked
-/// (physical lighting, tone-mapped) with auto exposure 0.18 / (1e-4 + 0.5 b).
-fn add_lightmap_page(bld: &mut PackBuilder, b: f32) {
-    let half = half_bits(b);
-    let texel: Vec<u8> = [half, half, half, half_bits(1.0)].iter().flat_map(|v| v.to_le_bytes()).collect();
-    let page = bld.push_bytes(&texel.repeat(16));
-    let t = bld.manifest.textures.len() as u32;
-    bld.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![page] });
-    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![t] });
-}
-
-/// The exposure `add_lightmap_page(b)` gives (scene.rs: k / log-average, k = 0.18, albedo 0.5).
-fn auto_exposure(b: f32) -> f32 {
-    0.18 / (1e-4 + 0.5 * b)
-}
-
-/// The tone map's output bytes for linear radiance `l`, computed here from the formula of
-/// textures.md §5.7: exposure, Reinhard on luminance, colour restored with exponent `s`, then the
-/// sRGB encode.
-fn tone_mapped_bytes(l: [f32; 3], exposure: f32, s: f32) -> [u8; 3] {
-    let ls = l.map(|c| c * exposure);
-    let y = 0.2126 * ls[0] + 0.7152 * ls[1] + 0.0722 * ls[2];
-    let ld = y / (1.0 + y);
-    ls.map(|c| srgb_encode((c / y).powf(s) * ld))
-}
 
 /// A baked pack (one lightmap page of B = `lightmap_b`, on a static quad out of view) with one
 /// black quad per entry of `emission` (nits), side by side along x at z = 0, 1.1 m apart,
@@ -725,15 +696,15 @@ fn emissive_quads_pack(lightmap_b: f32, emission: &[[f32; 3]]) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = quad_vertices();
     b.manifest.materials.push(Material::default());
-    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0), true);
+    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0));
     add_lightmap_page(&mut b, lightmap_b);
-    b.manifest.nodes.push(Node { name: "lightmapped".into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, 50.0)).to_cols_array(), mesh: Some(lit) });
+    b.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(Vec3::new(0.0, 0.0, 50.0)), lit, 0));
     for (i, e) in emission.iter().enumerate() {
         b.manifest.materials.push(Material { base_color: [0.0, 0.0, 0.0, 1.0], emissive: *e, ..Material::default() });
-        let mesh = push_mesh(&mut b, &format!("emitter{i}"), &verts, &idx, None, false);
+        let mesh = push_mesh(&mut b, &format!("emitter{i}"), &verts, &idx, None);
         b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = i as u32 + 1;
         let x = (i as f32 - (emission.len() as f32 - 1.0) * 0.5) * 1.1;
-        b.manifest.nodes.push(Node { name: format!("emitter{i}"), parent: None, local: Mat4::from_translation(Vec3::new(x, 0.0, 0.0)).to_cols_array(), mesh: Some(mesh) });
+        b.manifest.nodes.push(node(&format!("emitter{i}"), Mat4::from_translation(Vec3::new(x, 0.0, 0.0)), mesh));
     }
     b.finish()
 }
@@ -748,23 +719,15 @@ fn emitter_pixels(gpu: &Gpu, lightmap_b: f32, emission: &[[f32; 3]], s: f32) -> 
     rig.renderer.tonemap.saturation = s;
     let cam = looking_down_neg_z(3.0);
     rig.target.render(gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
-    let vp = cam.view_proj(w as f32 / h as f32);
     let px = (0..emission.len())
         .map(|i| {
             let x = (i as f32 - (emission.len() as f32 - 1.0) * 0.5) * 1.1;
-            let c = vp * glam::Vec4::new(x, 0.0, 0.0, 1.0);
-            let (sx, sy) = ((c.x / c.w * 0.5 + 0.5) * w as f32, (c.y / c.w * 0.5 + 0.5) * h as f32);
-            pixel(rig.target.pixels(), w, sx as u32, sy as u32)
+            let (sx, sy) = screen_pixel(&cam, w, h, Vec3::new(x, 0.0, 0.0));
+            pixel(rig.target.pixels(), w, sx, sy)
         })
         .collect();
     rig.destroy(gpu);
     px
-}
-
-fn assert_bytes_near(what: &str, got: [u8; 4], want: [u8; 3], tolerance: i32) {
-    for c in 0..3 {
-        assert!((got[c] as i32 - want[c] as i32).abs() <= tolerance, "{what}: got {got:?}, want {want:?} (+-{tolerance})");
-    }
 }
 
 #[test]
@@ -821,16 +784,16 @@ fn roof_pack(cube_x: f32, probe_b: f32, sun_lux: f32, towards_sun: Vec3) -> Pack
     let mut b = PackBuilder::new("generated", "test");
     b.manifest.materials.push(Material::default());
     let (cv, ci) = cube_vertices();
-    let cube = push_mesh(&mut b, "cube", &cv, &ci, None, false);
+    let cube = push_mesh(&mut b, "cube", &cv, &ci, None);
     let roof_verts: Vec<Vertex> = [(-0.5f32, 0.5f32), (0.5, 0.5), (0.5, -0.5), (-0.5, -0.5)]
         .iter()
         .map(|&(x, z)| Vertex { position: [x, 0.0, z], normal: [0.0, 1.0, 0.0], tangent: [1.0, 0.0, 0.0, 1.0], uv0: [0.5, 0.5], uv1: [x + 0.5, z + 0.5], color: [255; 4], ..Default::default() })
         .collect();
-    let roof = push_mesh(&mut b, "roof", &roof_verts, &[0, 1, 2, 0, 2, 3], Some(0), true);
+    let roof = push_mesh(&mut b, "roof", &roof_verts, &[0, 1, 2, 0, 2, 3], Some(0));
     add_lightmap_page(&mut b, 100.0);
     let roof_at = Mat4::from_translation(Vec3::new(0.0, 1.5, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
-    b.manifest.nodes.push(Node { name: "roof".into(), parent: None, local: roof_at.to_cols_array(), mesh: Some(roof) });
-    b.manifest.nodes.push(Node { name: "cube".into(), parent: None, local: Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0)).to_cols_array(), mesh: Some(cube) });
+    b.manifest.nodes.push(static_node("roof", roof_at, roof, 0));
+    b.manifest.nodes.push(node("cube", Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0)), cube));
     push_uniform_probes(&mut b, probe_b, 1.0);
     b.manifest.lights.push(pack::Light {
         name: "sun".into(),
@@ -907,12 +870,12 @@ fn the_static_casters_are_drawn_into_the_shadow_map_once_and_reused_while_the_cu
     // A static ground under it all (the roof's quad, 24 m wide), so the map's window, fitted to
     // the scene, stays put while the cube moves about inside it.
     let ground_at = Mat4::from_translation(Vec3::new(0.0, -0.6, 0.0)) * Mat4::from_scale(Vec3::new(24.0, 1.0, 24.0));
-    let roof_mesh = pack.manifest.nodes[0].mesh;
-    pack.manifest.nodes.push(Node { name: "ground".into(), parent: None, local: ground_at.to_cols_array(), mesh: roof_mesh });
+    let roof_mesh = pack.manifest.nodes[0].mesh.unwrap();
+    pack.manifest.nodes.push(static_node("ground", ground_at, roof_mesh, 0));
     // Puts the cube at x and the roof at height y in `scene` (transforms and culling spheres).
     let place = |scene: &mut GpuScene, cube_x: f32, roof_y: f32| {
         let [roof, cube] = [0, 1];
-        assert!(scene.meshes[scene.instances[roof].mesh as usize].is_static && !scene.meshes[scene.instances[cube].mesh as usize].is_static);
+        assert!(scene.instances[roof].is_static && !scene.instances[cube].is_static);
         scene.instances[roof].world = Mat4::from_translation(Vec3::new(0.0, roof_y, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
         scene.instances[cube].world = Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0));
         let s = &mut scene.spheres;
@@ -989,10 +952,10 @@ fn a_hung_device_is_an_error_that_says_so_not_a_wait_forever() {
 
 #[test]
 fn a_cpu_device_samples_textures_without_anisotropy() {
-    // Lavapipe's anisotropic sampling can stall a frame for minutes (`scene::max_anisotropy`): a
+    // Lavapipe's anisotropic sampling can stall a frame for minutes (`samplers::max_anisotropy`): a
     // CPU device gets none, any other its own limit up to 16x.
     let gpu = gpu();
-    let got = engine::scene::max_anisotropy(&gpu);
+    let got = engine::samplers::max_anisotropy(&gpu);
     if gpu.caps.device_type == ash::vk::PhysicalDeviceType::CPU {
         assert_eq!(got, None, "{} is a CPU device", gpu.caps.device_name);
     } else {

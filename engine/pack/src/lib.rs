@@ -19,6 +19,9 @@
 //! ```
 //!
 //! Version 3 added the `animation` section (skins, clips, joints/weights, morph targets).
+//! Version 4: 80-byte vertices with TEXCOORD_1; lightmaps per static instance (`Node::lightmap`
+//! regions, `Submesh::lightmap_block`, pages of one size) and `Node::is_static` instead of
+//! `Mesh::is_static`; texture slot transforms (`Material::*_uv`) and samplers (`Texture::sampler`).
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
@@ -38,7 +41,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

@@ -10,8 +10,9 @@ pub struct BufferRange {
     pub len: u64,
 }
 
-/// The static vertex as stored in a pack and read by the vertex shader, interleaved, 64 bytes.
-/// The runtime's vertex input state is derived from these offsets (see `VERTEX_ATTRIBUTES`).
+/// The static vertex as stored in a pack and read by the vertex shader, interleaved, 80 bytes
+/// (five 16-byte words, which the skinning shader moves whole). The runtime's vertex input state
+/// is derived from these offsets (see `VERTEX_ATTRIBUTES`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Vertex {
@@ -19,16 +20,22 @@ pub struct Vertex {
     pub normal: [f32; 3],
     /// xyz tangent, w = handedness (+1/-1) of the bitangent, as glTF.
     pub tangent: [f32; 4],
+    /// glTF TEXCOORD_0.
     pub uv0: [f32; 2],
-    /// Lightmap UVs; zero until the uv2 stage has run.
+    /// Lightmap UVs in the mesh's own lightmap space, `[0, 1]`: of the page for a mesh placed
+    /// once (its region is the identity), of its largest block for a mesh placed several times;
+    /// a static instance maps them onto its atlas page with its `Node::lightmap` region. Zero
+    /// until the uv2 stage has run.
     pub uv1: [f32; 2],
+    /// glTF TEXCOORD_1, for texture slots whose `tex_coord` is 1 (zero when absent).
+    pub texcoord1: [f32; 2],
     /// Linear RGBA vertex colour, 8 bits per channel (UNORM).
     pub color: [u8; 4],
-    pub _pad: u32,
+    pub _pad: [u32; 3],
 }
 
 pub const VERTEX_STRIDE: usize = std::mem::size_of::<Vertex>();
-const _: () = assert!(VERTEX_STRIDE == 64);
+const _: () = assert!(VERTEX_STRIDE == 80);
 
 /// What kind of data a vertex attribute holds, so the runtime can pick a Vulkan format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,19 +47,20 @@ pub enum AttributeFormat {
 }
 
 /// (shader location, byte offset, format) of every attribute of `Vertex`.
-pub const VERTEX_ATTRIBUTES: [(u32, u32, AttributeFormat); 6] = [
+pub const VERTEX_ATTRIBUTES: [(u32, u32, AttributeFormat); 7] = [
     (0, 0, AttributeFormat::F32x3),
     (1, 12, AttributeFormat::F32x3),
     (2, 24, AttributeFormat::F32x4),
     (3, 40, AttributeFormat::F32x2),
     (4, 48, AttributeFormat::F32x2),
-    (5, 56, AttributeFormat::Unorm8x4),
+    (5, 64, AttributeFormat::Unorm8x4),
+    (13, 56, AttributeFormat::F32x2),
 ];
 
 impl Vertex {
     /// Raw bytes of a vertex slice, for writing into the data blob.
     pub fn slice_as_bytes(v: &[Vertex]) -> &[u8] {
-        // SAFETY: Vertex is repr(C), 64 bytes, made only of plain numbers with no padding holes
+        // SAFETY: Vertex is repr(C), 80 bytes, made only of plain numbers with no padding holes
         // (the explicit `_pad` field fills the tail).
         unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) }
     }
@@ -172,7 +180,8 @@ pub struct Sky {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LightmapLayout {
     pub texels_per_metre: f32,
-    /// (width, height) in texels of each atlas page.
+    /// (width, height) in texels of each atlas page; every page has the same size (the runtime
+    /// holds them as the layers of one array texture).
     pub pages: Vec<[u32; 2]>,
     /// Texels kept free around every chart.
     pub padding: u32,
@@ -213,9 +222,6 @@ pub struct Mesh {
     /// Object-space axis-aligned bounds (of LOD 0, which every LOD stays close to).
     pub bounds_min: [f32; 3],
     pub bounds_max: [f32; 3],
-    /// Static level geometry (lightmapped) rather than a movable prop or character.
-    #[serde(default)]
-    pub is_static: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -226,7 +232,7 @@ pub struct MeshLod {
     /// u32 triangle list indices into this LOD's vertices.
     pub indices: BufferRange,
     pub index_count: u32,
-    /// Ranges of `indices` drawn with one material (and lightmap page) each.
+    /// Ranges of `indices` drawn with one material (and lightmap block) each.
     pub submeshes: Vec<Submesh>,
     /// Geometric error to LOD 0 in metres, object space (an upper bound of the measured
     /// two-sided Hausdorff distance); 0 for LOD 0. Non-decreasing along the chain.
@@ -238,9 +244,11 @@ pub struct Submesh {
     pub first_index: u32,
     pub index_count: u32,
     pub material: u32,
-    /// The lightmap atlas page its lightmap UVs (uv1) refer to; `None` when not lightmapped.
+    /// The mesh's lightmap block its lightmap UVs (uv1) lie in; `None` when the mesh has none.
+    /// A mesh too big for one atlas page is laid out in several blocks; a static instance puts
+    /// block `b` on page `region.page + b` (see `Node::lightmap`).
     #[serde(default)]
-    pub lightmap_page: Option<u32>,
+    pub lightmap_block: Option<u32>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -277,6 +285,58 @@ pub struct Material {
     pub occlusion_strength: f32,
     /// Emission colour (Rgba8Srgb), multiplies `emissive`.
     pub emissive_texture: Option<u32>,
+    /// How each slot's texture coordinates are chosen and transformed (glTF `texCoord` and
+    /// KHR_texture_transform); the identity on TEXCOORD_0 when absent.
+    #[serde(default)]
+    pub base_color_uv: TextureTransform,
+    #[serde(default)]
+    pub normal_uv: TextureTransform,
+    #[serde(default)]
+    pub metallic_roughness_uv: TextureTransform,
+    #[serde(default)]
+    pub occlusion_uv: TextureTransform,
+    #[serde(default)]
+    pub emissive_uv: TextureTransform,
+}
+
+/// Which vertex UV set a texture slot reads and how it is transformed before sampling, as glTF
+/// `textureInfo.texCoord` and KHR_texture_transform: `uv' = T(offset) R(rotation) S(scale) uv`
+/// (`matrix`). `tex_coord` 0 is `Vertex::uv0`, 1 is `Vertex::texcoord1`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TextureTransform {
+    #[serde(default)]
+    pub tex_coord: u32,
+    #[serde(default)]
+    pub offset: [f32; 2],
+    /// Radians, counter-clockwise in UV space (glTF's convention).
+    #[serde(default)]
+    pub rotation: f32,
+    #[serde(default = "one2")]
+    pub scale: [f32; 2],
+}
+
+fn one2() -> [f32; 2] {
+    [1.0; 2]
+}
+
+impl Default for TextureTransform {
+    fn default() -> Self {
+        TextureTransform { tex_coord: 0, offset: [0.0; 2], rotation: 0.0, scale: [1.0; 2] }
+    }
+}
+
+impl TextureTransform {
+    /// The 2x3 matrix of the transform, rows `[a, b, c]` and `[d, e, f]`:
+    /// `u' = a u + b v + c`, `v' = d u + e v + f` (KHR_texture_transform's T * R * S).
+    pub fn matrix(&self) -> [[f32; 3]; 2] {
+        let (s, c) = self.rotation.sin_cos();
+        let [sx, sy] = self.scale;
+        [[c * sx, s * sy, self.offset[0]], [-s * sx, c * sy, self.offset[1]]]
+    }
+
+    pub fn is_identity(&self) -> bool {
+        *self == TextureTransform::default()
+    }
 }
 
 impl Material {
@@ -290,6 +350,11 @@ impl Material {
             ("occlusion", self.occlusion_texture, &[Rgba8Unorm]),
             ("emissive", self.emissive_texture, &[Rgba8Srgb]),
         ]
+    }
+
+    /// The UV transform of each slot, in `texture_slots` order.
+    pub fn texture_uvs(&self) -> [&TextureTransform; 5] {
+        [&self.base_color_uv, &self.normal_uv, &self.metallic_roughness_uv, &self.occlusion_uv, &self.emissive_uv]
     }
 }
 
@@ -311,6 +376,11 @@ impl Default for Material {
             occlusion_texture: None,
             occlusion_strength: 1.0,
             emissive_texture: None,
+            base_color_uv: TextureTransform::default(),
+            normal_uv: TextureTransform::default(),
+            metallic_roughness_uv: TextureTransform::default(),
+            occlusion_uv: TextureTransform::default(),
+            emissive_uv: TextureTransform::default(),
         }
     }
 }
@@ -344,15 +414,81 @@ pub struct Texture {
     pub format: TextureFormat,
     /// One range per mip level, level 0 first; level i is max(1, w >> i) x max(1, h >> i), tightly packed rows.
     pub mips: Vec<BufferRange>,
+    /// How it is sampled (glTF's sampler); repeating, trilinear when absent.
+    #[serde(default)]
+    pub sampler: Sampler,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Texture addressing outside [0, 1], per axis (glTF `wrapS` / `wrapT`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Wrap {
+    #[default]
+    Repeat,
+    Clamp,
+    Mirror,
+}
+
+/// Texel filtering (glTF's NEAREST / LINEAR).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Filter {
+    Nearest,
+    #[default]
+    Linear,
+}
+
+/// A glTF sampler: wrap per axis, magnification and minification filters, and how mip levels
+/// are blended (`None`: level 0 only, glTF's NEAREST or LINEAR minification).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Sampler {
+    #[serde(default)]
+    pub wrap_s: Wrap,
+    #[serde(default)]
+    pub wrap_t: Wrap,
+    #[serde(default)]
+    pub mag_filter: Filter,
+    #[serde(default)]
+    pub min_filter: Filter,
+    #[serde(default = "linear_mips")]
+    pub mipmap_filter: Option<Filter>,
+}
+
+fn linear_mips() -> Option<Filter> {
+    Some(Filter::Linear)
+}
+
+impl Default for Sampler {
+    fn default() -> Self {
+        Sampler { wrap_s: Wrap::Repeat, wrap_t: Wrap::Repeat, mag_filter: Filter::Linear, min_filter: Filter::Linear, mipmap_filter: Some(Filter::Linear) }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Node {
     pub name: String,
     pub parent: Option<u32>,
     /// Local transform relative to the parent, column-major 4x4 (as glam's `Mat4::to_cols_array`).
     pub local: [f32; 16],
     pub mesh: Option<u32>,
+    /// A static instance of its mesh: never moves (not skinned, morphed or animated), so it is
+    /// part of the baked scene and its shadow is cached.
+    #[serde(default)]
+    pub is_static: bool,
+    /// Where a baked static instance's lightmap lies in the atlas; `None` when it has none.
+    #[serde(default)]
+    pub lightmap: Option<LightmapRegion>,
+}
+
+/// A static instance's part of the lightmap atlas: its mesh's lightmap UVs (`Vertex::uv1`) map
+/// to `uv1 * scale + offset` on page `page + block`,
+/// `block` being the submesh's `lightmap_block`. One mesh placed several times keeps one set of
+/// vertices; every placement gets texels of its own, sized by its own world scale.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LightmapRegion {
+    pub page: u32,
+    pub scale: [f32; 2],
+    pub offset: [f32; 2],
 }
 
 impl Manifest {
@@ -395,6 +531,12 @@ impl Manifest {
         for (i, m) in self.materials.iter().enumerate() {
             let v = [&m.base_color[..], &[m.metallic, m.roughness], &m.emissive, &[m.alpha_cutoff, m.normal_scale, m.occlusion_strength]].concat();
             check(&|| format!("material {i} '{}'", m.name), &v)?;
+            for (t, (slot, _, _)) in m.texture_uvs().iter().zip(m.texture_slots()) {
+                check(&|| format!("material {i} '{}' {slot} transform", m.name), &[t.offset[0], t.offset[1], t.rotation, t.scale[0], t.scale[1]])?;
+                if t.tex_coord > 1 {
+                    return Err(PackError::Malformed(format!("material {i} '{}': {slot} reads TEXCOORD_{}, but vertices carry TEXCOORD_0 and _1", m.name, t.tex_coord)));
+                }
+            }
         }
         for (i, l) in self.lights.iter().enumerate() {
             let v = [&l.color[..], &[l.intensity], &l.position, &l.direction, l.range.as_slice(), &[l.inner_cone, l.outer_cone], &l.size, &[l.angular_radius]].concat();
@@ -460,9 +602,9 @@ impl Manifest {
                     if sm.material as usize >= self.materials.len() {
                         return bad(format!("{what} submesh {s}: material {} does not exist", sm.material));
                     }
-                    if let Some(p) = sm.lightmap_page {
-                        if p as usize >= pages {
-                            return bad(format!("{what} submesh {s}: lightmap page {p} does not exist ({pages} pages)"));
+                    if let Some(block) = sm.lightmap_block {
+                        if block as usize >= pages.max(1) {
+                            return bad(format!("{what} submesh {s}: lightmap block {block} cannot lie on one of the {pages} pages"));
                         }
                     }
                 }
@@ -499,6 +641,9 @@ impl Manifest {
             }
         }
         if let Some(l) = &self.lightmap {
+            if let Some(size) = l.pages.iter().find(|p| **p != l.pages[0]) {
+                return bad(format!("lightmap: pages of different sizes ({}x{} and {}x{})", l.pages[0][0], l.pages[0][1], size[0], size[1]));
+            }
             if !l.textures.is_empty() && l.textures.len() != l.pages.len() {
                 return bad(format!("lightmap: {} baked textures for {} pages", l.textures.len(), l.pages.len()));
             }
@@ -534,6 +679,16 @@ impl Manifest {
             if let Some(m) = n.mesh {
                 if m as usize >= self.meshes.len() {
                     return bad(format!("node {i} '{}': mesh {m} does not exist", n.name));
+                }
+            }
+            if let Some(r) = &n.lightmap {
+                let Some(m) = n.mesh else { return bad(format!("node {i} '{}': a lightmap region but no mesh", n.name)) };
+                let blocks = self.meshes[m as usize].lods.iter().flat_map(|l| &l.submeshes).filter_map(|s| s.lightmap_block).max().map_or(0, |b| b + 1);
+                if r.page as usize + blocks as usize > pages {
+                    return bad(format!("node {i} '{}': lightmap pages {}..{} do not exist ({pages} pages)", n.name, r.page, r.page + blocks));
+                }
+                if !r.scale.iter().chain(&r.offset).all(|x| x.is_finite()) || !r.scale.iter().all(|&x| x > 0.0) {
+                    return bad(format!("node {i} '{}': bad lightmap region (scale {:?}, offset {:?})", n.name, r.scale, r.offset));
                 }
             }
         }

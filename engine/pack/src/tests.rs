@@ -10,6 +10,7 @@ fn sample() -> Pack {
             tangent: [1.0, 0.0, 0.0, 1.0],
             uv0: [(i & 1) as f32, (i >> 1) as f32],
             color: [255, 128, 0, 255],
+            texcoord1: [0.25, 0.75],
             ..Default::default()
         })
         .collect();
@@ -24,8 +25,10 @@ fn sample() -> Pack {
         height: 2,
         format: TextureFormat::Rgba8Srgb,
         mips: vec![mip0, mip1],
+        sampler: Sampler { wrap_s: Wrap::Clamp, wrap_t: Wrap::Mirror, mag_filter: Filter::Nearest, ..Default::default() },
     });
-    b.manifest.materials.push(Material { base_color_texture: Some(0), ..Default::default() });
+    let uv = TextureTransform { tex_coord: 1, offset: [0.5, 0.0], rotation: 0.3, scale: [2.0, 1.0] };
+    b.manifest.materials.push(Material { base_color_texture: Some(0), base_color_uv: uv, ..Default::default() });
     let lod1 = b.push_bytes(&idx[..12]);
     b.manifest.meshes.push(Mesh {
         name: "quad".into(),
@@ -35,7 +38,7 @@ fn sample() -> Pack {
                 vertex_count: 4,
                 indices,
                 index_count: 6,
-                submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: Some(0) }],
+                submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_block: Some(0) }],
                 error: 0.0,
             },
             MeshLod {
@@ -43,13 +46,12 @@ fn sample() -> Pack {
                 vertex_count: 4,
                 indices: lod1,
                 index_count: 3,
-                submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_page: Some(0) }],
+                submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_block: Some(0) }],
                 error: 0.5,
             },
         ],
         bounds_min: [0.0; 3],
         bounds_max: [1.0, 1.0, 0.0],
-        is_static: true,
     });
     b.manifest.lights.push(Light {
         name: "sun".into(),
@@ -75,12 +77,13 @@ fn sample() -> Pack {
     b.manifest.sky = Some(Sky { color: [0.5, 0.7, 1.0], intensity: 8000.0 });
     // A baked 4x4 lightmap page (half floats) and a 2x1x1 probe grid.
     let lm = b.push_bytes(&[0x3cu8; 4 * 4 * 8]);
-    b.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![lm] });
+    b.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![lm], sampler: Sampler::default() });
     b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1] });
     let sh = b.push_bytes(&[0u8; 2 * 27 * 4]);
     let sun = b.push_bytes(&[0u8; 2 * 4]);
     b.manifest.probes = Some(ProbeGrid { origin: [0.0; 3], spacing: [2.0; 3], counts: [2, 1, 1], sh, sun_visibility: sun });
-    b.manifest.nodes.push(Node { name: "root".into(), parent: None, local: IDENTITY, mesh: Some(0) });
+    let region = LightmapRegion { page: 0, scale: [0.5, 0.25], offset: [0.125, 0.5] };
+    b.manifest.nodes.push(Node { name: "root".into(), parent: None, local: IDENTITY, mesh: Some(0), is_static: true, lightmap: Some(region) });
     b.finish()
 }
 
@@ -95,7 +98,11 @@ fn round_trip_is_exact() {
     assert_eq!(q.to_bytes().unwrap(), bytes, "encoding is deterministic");
     let v = &q.bytes(q.manifest.meshes[0].lods[0].vertices)[..VERTEX_STRIDE];
     assert_eq!(&v[0..4], &0.0f32.to_le_bytes());
-    assert_eq!(&v[56..60], &[255, 128, 0, 255]);
+    assert_eq!(&v[56..60], &0.25f32.to_le_bytes(), "texcoord1.u");
+    assert_eq!(&v[64..68], &[255, 128, 0, 255], "colour");
+    // The offsets the runtime binds are the struct's.
+    let at = |loc: u32| VERTEX_ATTRIBUTES.iter().find(|a| a.0 == loc).unwrap().1 as usize;
+    assert_eq!((at(13), at(5)), (56, 64));
 }
 
 #[test]
@@ -175,9 +182,29 @@ fn dangling_references_are_rejected_before_writing() {
     assert!(e.contains("mip 1") && e.contains("4 expected"), "{e}");
 
     let mut p = sample();
-    p.manifest.meshes[0].lods[1].submeshes[0].lightmap_page = Some(3);
+    p.manifest.meshes[0].lods[1].submeshes[0].lightmap_block = Some(3);
     let e = p.to_bytes().unwrap_err().to_string();
-    assert!(e.contains("lightmap page 3 does not exist"), "{e}");
+    assert!(e.contains("lightmap block 3 cannot lie on one of the 1 pages"), "{e}");
+
+    // A static instance's lightmap region must lie on the pages, with a positive scale.
+    let mut p = sample();
+    p.manifest.nodes[0].lightmap = Some(LightmapRegion { page: 1, scale: [1.0, 1.0], offset: [0.0, 0.0] });
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("node 0 'root': lightmap pages 1..2 do not exist (1 pages)"), "{e}");
+    let mut p = sample();
+    p.manifest.nodes[0].lightmap = Some(LightmapRegion { page: 0, scale: [0.0, 1.0], offset: [0.0, 0.0] });
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("bad lightmap region"), "{e}");
+    // Pages share one size (the runtime's array texture).
+    let mut p = sample();
+    p.manifest.lightmap.as_mut().unwrap().pages.push([8, 4]);
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("lightmap: pages of different sizes (4x4 and 8x4)"), "{e}");
+    // A slot reads TEXCOORD_0 or _1 only.
+    let mut p = sample();
+    p.manifest.materials[0].emissive_uv.tex_coord = 2;
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("emissive reads TEXCOORD_2"), "{e}");
 
     // Every material texture slot is checked: it must exist and hold what the slot reads.
     let mut p = sample();
@@ -195,7 +222,7 @@ fn dangling_references_are_rejected_before_writing() {
     assert!(e.contains("non-decreasing"), "{e}");
 
     let mut p = sample();
-    p.manifest.nodes.push(Node { name: "loop".into(), parent: Some(1), local: IDENTITY, mesh: None });
+    p.manifest.nodes.push(Node { name: "loop".into(), parent: Some(1), local: IDENTITY, mesh: None, ..Default::default() });
     assert!(p.to_bytes().is_err());
 
     // Lightmap pages must be baked into Rgba16Float textures of the page's size.
@@ -298,7 +325,7 @@ fn push(p: &mut Pack, bytes: &[u8]) -> BufferRange {
 /// target on both LODs' 4 vertices, and a clip with a rotation and a weights channel.
 fn animated() -> Pack {
     let mut p = sample();
-    p.manifest.nodes.push(Node { name: "bone".into(), parent: Some(0), local: IDENTITY, mesh: None });
+    p.manifest.nodes.push(Node { name: "bone".into(), parent: Some(0), local: IDENTITY, mesh: None, ..Default::default() });
     let ibm = push(&mut p, &[0u8; 64]);
     p.manifest.animation.skins.push(Skin { name: "rig".into(), joints: vec![1], inverse_bind: ibm });
     let joints = push(&mut p, &[0u8; 4 * 8]);

@@ -35,8 +35,8 @@ impl DeformData {
         let m = &pack.manifest.meshes[mesh].lods[lod];
         let bytes = pack.bytes(m.vertices);
         let vertices = (0..m.vertex_count as usize)
-            // SAFETY: the range was validated to hold vertex_count 64-byte `Vertex`es, a plain-old-data type.
-            .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * 64..].as_ptr() as *const Vertex) })
+            // SAFETY: the range was validated to hold vertex_count `Vertex`es, a plain-old-data type.
+            .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * pack::VERTEX_STRIDE..].as_ptr() as *const Vertex) })
             .collect();
         let deform = pack.manifest.animation.deform(mesh as u32);
         let d = deform.map(|d| d.lods[lod]).unwrap_or_default();

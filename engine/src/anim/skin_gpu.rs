@@ -263,8 +263,8 @@ impl SkinnedMesh {
         let out = run.map(|_| {
             let bytes = readback.mapped_ref();
             (0..self.params.vertex_count as usize)
-                // SAFETY: the buffer holds vertex_count 64-byte vertices written by the shader.
-                .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * 64..].as_ptr() as *const Vertex) })
+                // SAFETY: the buffer holds vertex_count vertices written by the shader.
+                .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * pack::VERTEX_STRIDE..].as_ptr() as *const Vertex) })
                 .collect()
         });
         readback.destroy(gpu);

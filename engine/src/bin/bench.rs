@@ -97,13 +97,12 @@ fn boxes_pack(placements: impl Iterator<Item = Mat4>) -> Pack {
     b.manifest.materials.push(Material::default());
     b.manifest.meshes.push(Mesh {
         name: "cube".into(),
-        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_page: None }], error: 0.0 }],
+        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_block: None }], error: 0.0 }],
         bounds_min: [-0.5; 3],
         bounds_max: [0.5; 3],
-        is_static: false,
     });
     for (i, m) in placements.enumerate() {
-        b.manifest.nodes.push(Node { name: format!("c{i}"), parent: None, local: m.to_cols_array(), mesh: Some(0) });
+        b.manifest.nodes.push(Node { name: format!("c{i}"), local: m.to_cols_array(), mesh: Some(0), ..Default::default() });
     }
     b.finish()
 }
@@ -455,7 +454,7 @@ mod skinned_bench {
         for k in 0..n as u32 {
             let base = k * (nodes + 1);
             let at = Vec3::new((k as usize % side) as f32 * 2.0, 0.0, -((k as usize / side) as f32) * 2.0);
-            out.manifest.nodes.push(Node { name: format!("copy{k}"), parent: None, local: Mat4::from_translation(at).to_cols_array(), mesh: None });
+            out.manifest.nodes.push(Node { name: format!("copy{k}"), local: Mat4::from_translation(at).to_cols_array(), ..Default::default() });
             for nd in &m.nodes {
                 out.manifest.nodes.push(Node { name: format!("copy{k}/{}", nd.name), parent: Some(nd.parent.map_or(base, |p| base + 1 + p)), ..nd.clone() });
             }

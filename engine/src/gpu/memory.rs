@@ -116,6 +116,8 @@ pub struct Image {
     pub format: vk::Format,
     pub extent: vk::Extent2D,
     pub mip_levels: u32,
+    /// Array layers (1 unless made by `sampled_array`).
+    layers: u32,
     allocation: Option<Allocation>,
 }
 
@@ -129,16 +131,23 @@ impl Image {
         usage: vk::ImageUsageFlags,
         aspect: vk::ImageAspectFlags,
     ) -> Result<Image> {
-        let d = &gpu.device;
         let info = vk::ImageCreateInfo::default()
-            .image_type(vk::ImageType::TYPE_2D)
             .format(format)
             .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
             .mip_levels(mip_levels)
             .array_layers(1)
+            .usage(usage);
+        Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D, aspect)
+    }
+
+    /// A 2D image as `info` describes it (type, samples, tiling and initial layout are set
+    /// here), in device memory, with a view of `view_type` over all its levels and layers.
+    fn create(gpu: &Gpu, name: &str, info: &vk::ImageCreateInfo, view_type: vk::ImageViewType, aspect: vk::ImageAspectFlags) -> Result<Image> {
+        let d = &gpu.device;
+        let info = info
+            .image_type(vk::ImageType::TYPE_2D)
             .samples(vk::SampleCountFlags::TYPE_1)
             .tiling(vk::ImageTiling::OPTIMAL)
-            .usage(usage)
             .initial_layout(vk::ImageLayout::UNDEFINED);
         let image = unsafe { d.create_image(&info, None)? };
         let requirements = unsafe { d.get_image_memory_requirements(image) };
@@ -150,62 +159,61 @@ impl Image {
             }
         };
         unsafe { d.bind_image_memory(image, allocation.memory(), allocation.offset())? };
-        let view = unsafe {
-            d.create_image_view(
-                &vk::ImageViewCreateInfo::default()
-                    .image(image)
-                    .view_type(vk::ImageViewType::TYPE_2D)
-                    .format(format)
-                    .subresource_range(full_range(aspect, mip_levels)),
-                None,
-            )?
-        };
-        Ok(Image { image, view, format, extent, mip_levels, allocation: Some(allocation) })
+        let range = vk::ImageSubresourceRange { layer_count: info.array_layers, ..full_range(aspect, info.mip_levels) };
+        let view = unsafe { d.create_image_view(&vk::ImageViewCreateInfo::default().image(image).view_type(view_type).format(info.format).subresource_range(range), None)? };
+        let extent = vk::Extent2D { width: info.extent.width, height: info.extent.height };
+        Ok(Image { image, view, format: info.format, extent, mip_levels: info.mip_levels, layers: info.array_layers, allocation: Some(allocation) })
     }
 
     /// A sampled image with every mip level uploaded from `mips` (level 0 first, tightly packed),
     /// left in SHADER_READ_ONLY_OPTIMAL.
     pub fn sampled_with_mips(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, mips: &[&[u8]]) -> Result<Image> {
-        let image = Image::new(
-            gpu,
-            name,
-            format,
-            extent,
-            mips.len() as u32,
-            vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
-            vk::ImageAspectFlags::COLOR,
-        )?;
-        let total: usize = mips.iter().map(|m| m.len()).sum();
+        let image = Image::new(gpu, name, format, extent, mips.len() as u32, vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST, vk::ImageAspectFlags::COLOR)?;
+        let parts: Vec<(&[u8], u32, u32)> = mips.iter().enumerate().map(|(level, bytes)| (*bytes, level as u32, 0)).collect();
+        image.upload(gpu, &parts)?;
+        Ok(image)
+    }
+
+    /// A sampled 2D array image of one level, layer i uploaded from `layers[i]` (tightly
+    /// packed), seen through a 2D-array view, left in SHADER_READ_ONLY_OPTIMAL.
+    pub fn sampled_array(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, layers: &[&[u8]]) -> Result<Image> {
+        let info = vk::ImageCreateInfo::default()
+            .format(format)
+            .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
+            .mip_levels(1)
+            .array_layers(layers.len() as u32)
+            .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST);
+        let image = Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D_ARRAY, vk::ImageAspectFlags::COLOR)?;
+        let parts: Vec<(&[u8], u32, u32)> = layers.iter().enumerate().map(|(layer, bytes)| (*bytes, 0, layer as u32)).collect();
+        image.upload(gpu, &parts)?;
+        Ok(image)
+    }
+
+    /// Copy `parts` (texels, mip level, array layer) into a new colour image through one
+    /// staging buffer and leave every level and layer in SHADER_READ_ONLY_OPTIMAL.
+    fn upload(&self, gpu: &Gpu, parts: &[(&[u8], u32, u32)]) -> Result<()> {
+        let total: usize = parts.iter().map(|p| p.0.len()).sum();
         let mut staging = Buffer::new(gpu, "texture staging", total as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
-        let mut regions = Vec::new();
+        let mut regions = Vec::with_capacity(parts.len());
         let mut offset = 0usize;
-        for (level, bytes) in mips.iter().enumerate() {
+        for &(bytes, level, layer) in parts {
             staging.mapped()[offset..offset + bytes.len()].copy_from_slice(bytes);
             regions.push(
                 vk::BufferImageCopy::default()
                     .buffer_offset(offset as u64)
-                    .image_subresource(vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: level as u32,
-                        base_array_layer: 0,
-                        layer_count: 1,
-                    })
-                    .image_extent(vk::Extent3D {
-                        width: (extent.width >> level).max(1),
-                        height: (extent.height >> level).max(1),
-                        depth: 1,
-                    }),
+                    .image_subresource(vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: level, base_array_layer: layer, layer_count: 1 })
+                    .image_extent(vk::Extent3D { width: (self.extent.width >> level).max(1), height: (self.extent.height >> level).max(1), depth: 1 }),
             );
             offset += bytes.len();
         }
-        let range = full_range(vk::ImageAspectFlags::COLOR, mips.len() as u32);
+        let range = vk::ImageSubresourceRange { layer_count: self.layers, ..full_range(vk::ImageAspectFlags::COLOR, self.mip_levels) };
         gpu.one_shot(|cb| unsafe {
-            barrier(gpu, cb, image.image, range, Transition::UNDEFINED_TO_TRANSFER_DST);
-            gpu.device.cmd_copy_buffer_to_image(cb, staging.buffer, image.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &regions);
-            barrier(gpu, cb, image.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
+            barrier(gpu, cb, self.image, range, Transition::UNDEFINED_TO_TRANSFER_DST);
+            gpu.device.cmd_copy_buffer_to_image(cb, staging.buffer, self.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &regions);
+            barrier(gpu, cb, self.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
         })?;
         staging.destroy(gpu);
-        Ok(image)
+        Ok(())
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {

@@ -4,6 +4,9 @@
 //! Each test file compiles this module on its own and uses part of it.
 #![allow(dead_code)]
 
+pub mod frames;
+pub mod packs;
+
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
 use pack::Pack;
 use std::path::{Path, PathBuf};
@@ -60,15 +63,14 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
             vertex_count: 4,
             indices,
             index_count: 6,
-            submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: None }],
+            submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_block: None }],
             error: 0.0,
         }],
         bounds_min: [-half, -half, 0.0],
         bounds_max: [half, half, 0.0],
-        is_static: false,
     });
     b.manifest.materials.push(material);
-    b.manifest.nodes.push(Node { name: name.into(), parent: None, local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(), mesh: Some(0) });
+    b.manifest.nodes.push(Node { name: name.into(), local: Mat4::from_translation(Vec3::new(0.0, 0.0, z)).to_cols_array(), mesh: Some(0), ..Default::default() });
     b.finish()
 }
 

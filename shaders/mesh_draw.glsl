@@ -1,0 +1,20 @@
+// What a mesh draw gives both its vertex and its fragment shaders: the push constants (mirrors
+// `DrawPush` in engine/src/renderer.rs) and every material's constants (set 2 binding 2;
+// `MaterialConstants` in engine/src/scene.rs).
+
+layout(push_constant) uniform Draw {
+    vec4 material; // x: alpha-test cutoff (or -1), y: material index, z: the submesh's lightmap block
+    vec4 base_color;
+} draw;
+
+struct MaterialConstants {
+    vec4 emission; // rgb: emitted radiance factor, times the emissive texture
+    // A texture slot's UV transform (glTF texCoord and KHR_texture_transform) as two rows
+    // (a, b, c, tex_coord) and (d, e, f, 0): uv' = (a u + b v + c, d u + e v + f) of uv0
+    // (tex_coord 0) or texcoord1 (1).
+    vec4 base_color_uv[2];
+    vec4 emissive_uv[2];
+};
+layout(std430, set = 2, binding = 2) readonly buffer MaterialBlock {
+    MaterialConstants materials[];
+};
