@@ -5,17 +5,25 @@ use crate::{raise, summary};
 use cook_core::wire::{self, RawArray};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
+use std::ffi::OsString;
 use std::path::PathBuf;
 
 type PyArrays<'py> = Vec<(String, Vec<usize>, Bound<'py, PyBytes>)>;
 
-/// Import a .gltf/.glb file: returns (json, arrays) for `asset_pipeline.ir.from_wire`.
+/// Import a .gltf/.glb file: returns (json, arrays, files): the scene for
+/// `asset_pipeline.ir.from_wire`, and every file the import read (the glTF first, then its
+/// external buffers and images, canonical, without duplicates). External buffers and images
+/// must lie in `root` (default: the glTF's folder) unless `allow_external_uris`.
 #[pyfunction]
-fn import_gltf<'py>(py: Python<'py>, source: PathBuf) -> PyResult<(String, PyArrays<'py>)> {
-    let scene = py.detach(|| cook_core::import_gltf(&source, &mut |_, _| {})).map_err(raise)?;
-    let (json, arrays) = py.detach(|| wire::to_wire(&scene));
+#[pyo3(signature = (source, root=None, allow_external_uris=false))]
+fn import_gltf<'py>(py: Python<'py>, source: PathBuf, root: Option<PathBuf>, allow_external_uris: bool) -> PyResult<(String, PyArrays<'py>, Vec<OsString>)> {
+    let options = cook_core::ImportOptions { root, allow_external_uris };
+    let imported = py.detach(|| cook_core::import_gltf(&source, &options, &mut |_, _| {})).map_err(raise)?;
+    let (json, arrays) = py.detach(|| wire::to_wire(&imported.scene));
     let arrays = arrays.into_iter().map(|a| (a.dtype, a.shape, PyBytes::new(py, &a.bytes))).collect();
-    Ok((json, arrays))
+    // As str (OsString converts losslessly, as os.fsdecode would).
+    let files = imported.files.into_iter().map(PathBuf::into_os_string).collect();
+    Ok((json, arrays, files))
 }
 
 /// Write the pack for a scene given in wire form (from `asset_pipeline.ir.to_wire`) to `out`,

@@ -8,10 +8,12 @@ use std::path::Path;
 mod common;
 
 fuzz_target!(|data: &[u8]| {
-    // Relative URIs resolve against a directory that does not exist: the target reads no files.
+    // Relative URIs resolve against a directory that does not exist, and the default options
+    // refuse any URI out of it: the target reads no files.
     let source = Path::new("/nonexistent-fuzz-input/input.gltf");
-    let Ok(scene) = cook_core::import_gltf_bytes(source, data, &mut |_, _| {}) else { return };
-    if let Ok(pack) = cook_core::build_pack(&scene) {
+    let options = cook_core::ImportOptions::default();
+    let Ok(imported) = cook_core::import_gltf_bytes(source, data, &options, &mut |_, _| {}) else { return };
+    if let Ok(pack) = cook_core::build_pack(&imported.scene) {
         common::exercise(&pack);
     }
 });

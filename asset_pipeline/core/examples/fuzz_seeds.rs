@@ -112,6 +112,7 @@ fn rich_pack(base: Pack) -> Pack {
         height: 4,
         format: TextureFormat::Rgba8Srgb,
         mips,
+        sampler: pack::Sampler { wrap_s: pack::Wrap::Mirror, ..Default::default() },
     });
     let page = b.push_bytes(&[0u8; 2 * 2 * 8]);
     b.manifest.textures.push(pack::Texture {
@@ -120,10 +121,12 @@ fn rich_pack(base: Pack) -> Pack {
         height: 2,
         format: TextureFormat::Rgba16Float,
         mips: vec![page],
+        sampler: pack::Sampler::default(),
     });
     let mut material = pack::Material {
         name: "textured".into(),
         base_color_texture: Some(0),
+        base_color_uv: pack::TextureTransform { tex_coord: 1, offset: [0.25, 0.0], rotation: 0.5, scale: [2.0, 2.0] },
         ..Default::default()
     };
     material.emissive = [0.5, 0.25, 0.0];
@@ -135,7 +138,11 @@ fn rich_pack(base: Pack) -> Pack {
         textures: vec![1],
     });
     if let Some(sm) = b.manifest.meshes.first_mut().and_then(|m| m.lods[0].submeshes.first_mut()) {
-        sm.lightmap_page = Some(0);
+        sm.lightmap_block = Some(0);
+        if let Some(node) = b.manifest.nodes.iter_mut().find(|n| n.mesh == Some(0)) {
+            node.is_static = true;
+            node.lightmap = Some(pack::LightmapRegion { page: 0, scale: [0.5, 0.5], offset: [0.25, 0.25] });
+        }
     }
     let counts = [2u32, 1, 1];
     let n = 2usize;

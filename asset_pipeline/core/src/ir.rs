@@ -11,7 +11,10 @@ pub struct LodIr {
     pub normals: Option<Vec<[f32; 3]>>,
     pub tangents: Option<Vec<[f32; 4]>>,
     pub uv0: Option<Vec<[f32; 2]>>,
+    /// Lightmap UVs (the uv2 stage's), in the mesh's own lightmap space.
     pub uv1: Option<Vec<[f32; 2]>>,
+    /// glTF TEXCOORD_1 (textures whose slot reads set 1).
+    pub texcoord1: Option<Vec<[f32; 2]>>,
     /// Linear RGBA, 8-bit UNORM.
     pub colors: Option<Vec<[u8; 4]>>,
     pub joints: Option<Vec<[u16; 4]>>,
@@ -19,8 +22,9 @@ pub struct LodIr {
     pub triangles: Vec<[u32; 3]>,
     /// Material index per triangle.
     pub materials: Vec<u32>,
-    /// Lightmap atlas page per triangle, once the uv2 stage has run.
-    pub lightmap_pages: Option<Vec<u32>>,
+    /// Lightmap block per triangle (the mesh's own blocks; a static instance's region puts
+    /// block b on its page + b), once the uv2 stage has run.
+    pub lightmap_blocks: Option<Vec<u32>>,
     /// Geometric error to LOD 0 in metres (object space).
     pub error: f32,
     /// Morph target position deltas, [target][vertex]; empty when the mesh has none.
@@ -32,7 +36,6 @@ pub struct LodIr {
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeshIr {
     pub name: String,
-    pub is_static: bool,
     pub lods: Vec<LodIr>,
     /// Default morph target weights (glTF `mesh.weights`, zeros when absent), one per target.
     pub morph_weights: Vec<f32>,
@@ -74,6 +77,8 @@ pub struct TextureIr {
     pub usage: Usage,
     /// Tightly packed texels per mip level, level 0 first.
     pub mips: Vec<Vec<u8>>,
+    /// How the runtime samples it (and which edges its mip filter wraps across).
+    pub sampler: pack::Sampler,
 }
 
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -120,6 +125,7 @@ impl LodIr {
             ("tangent", self.tangents.as_ref().map(Vec::len)),
             ("uv0", self.uv0.as_ref().map(Vec::len)),
             ("uv1", self.uv1.as_ref().map(Vec::len)),
+            ("texcoord1", self.texcoord1.as_ref().map(Vec::len)),
             ("color", self.colors.as_ref().map(Vec::len)),
             ("joints", self.joints.as_ref().map(Vec::len)),
             ("weights", self.weights.as_ref().map(Vec::len)),
@@ -136,8 +142,8 @@ impl LodIr {
         if self.materials.len() != m {
             return Err(format!("{what}: {} material ids for {m} triangles", self.materials.len()));
         }
-        if let Some(p) = self.lightmap_pages.as_ref().filter(|p| p.len() != m) {
-            return Err(format!("{what}: {} lightmap pages for {m} triangles", p.len()));
+        if let Some(p) = self.lightmap_blocks.as_ref().filter(|p| p.len() != m) {
+            return Err(format!("{what}: {} lightmap blocks for {m} triangles", p.len()));
         }
         for (t, d) in self.morph_positions.iter().chain(&self.morph_normals).enumerate() {
             if d.len() != n {

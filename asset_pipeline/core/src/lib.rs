@@ -6,15 +6,19 @@
 
 mod accessor;
 pub mod anim;
+mod camera;
 mod error;
 pub mod bake;
 pub mod ir;
+mod lights;
 mod load;
 mod material;
 mod mesh;
 pub mod measure;
 pub mod pack_build;
 mod scene;
+mod transform;
+mod uri;
 pub mod uv_raster;
 pub mod wire;
 pub mod exr_io;
@@ -23,20 +27,21 @@ pub mod lod;
 pub mod mips;
 
 pub use error::CookError;
+pub use load::SUPPORTED_EXTENSIONS;
 pub use pack;
 
 use ir::SceneIr;
 use pack::{Pack, PackError};
-use std::collections::HashSet;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Written into every pack's manifest as provenance.
 pub const COOKER: &str = concat!("cook_core ", env!("CARGO_PKG_VERSION"));
 
-/// Cook a .gltf or .glb file into a pack in memory (import, then write; no other stages).
+/// Cook a .gltf or .glb file into a pack in memory (import with the default options, then
+/// write; no other stages).
 pub fn cook_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<Pack, CookError> {
-    let scene = import_gltf(source, progress)?;
-    build_pack(&scene)
+    let imported = import_gltf(source, &ImportOptions::default(), progress)?;
+    build_pack(&imported.scene)
 }
 
 /// The pack for a scene IR; a failure here is a cooker bug or bad data from a stage, reported
@@ -45,38 +50,51 @@ pub fn build_pack(scene: &SceneIr) -> Result<Pack, CookError> {
     pack_build::build_pack(scene, COOKER).map_err(|e| CookError::invalid(&scene.source, e))
 }
 
-/// Import a .gltf or .glb file into the scene IR. `progress` is called with what is being
-/// worked on and the fraction done (0..=1).
-pub fn import_gltf(source: &Path, progress: &mut dyn FnMut(&str, f32)) -> Result<SceneIr, CookError> {
-    progress("reading", 0.0);
-    let bytes = load::read(source, &source.display().to_string())?;
-    import_gltf_bytes(source, &bytes, progress)
+/// Which files a glTF import may read besides the glTF itself.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// The folder tree external buffers and images must lie in, after symlinks are followed;
+    /// `None`: the glTF file's own folder. (A level passes its own folder for its props.)
+    pub root: Option<PathBuf>,
+    /// Read buffer and image URIs wherever they point: absolute paths, `file:` URIs and `..`
+    /// out of the root.
+    pub allow_external_uris: bool,
 }
 
-/// Import the bytes of a .gltf or .glb file that `source` names: `source` is only used in
-/// messages, for the scene's name and to resolve relative URIs (the fuzz target's entry point).
-pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&str, f32)) -> Result<SceneIr, CookError> {
+/// What a glTF import made, and what it read to make it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imported {
+    pub scene: SceneIr,
+    /// Every file read, in order, without duplicates: the glTF itself (from `import_gltf`, not
+    /// `import_gltf_bytes`), then each external buffer and image file, canonical (symlinks
+    /// followed). A cache keyed by their contents knows when to import again.
+    pub files: Vec<PathBuf>,
+}
+
+/// Import a .gltf or .glb file into the scene IR. `progress` is called with what is being
+/// worked on and the fraction done (0..=1).
+pub fn import_gltf(source: &Path, options: &ImportOptions, progress: &mut dyn FnMut(&str, f32)) -> Result<Imported, CookError> {
+    progress("reading", 0.0);
+    let bytes = load::read(source, &source.display().to_string())?;
+    let mut imported = import_gltf_bytes(source, &bytes, options, progress)?;
+    let me = source.canonicalize().unwrap_or_else(|_| source.to_path_buf());
+    imported.files.retain(|f| *f != me);
+    imported.files.insert(0, me);
+    Ok(imported)
+}
+
+/// Import the bytes of a .gltf or .glb file that `source` names: `source` is used in messages,
+/// for the scene's name and to resolve relative URIs (the fuzz target's entry point). The
+/// files it reports are the external ones it read.
+pub fn import_gltf_bytes(source: &Path, bytes: &[u8], options: &ImportOptions, progress: &mut dyn FnMut(&str, f32)) -> Result<Imported, CookError> {
     let file = source.display().to_string();
     let invalid = |problem: String| CookError::invalid(&file, problem);
-    let src = load::parse(bytes, source, &file)?;
+    let policy = uri::UriPolicy::new(source, options.root.as_deref(), options.allow_external_uris);
+    let mut src = load::parse(bytes, &file, &policy)?;
     let doc = &src.document;
 
-    // Progress counts images once per material slot that reads them (a rough total is enough).
-    let images: HashSet<(usize, &str)> = doc
-        .materials()
-        .flat_map(|m| {
-            let pbr = m.pbr_metallic_roughness();
-            [
-                pbr.base_color_texture().map(|t| (t.texture().source().index(), "colour")),
-                pbr.metallic_roughness_texture().map(|t| (t.texture().source().index(), "data")),
-                m.normal_texture().map(|t| (t.texture().source().index(), "normal")),
-                m.occlusion_texture().map(|t| (t.texture().source().index(), "data")),
-                m.emissive_texture().map(|t| (t.texture().source().index(), "colour")),
-            ]
-        })
-        .flatten()
-        .collect();
-    let total = (images.len() + doc.meshes().len() + 2) as f32;
+    // Progress counts each texture once (a rough total is enough).
+    let total = (material::texture_count(doc) + doc.meshes().len() + 2) as f32;
     let mut done = 0usize;
     let mut step = |what: &str| {
         progress(what, done as f32 / total);
@@ -88,7 +106,8 @@ pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&
         source: file.clone(),
         ..Default::default()
     };
-    scene.materials = material::cook_materials(&src, &mut scene.textures, &mut step).map_err(invalid)?;
+    let mut files = std::mem::take(&mut src.files);
+    scene.materials = material::cook_materials(&src, &mut scene.textures, &mut files, &mut step).map_err(invalid)?;
     let default_material = scene.materials.len() as u32;
     let mut budget = mesh::MAX_VERTICES;
     for m in doc.meshes() {
@@ -100,8 +119,11 @@ pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&
         scene.materials.push(pack::Material::default());
     }
     step("nodes");
-    let node_map;
-    (scene.nodes, node_map) = scene::flatten(doc).map_err(invalid)?;
+    let mut flat = scene::flatten(doc).map_err(invalid)?;
+    scene.lights = lights::cook_lights(doc, &flat, &mut scene.warnings).map_err(invalid)?;
+    scene.spawns.extend(camera::first_camera(doc, &flat, &mut scene.warnings).map_err(invalid)?);
+    scene.nodes = std::mem::take(&mut flat.nodes);
+    let node_map = flat.map;
     step("animation");
     scene.skins = anim::cook_skins(doc, &src.buffers, &node_map).map_err(invalid)?;
     for n in doc.nodes() {
@@ -116,7 +138,7 @@ pub fn import_gltf_bytes(source: &Path, bytes: &[u8], progress: &mut dyn FnMut(&
     scene.clips = anim::cook_clips(doc, &src.buffers, &node_map, &targets_of, &mut scene.warnings).map_err(invalid)?;
     scene.check_animation().map_err(invalid)?;
     progress("done", 1.0);
-    Ok(scene)
+    Ok(Imported { scene, files })
 }
 
 /// The largest texture side the cooker accepts: what Vulkan devices commonly support for 2D

@@ -5,15 +5,28 @@
 //! image a failure was about.
 
 use crate::error::{one_line, CookError};
+use crate::uri::{self, UriPolicy};
 use gltf::Document;
 use std::path::{Path, PathBuf};
+
+/// The extensions the importer implements; a file that requires any other is refused (one it
+/// only uses is read without it, as glTF allows).
+pub const SUPPORTED_EXTENSIONS: [&str; 3] = ["KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform"];
 
 /// A parsed document with its buffers' bytes, index-aligned with `document.buffers()`.
 pub(crate) struct Source {
     pub document: Document,
     pub buffers: Vec<Vec<u8>>,
-    /// Directory relative URIs are resolved against.
-    pub base: PathBuf,
+    /// Per image: the file its URI names, resolved and checked against the root folder (`None`
+    /// for a data: URI, a buffer view or no source at all). Read only when a material uses it.
+    pub image_files: Vec<Option<PathBuf>>,
+    /// Per material: the KHR_texture_transform JSON of its normal and occlusion textures, which
+    /// gltf-json 1.4 does not model (it reads the extension on `textureInfo` only; its
+    /// `extensions` feature would keep them, but it also makes light and transform `extras`
+    /// fail to parse).
+    pub normal_occlusion_transforms: Vec<[Option<serde_json::Value>; 2]>,
+    /// The external files read so far (buffers), canonical, in order, without duplicates.
+    pub files: Vec<PathBuf>,
 }
 
 /// The bytes of a .gltf or .glb file.
@@ -24,9 +37,10 @@ pub(crate) fn read(path: &Path, file: &str) -> Result<Vec<u8>, CookError> {
     })
 }
 
-/// Parse the bytes of the .gltf or .glb file at `path` (which resolves relative URIs; `file`
-/// names it in messages) and load its buffers.
-pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, CookError> {
+/// Parse the bytes of a .gltf or .glb file (`file` names it in messages) and load its buffers.
+/// Every buffer and image URI is resolved and checked against `policy` (made for the file's
+/// path) before any of them is read.
+pub(crate) fn parse(bytes: &[u8], file: &str, policy: &UriPolicy) -> Result<Source, CookError> {
     let not_gltf = |reason: String| CookError::NotGltf { file: file.into(), reason: one_line(&reason) };
     if bytes.starts_with(b"glTF") {
         check_glb_header(bytes).map_err(not_gltf)?;
@@ -37,21 +51,50 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, Coo
         return Err(not_gltf(format!("asset version is {:?}", json.asset.version)));
     }
     // It parsed as glTF, so from here on failures mean broken content, not a foreign file.
-    check_position_indices(&json).map_err(|p| CookError::invalid(file, p))?;
+    let invalid = |p: String| CookError::invalid(file, p);
+    // Before the crate validates: its message for this ("Unsupported extension") does not say
+    // what the cooker can read instead.
+    check_required_extensions(&json).map_err(invalid)?;
+    check_position_indices(&json).map_err(invalid)?;
     let document = Document::from_json(json)
         .map_err(|e| CookError::invalid(file, e.to_string().trim_end_matches(';')))?;
-    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let normal_occlusion_transforms = normal_occlusion_transforms(&document, bytes).map_err(invalid)?;
+
+    let resolve = |what: String, uri: &str| policy.resolve(uri).map_err(|e| invalid(format!("invalid glTF: {what}: {e}")));
+    let mut buffer_files = Vec::new();
+    for buffer in document.buffers() {
+        buffer_files.push(match buffer.source() {
+            gltf::buffer::Source::Uri(u) if !uri::is_data(u) => Some(resolve(format!("buffer {}", buffer.index()), u)?),
+            _ => None,
+        });
+    }
+    let mut image_files = Vec::new();
+    for (i, image) in document.as_json().images.iter().enumerate() {
+        image_files.push(match (&image.buffer_view, &image.uri) {
+            (None, Some(u)) if !uri::is_data(u) => Some(resolve(crate::label("image", i, image.name.as_deref()), u)?),
+            _ => None,
+        });
+    }
+
     let mut blob = gltf.blob;
     let mut buffers = Vec::new();
-    for buffer in document.buffers() {
+    let mut files: Vec<PathBuf> = Vec::new();
+    for (buffer, resolved) in document.buffers().zip(buffer_files) {
         let i = buffer.index();
-        let data = match buffer.source() {
-            gltf::buffer::Source::Bin => blob
+        let data = match (buffer.source(), resolved) {
+            (gltf::buffer::Source::Bin, _) => blob
                 .take()
                 .ok_or_else(|| format!("buffer {i} refers to the GLB binary chunk, which is missing")),
-            gltf::buffer::Source::Uri(uri) => read_uri(&base, uri).map_err(|e| format!("buffer {i}: {e}")),
+            (_, Some(path)) => {
+                let data = uri::read_file(&path).map_err(|e| format!("buffer {i}: {e}"));
+                if !files.contains(&path) {
+                    files.push(path);
+                }
+                data
+            }
+            (gltf::buffer::Source::Uri(u), None) => uri::decode_data(u).map_err(|e| format!("buffer {i}: {e}")),
         }
-        .map_err(|p| CookError::invalid(file, p))?;
+        .map_err(invalid)?;
         if data.len() < buffer.length() {
             return Err(CookError::invalid(
                 file,
@@ -60,7 +103,66 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, file: &str) -> Result<Source, Coo
         }
         buffers.push(data);
     }
-    Ok(Source { document, buffers, base })
+    Ok(Source { document, buffers, image_files, normal_occlusion_transforms, files })
+}
+
+/// Refuse a file that requires an extension the importer does not implement: read without it,
+/// the file would cook into something other than what it describes.
+fn check_required_extensions(json: &gltf::json::Root) -> Result<(), String> {
+    let missing: Vec<String> = json
+        .extensions_required
+        .iter()
+        .filter(|e| !SUPPORTED_EXTENSIONS.contains(&e.as_str()))
+        .map(|e| format!("'{e}'"))
+        .collect();
+    match missing.len() {
+        0 => Ok(()),
+        n => Err(format!(
+            "requires extension{} {}, which the cooker does not support (supported: {})",
+            if n == 1 { "" } else { "s" },
+            missing.join(", "),
+            SUPPORTED_EXTENSIONS.join(", ")
+        )),
+    }
+}
+
+/// The raw KHR_texture_transform of every material's normal and occlusion textures (see
+/// `Source::normal_occlusion_transforms`), read from the JSON a second time, and only when some
+/// material has either texture.
+fn normal_occlusion_transforms(document: &Document, bytes: &[u8]) -> Result<Vec<[Option<serde_json::Value>; 2]>, String> {
+    #[derive(serde::Deserialize)]
+    struct Root {
+        #[serde(default)]
+        materials: Vec<Material>,
+    }
+    #[derive(serde::Deserialize)]
+    #[serde(rename_all = "camelCase")]
+    struct Material {
+        normal_texture: Option<Slot>,
+        occlusion_texture: Option<Slot>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Slot {
+        extensions: Option<Extensions>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Extensions {
+        #[serde(rename = "KHR_texture_transform")]
+        transform: Option<serde_json::Value>,
+    }
+    let materials = &document.as_json().materials;
+    if !materials.iter().any(|m| m.normal_texture.is_some() || m.occlusion_texture.is_some()) {
+        return Ok(vec![[None, None]; materials.len()]);
+    }
+    let text: std::borrow::Cow<[u8]> = match bytes.starts_with(b"glTF") {
+        true => gltf::binary::Glb::from_slice(bytes).map_err(|e| format!("GLB: {e}"))?.json,
+        false => bytes.into(),
+    };
+    let root: Root = serde_json::from_slice(&text).map_err(|e| format!("invalid glTF: materials: {e}"))?;
+    let transform = |s: Option<Slot>| s.and_then(|s| s.extensions).and_then(|e| e.transform);
+    let mut out: Vec<_> = root.materials.into_iter().map(|m| [transform(m.normal_texture), transform(m.occlusion_texture)]).collect();
+    out.resize(materials.len(), [None, None]);
+    Ok(out)
 }
 
 /// What gltf-json 1.4 does not validate but the gltf crate relies on. It validates a primitive by
@@ -127,54 +229,4 @@ fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
         (Some(v), Some(_)) => Err(format!("GLB container version {v}, expected 2")),
         _ => Err("GLB header is cut short".into()),
     }
-}
-
-/// Bytes behind a buffer or image URI: a base64 `data:` URI, or a file relative to `base`.
-pub(crate) fn read_uri(base: &Path, uri: &str) -> Result<Vec<u8>, String> {
-    if let Some(rest) = uri.strip_prefix("data:") {
-        let (_, payload) = rest
-            .split_once(";base64,")
-            .ok_or_else(|| "only base64 data: URIs are supported".to_string())?;
-        return base64::decode(payload).map_err(|e| format!("bad base64 data: {e}"));
-    }
-    let path = if let Some(p) = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
-        PathBuf::from(percent_decode(p))
-    } else if has_scheme(uri) {
-        return Err(format!("unsupported URI scheme in '{uri}'"));
-    } else {
-        base.join(percent_decode(uri))
-    };
-    // Only regular files: a device (/dev/zero, /dev/stdin) or a pipe never ends or blocks.
-    match std::fs::metadata(&path) {
-        Ok(m) if !m.is_file() => return Err(format!("cannot read '{}': not a regular file", path.display())),
-        _ => {}
-    }
-    std::fs::read(&path).map_err(|e| format!("cannot read '{}': {e}", path.display()))
-}
-
-fn has_scheme(uri: &str) -> bool {
-    match uri.find(':') {
-        Some(colon) => !uri[..colon].contains('/'),
-        None => false,
-    }
-}
-
-/// glTF URIs are percent-encoded (RFC 3986). Malformed escapes are kept literally.
-fn percent_decode(s: &str) -> String {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }

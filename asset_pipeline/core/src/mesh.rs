@@ -76,7 +76,7 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
         normals: Some(vertices.iter().map(|v| v.normal).collect()),
         tangents: Some(vertices.iter().map(|v| v.tangent).collect()),
         uv0: Some(vertices.iter().map(|v| v.uv0).collect()),
-        uv1: has_uv1.then(|| vertices.iter().map(|v| v.uv1).collect()),
+        texcoord1: has_uv1.then(|| vertices.iter().map(|v| v.texcoord1).collect()),
         colors: Some(vertices.iter().map(|v| v.color).collect()),
         joints,
         weights,
@@ -86,7 +86,7 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
         morph_normals: deform.morph_normals,
         ..Default::default()
     };
-    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), is_static: false, lods: vec![lod], morph_weights })
+    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), lods: vec![lod], morph_weights })
 }
 
 /// An upper bound on the vertices one import may produce (counting each morph target's deltas as
@@ -201,9 +201,9 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>], budget: &mut u64) -> Resu
             normal: nrm.as_ref().map_or([0.0, 0.0, 1.0], |v| v[i]),
             tangent: tan.as_ref().map_or([0.0; 4], |v| v[i]),
             uv0: t0.as_ref().map_or([0.0; 2], |v| v[i]),
-            uv1: t1.as_ref().map_or([0.0; 2], |v| v[i]),
+            texcoord1: t1.as_ref().map_or([0.0; 2], |v| v[i]),
             color: col.as_ref().map_or([255; 4], |v| unorm8(v[i])),
-            _pad: 0,
+            ..Default::default()
         })
         .collect();
     let influences = joints[0].as_ref().map(|_| {

@@ -9,7 +9,7 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
     let mut b = PackBuilder::new(&scene.source, cooker);
     for t in &scene.textures {
         let mips = t.mips.iter().map(|m| b.push_bytes(m)).collect();
-        b.manifest.textures.push(pack::Texture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips });
+        b.manifest.textures.push(pack::Texture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, mips, sampler: t.sampler });
     }
     for (i, mesh) in scene.meshes.iter().enumerate() {
         let what = format!("mesh {i} '{}'", mesh.name);
@@ -21,7 +21,7 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
             lod.validate(&what)?;
             lods.push(write_lod(lod, &mut b).map_err(|e| format!("{what}: {e}"))?);
         }
-        b.manifest.meshes.push(Mesh { name: mesh.name.clone(), lods, bounds_min, bounds_max, is_static: mesh.is_static });
+        b.manifest.meshes.push(Mesh { name: mesh.name.clone(), lods, bounds_min, bounds_max });
         write_deform(i as u32, mesh, &mut b);
     }
     scene.check_animation()?;
@@ -125,22 +125,23 @@ fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
             tangent: lod.tangents.as_ref().map_or([1.0, 0.0, 0.0, 1.0], |v| v[i]),
             uv0: lod.uv0.as_ref().map_or([0.0; 2], |v| v[i]),
             uv1: lod.uv1.as_ref().map_or([0.0; 2], |v| v[i]),
+            texcoord1: lod.texcoord1.as_ref().map_or([0.0; 2], |v| v[i]),
             color: lod.colors.as_ref().map_or([255; 4], |v| v[i]),
-            _pad: 0,
+            _pad: [0; 3],
         })
         .collect();
-    // One submesh per (material, lightmap page); a stable sort keeps the authored triangle order
+    // One submesh per (material, lightmap block); a stable sort keeps the authored triangle order
     // within each, which keeps the output deterministic.
-    let key = |t: usize| (lod.materials[t], lod.lightmap_pages.as_ref().map(|p| p[t]));
+    let key = |t: usize| (lod.materials[t], lod.lightmap_blocks.as_ref().map(|p| p[t]));
     let mut order: Vec<usize> = (0..lod.triangles.len()).collect();
     order.sort_by_key(|&t| key(t));
     let mut indices: Vec<u32> = Vec::with_capacity(order.len() * 3);
     let mut submeshes: Vec<Submesh> = Vec::new();
     for &t in &order {
-        let (material, lightmap_page) = key(t);
+        let (material, lightmap_block) = key(t);
         match submeshes.last_mut() {
-            Some(s) if s.material == material && s.lightmap_page == lightmap_page => s.index_count += 3,
-            _ => submeshes.push(Submesh { first_index: indices.len() as u32, index_count: 3, material, lightmap_page }),
+            Some(s) if s.material == material && s.lightmap_block == lightmap_block => s.index_count += 3,
+            _ => submeshes.push(Submesh { first_index: indices.len() as u32, index_count: 3, material, lightmap_block }),
         }
         indices.extend_from_slice(&lod.triangles[t]);
     }

@@ -121,8 +121,9 @@ fn vertices(p: &Pack, mesh: usize) -> Vec<pack::Vertex> {
                 tangent: [f(24), f(28), f(32), f(36)],
                 uv0: [f(40), f(44)],
                 uv1: [f(48), f(52)],
-                color: c[56..60].try_into().unwrap(),
-                _pad: 0,
+                texcoord1: [f(56), f(60)],
+                color: c[64..68].try_into().unwrap(),
+                _pad: [0; 3],
             }
         })
         .collect()
@@ -145,7 +146,7 @@ fn textured_quad_cooks_completely() {
     let mesh = &m.meshes[0];
     assert_eq!((mesh.name.as_str(), mesh.lods[0].vertex_count, mesh.lods[0].index_count), ("Quad", 4, 6));
     assert_eq!(indices(&p, 0), [0, 1, 2, 2, 1, 3], "u16 indices widened to u32");
-    assert_eq!(mesh.lods[0].submeshes, [pack::Submesh { first_index: 0, index_count: 6, material: 0, lightmap_page: None }]);
+    assert_eq!(mesh.lods[0].submeshes, [pack::Submesh { first_index: 0, index_count: 6, material: 0, lightmap_block: None }]);
     assert_eq!((mesh.bounds_min, mesh.bounds_max), ([0.0; 3], [1.0, 1.0, 0.0]));
     let v = vertices(&p, 0);
     assert_eq!(v[3].position, [1.0, 1.0, 0.0]);
@@ -185,19 +186,16 @@ fn textured_quad_cooks_completely() {
     assert_eq!(dir.files(), ["quad.gltf", "quad.pack"]);
 }
 
-#[test]
-fn glb_with_image_in_a_buffer_view_cooks() {
-    let (mut j, mut bin) = quad();
-    let image = png(3, 1);
-    j["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 0, "byteOffset": 140, "byteLength": image.len()}));
-    j["images"] = json!([{"bufferView": 4, "mimeType": "image/png"}]);
-    bin.extend(&image);
-    while bin.len() % 4 != 0 {
+/// `j` and `bin` as a GLB file's bytes (JSON chunk, then the buffer as the BIN chunk).
+fn glb(j: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut bin = bin.to_vec();
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
+    let mut j = j.clone();
     j["buffers"] = json!([{"byteLength": bin.len()}]);
     let mut text = serde_json::to_vec(&j).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let mut glb = Vec::new();
@@ -210,6 +208,17 @@ fn glb_with_image_in_a_buffer_view_cooks() {
     glb.extend((bin.len() as u32).to_le_bytes());
     glb.extend(b"BIN\0");
     glb.extend(&bin);
+    glb
+}
+
+#[test]
+fn glb_with_image_in_a_buffer_view_cooks() {
+    let (mut j, mut bin) = quad();
+    let image = png(3, 1);
+    j["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 0, "byteOffset": 140, "byteLength": image.len()}));
+    j["images"] = json!([{"bufferView": 4, "mimeType": "image/png"}]);
+    bin.extend(&image);
+    let mut glb = glb(&j, &bin);
     let dir = TempDir::new("glb");
     let p = dir.path("quad.glb");
     std::fs::write(&p, &glb).unwrap();
@@ -454,16 +463,29 @@ fn scene_ir_survives_the_wire_both_ways() {
     let dir = TempDir::new("wire");
     let (j, bin) = quad();
     let path = write_gltf(&dir, "quad.gltf", j, &bin);
-    let mut scene = crate::import_gltf(&path, &mut |_, _| {}).unwrap();
-    // Exercise the optional parts too: a second LOD, lightmap pages, skin attributes, lights.
+    let mut scene = crate::import_gltf(&path, &ImportOptions::default(), &mut |_, _| {}).unwrap().scene;
+    // Exercise the optional parts too: a second LOD, lightmap blocks and a static instance's
+    // region, TEXCOORD_1, a sampler, skin attributes, lights.
     let mut lod1 = scene.meshes[0].lods[0].clone();
     lod1.triangles.truncate(1);
     lod1.materials.truncate(1);
     lod1.error = 0.25;
     lod1.joints = Some(vec![[0, 1, 0, 0]; lod1.positions.len()]);
     lod1.weights = Some(vec![[0.5, 0.5, 0.0, 0.0]; lod1.positions.len()]);
-    lod1.lightmap_pages = Some(vec![0]);
+    lod1.lightmap_blocks = Some(vec![0]);
+    lod1.texcoord1 = Some(vec![[0.5, 0.25]; lod1.positions.len()]);
     scene.meshes[0].lods.push(lod1);
+    scene.nodes[1].is_static = true;
+    scene.nodes[1].lightmap = Some(pack::LightmapRegion { page: 0, scale: [0.5, 0.5], offset: [0.25, 0.0] });
+    scene.textures.push(crate::ir::TextureIr {
+        name: "clamped".into(),
+        width: 1,
+        height: 1,
+        format: pack::TextureFormat::Rgba8Unorm,
+        usage: crate::mips::Usage::Data,
+        mips: vec![vec![1, 2, 3, 4]],
+        sampler: pack::Sampler { wrap_s: pack::Wrap::Clamp, min_filter: pack::Filter::Nearest, mipmap_filter: None, ..Default::default() },
+    });
     scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2, textures: vec![] });
     scene.probes = Some(crate::ir::ProbesIr { origin: [1.0, 2.0, 3.0], spacing: [2.0; 3], counts: [2, 1, 1], sh: vec![[0.5; 27], [0.25; 27]], sun_visibility: vec![1.0, 0.0] });
     scene.sky = Some(pack::Sky { color: [0.1, 0.2, 0.3], intensity: 2.0 });
@@ -472,7 +494,9 @@ fn scene_ir_survives_the_wire_both_ways() {
     assert_eq!(back, scene);
     let pack = crate::build_pack(&back).unwrap();
     assert_eq!(pack.manifest.meshes[0].lods.len(), 2);
-    assert_eq!(pack.manifest.meshes[0].lods[1].submeshes[0].lightmap_page, Some(0));
+    assert_eq!(pack.manifest.meshes[0].lods[1].submeshes[0].lightmap_block, Some(0));
+    assert_eq!(pack.manifest.nodes[1].lightmap, scene.nodes[1].lightmap);
+    assert_eq!(pack.manifest.textures.last().unwrap().sampler, scene.textures.last().unwrap().sampler);
     assert_eq!(pack.manifest.meshes[0].lods[1].error, 0.25);
     let g = pack.manifest.probes.as_ref().unwrap();
     assert_eq!((g.counts, g.sh.len, g.sun_visibility.len), ([2, 1, 1], 2 * 27 * 4, 8));
@@ -483,7 +507,7 @@ fn scene_ir_survives_the_wire_both_ways() {
 fn wire_arrays_of_the_wrong_type_or_shape_are_named() {
     let dir = TempDir::new("wire");
     let (j, bin) = quad();
-    let scene = crate::import_gltf(&write_gltf(&dir, "quad.gltf", j, &bin), &mut |_, _| {}).unwrap();
+    let scene = crate::import_gltf(&write_gltf(&dir, "quad.gltf", j, &bin), &ImportOptions::default(), &mut |_, _| {}).unwrap().scene;
     let (json, arrays) = crate::wire::to_wire(&scene);
     let position = arrays.iter().position(|a| a.shape == vec![4, 3] && a.dtype == "<f4").unwrap();
     let mut bad = arrays.clone();
@@ -510,4 +534,400 @@ fn a_texture_larger_than_the_image_crates_default_memory_limit_decodes() {
     // One more row than a texture may have is refused from the header, before decoding.
     let err = crate::decode_texture(&self::png(1, crate::MAX_TEXTURE_SIZE + 1)).unwrap_err();
     assert!(err.contains("1 x 16385 texels, larger than the 16384"), "{err}");
+}
+
+/// Import `p` with `options`; panics on failure.
+fn import_with(p: &Path, options: &ImportOptions) -> Imported {
+    import_gltf(p, options, &mut |_, _| {}).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn import_err_with(p: &Path, options: &ImportOptions) -> String {
+    let e = import_gltf(p, options, &mut |_, _| {}).expect_err("import should fail").to_string();
+    assert!(!e.contains('\n'), "{e}");
+    e
+}
+
+#[test]
+fn required_extensions_the_cooker_does_not_implement_are_refused_by_name() {
+    let (mut j, bin) = quad();
+    j["extensionsRequired"] = json!(["KHR_texture_transform", "KHR_draco_mesh_compression"]);
+    j["extensionsUsed"] = json!(["KHR_texture_transform", "KHR_draco_mesh_compression"]);
+    assert_eq!(
+        cook_err(j, &bin),
+        "requires extension 'KHR_draco_mesh_compression', which the cooker does not support \
+         (supported: KHR_lights_punctual, KHR_materials_emissive_strength, KHR_texture_transform)"
+    );
+    // Every one we implement may be required; one that is only used is ignored.
+    let (mut j, bin) = quad();
+    j["extensionsRequired"] = json!(["KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform"]);
+    j["extensionsUsed"] = json!(["KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform", "EXT_meshopt_compression"]);
+    let dir = TempDir::new("required");
+    cook(&write_gltf(&dir, "q.gltf", j, &bin)).unwrap();
+}
+
+#[test]
+fn texture_slots_carry_their_uv_set_and_khr_texture_transform() {
+    let (mut j, bin) = quad();
+    let transform = |t: Value| json!({"KHR_texture_transform": t});
+    j["extensionsUsed"] = json!(["KHR_texture_transform"]);
+    let m = &mut j["materials"][0];
+    m["pbrMetallicRoughness"]["baseColorTexture"] =
+        json!({"index": 0, "texCoord": 1, "extensions": transform(json!({"offset": [0.5, 0.25], "rotation": 0.3, "scale": [2.0, 3.0]}))});
+    m["pbrMetallicRoughness"]["metallicRoughnessTexture"] = json!({"index": 0, "texCoord": 1});
+    m["normalTexture"] = json!({"index": 0, "scale": 0.5, "extensions": transform(json!({"texCoord": 1, "scale": [4.0, 4.0]}))});
+    // The transform's texCoord overrides the slot's.
+    m["occlusionTexture"] = json!({"index": 0, "texCoord": 1, "extensions": transform(json!({"offset": [1.0, 0.0], "texCoord": 0}))});
+    m["emissiveTexture"] = json!({"index": 0});
+    let check = |p: &Pack| {
+        let mat = &p.manifest.materials[0];
+        let t = |tex_coord, offset, rotation, scale| pack::TextureTransform { tex_coord, offset, rotation, scale };
+        assert_eq!(mat.base_color_uv, t(1, [0.5, 0.25], 0.3, [2.0, 3.0]));
+        assert_eq!(mat.metallic_roughness_uv, t(1, [0.0; 2], 0.0, [1.0; 2]));
+        assert_eq!(mat.normal_uv, t(1, [0.0; 2], 0.0, [4.0, 4.0]));
+        assert_eq!(mat.occlusion_uv, t(0, [1.0, 0.0], 0.0, [1.0; 2]));
+        assert_eq!(mat.emissive_uv, pack::TextureTransform::default());
+        assert_eq!(mat.normal_scale, 0.5);
+    };
+    let dir = TempDir::new("uv");
+    check(&cook(&write_gltf(&dir, "t.gltf", j.clone(), &bin)).unwrap());
+    // The same from a GLB, whose normal and occlusion transforms come from its JSON chunk.
+    let p = dir.path("t.glb");
+    std::fs::write(&p, glb(&j, &bin)).unwrap();
+    check(&cook(&p).unwrap());
+
+    let mut bad = j.clone();
+    bad["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["texCoord"] = json!(2);
+    bad["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = json!({});
+    assert_eq!(cook_err(bad, &bin), "material 0 'mat' base colour: texCoord 2 is not supported (vertices carry TEXCOORD_0 and TEXCOORD_1)");
+    let mut bad = j.clone();
+    bad["materials"][0]["normalTexture"]["extensions"]["KHR_texture_transform"]["texCoord"] = json!(3);
+    assert_eq!(cook_err(bad, &bin), "material 0 'mat' normal map: texCoord 3 is not supported (vertices carry TEXCOORD_0 and TEXCOORD_1)");
+    let mut bad = j.clone();
+    bad["materials"][0]["occlusionTexture"]["extensions"]["KHR_texture_transform"]["offset"] = json!("up");
+    let e = cook_err(bad, &bin);
+    assert!(e.starts_with("material 0 'mat' occlusion: KHR_texture_transform: invalid type"), "{e}");
+    let mut bad = j;
+    bad["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]["rotation"] = json!(1e39);
+    let e = cook_err(bad, &bin);
+    assert!(e.starts_with("material 0 'mat' base colour: KHR_texture_transform has a number that is not finite"), "{e}");
+}
+
+#[test]
+fn samplers_come_through_and_one_image_under_two_samplers_is_two_textures() {
+    let (mut j, bin) = quad();
+    j["samplers"] = json!([{"wrapS": 33071, "wrapT": 33648, "magFilter": 9728, "minFilter": 9984}, {}]);
+    j["textures"] = json!([{"source": 0, "sampler": 0}, {"source": 0, "sampler": 1}, {"source": 0}]);
+    j["materials"][0]["emissiveTexture"] = json!({"index": 1});
+    j["materials"].as_array_mut().unwrap().push(json!({"name": "plain", "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}}}));
+    let dir = TempDir::new("sampler");
+    let p = cook(&write_gltf(&dir, "t.gltf", j.clone(), &bin)).unwrap();
+    let m = &p.manifest;
+    assert_eq!(m.textures.len(), 2, "sampler 1 (all defaults) and no sampler sample alike: one texture");
+    use pack::{Filter, Sampler, Wrap};
+    let clamped = Sampler { wrap_s: Wrap::Clamp, wrap_t: Wrap::Mirror, mag_filter: Filter::Nearest, min_filter: Filter::Nearest, mipmap_filter: Some(Filter::Nearest) };
+    assert_eq!((m.textures[0].sampler, m.textures[1].sampler), (clamped, Sampler::default()));
+    assert_eq!((m.materials[0].base_color_texture, m.materials[0].emissive_texture, m.materials[1].base_color_texture), (Some(0), Some(1), Some(1)));
+
+    // Every minification filter, and the other wrap and magnification values.
+    for (min, filter, mips) in [
+        (9728, Filter::Nearest, None),
+        (9729, Filter::Linear, None),
+        (9984, Filter::Nearest, Some(Filter::Nearest)),
+        (9985, Filter::Linear, Some(Filter::Nearest)),
+        (9986, Filter::Nearest, Some(Filter::Linear)),
+        (9987, Filter::Linear, Some(Filter::Linear)),
+    ] {
+        j["samplers"][0] = json!({"wrapS": 10497, "wrapT": 33071, "magFilter": 9729, "minFilter": min});
+        let p = cook(&write_gltf(&dir, "t.gltf", j.clone(), &bin)).unwrap();
+        let want = Sampler { wrap_s: Wrap::Repeat, wrap_t: Wrap::Clamp, mag_filter: Filter::Linear, min_filter: filter, mipmap_filter: mips };
+        assert_eq!(p.manifest.textures[0].sampler, want, "minFilter {min}");
+    }
+}
+
+/// The quad scene with deformation and motion: a skinned mesh (1), a mesh with a morph target
+/// (2), an animation moving nodes 3 and 6, and extras marking nodes static or not. Nodes, in
+/// flattened order: 0 plain, 1 skinned, 2 morphed, 3 mover (animated, no mesh), 4 rider (under
+/// mover), 5 door (extras static false), 6 insist (extras static true, animated), 7 joint,
+/// 8 empty, 9 marked (extras static true).
+fn rig() -> (Value, Vec<u8>) {
+    let (mut j, mut bin) = quad();
+    bin.extend([0u8; 16]); // joints, view 4
+    bin.extend(f32s(&[1., 0., 0., 0.].repeat(4))); // weights, view 5
+    bin.extend(f32s(&[0., 1.])); // key times, view 6
+    bin.extend(f32s(&[0., 0., 0., 0., 1., 0.])); // translations, view 7
+    j["buffers"][0]["byteLength"] = json!(bin.len());
+    j["bufferViews"].as_array_mut().unwrap().extend([
+        json!({"buffer": 0, "byteOffset": 140, "byteLength": 16}),
+        json!({"buffer": 0, "byteOffset": 156, "byteLength": 64}),
+        json!({"buffer": 0, "byteOffset": 220, "byteLength": 8}),
+        json!({"buffer": 0, "byteOffset": 228, "byteLength": 24}),
+    ]);
+    j["accessors"].as_array_mut().unwrap().extend([
+        json!({"bufferView": 4, "componentType": 5121, "count": 4, "type": "VEC4"}),
+        json!({"bufferView": 5, "componentType": 5126, "count": 4, "type": "VEC4"}),
+        json!({"bufferView": 6, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0.0], "max": [1.0]}),
+        json!({"bufferView": 7, "componentType": 5126, "count": 2, "type": "VEC3"}),
+    ]);
+    j["meshes"].as_array_mut().unwrap().extend([
+        json!({"name": "Skinned", "primitives": [{"attributes": {"POSITION": 1, "NORMAL": 2, "JOINTS_0": 4, "WEIGHTS_0": 5}, "indices": 0}]}),
+        // The normals serve as the target's position deltas.
+        json!({"name": "Morphed", "primitives": [{"attributes": {"POSITION": 1, "NORMAL": 2}, "indices": 0, "targets": [{"POSITION": 2}]}]}),
+    ]);
+    j["skins"] = json!([{"joints": [7]}]);
+    j["nodes"] = json!([
+        {"name": "plain", "mesh": 0},
+        {"name": "skinned", "mesh": 1, "skin": 0},
+        {"name": "morphed", "mesh": 2},
+        {"name": "mover", "children": [4]},
+        {"name": "rider", "mesh": 0},
+        {"name": "door", "mesh": 0, "extras": {"static": false}},
+        {"name": "insist", "mesh": 0, "extras": {"static": true}},
+        {"name": "joint"},
+        {"name": "empty"},
+        {"name": "marked", "mesh": 0, "extras": {"static": true, "note": "kept"}}
+    ]);
+    j["scenes"] = json!([{"nodes": [0, 1, 2, 3, 5, 6, 7, 8, 9]}]);
+    j["animations"] = json!([{"name": "move", "samplers": [{"input": 6, "output": 7}], "channels": [
+        {"sampler": 0, "target": {"node": 3, "path": "translation"}},
+        {"sampler": 0, "target": {"node": 6, "path": "translation"}}
+    ]}]);
+    (j, bin)
+}
+
+#[test]
+fn a_mesh_node_is_static_unless_it_deforms_moves_or_says_otherwise() {
+    let dir = TempDir::new("static");
+    let (j, bin) = rig();
+    let p = cook(&write_gltf(&dir, "rig.gltf", j.clone(), &bin)).unwrap();
+    let flags: Vec<(&str, bool)> = p.manifest.nodes.iter().map(|n| (n.name.as_str(), n.is_static)).collect();
+    assert_eq!(
+        flags,
+        [
+            ("plain", true),
+            ("skinned", false),
+            ("morphed", false),
+            ("mover", false),
+            ("rider", false),
+            ("door", false),
+            ("insist", false),
+            ("joint", false),
+            ("empty", false),
+            ("marked", true)
+        ]
+    );
+    let mut bad = j;
+    bad["nodes"][5]["extras"] = json!({"static": "no"});
+    assert_eq!(cook_err(bad, &bin), "node 5 'door': extras \"static\" is \"no\", expected true or false");
+}
+
+fn close(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5)
+}
+
+#[test]
+fn punctual_lights_come_in_world_space_with_their_units() {
+    let (mut j, bin) = quad();
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    j["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+        {"name": "Sun", "type": "directional", "color": [1.0, 0.9, 0.8], "intensity": 3.0, "range": 7.0},
+        {"type": "point", "intensity": 100.0, "range": 5.0},
+        {"name": "Spot", "type": "spot", "intensity": 50.0, "spot": {"innerConeAngle": 0.1}}
+    ]}});
+    // root: at (1, 2, 3), turned 90 degrees about +Y (so -Z becomes -X).
+    j["nodes"] = json!([
+        {"name": "root", "children": [1, 2, 4], "translation": [1.0, 2.0, 3.0], "rotation": [0.0, h, 0.0, h]},
+        {"name": "child", "mesh": 0},
+        {"name": "lamp", "translation": [0.0, 0.0, 2.0], "extensions": {"KHR_lights_punctual": {"light": 1}}},
+        {"name": "sky", "rotation": [-h, 0.0, 0.0, h], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+        {"name": "spot holder", "scale": [3.0, 3.0, 3.0], "extensions": {"KHR_lights_punctual": {"light": 2}}}
+    ]);
+    j["scenes"] = json!([{"nodes": [0, 3]}]);
+    let dir = TempDir::new("lights");
+    let imported = import_with(&write_gltf(&dir, "l.gltf", j.clone(), &bin), &ImportOptions::default());
+    let lights = &imported.scene.lights;
+    let names: Vec<(&str, pack::LightKind)> = lights.iter().map(|l| (l.name.as_str(), l.kind)).collect();
+    use pack::LightKind::{Point, Spot, Sun};
+    assert_eq!(names, [("lamp", Point), ("Spot", Spot), ("Sun", Sun)], "flattened node order; a light without a name takes its node's");
+    let (lamp, spot, sun) = (&lights[0], &lights[1], &lights[2]);
+    assert!(close(&lamp.position, &[3.0, 2.0, 3.0]), "{:?}", lamp.position);
+    assert_eq!((lamp.intensity, lamp.range, lamp.color), (100.0, Some(5.0), [1.0; 3]));
+    assert!(close(&spot.position, &[1.0, 2.0, 3.0]) && close(&spot.direction, &[-1.0, 0.0, 0.0]), "{spot:?}");
+    assert_eq!((spot.inner_cone, spot.outer_cone, spot.range), (0.1, std::f32::consts::FRAC_PI_4, None), "outer cone defaults to pi/4");
+    assert!(close(&sun.direction, &[0.0, -1.0, 0.0]), "{:?}", sun.direction);
+    assert_eq!((sun.intensity, sun.color, sun.range), (3.0, [1.0, 0.9, 0.8], None), "lux and tint apart; no range for a sun");
+    assert!(imported.scene.warnings.is_empty(), "{:?}", imported.scene.warnings);
+    let p = build_pack(&imported.scene).unwrap();
+    assert_eq!(p.manifest.lights, *lights);
+
+    let mut bad = j.clone();
+    bad["extensions"]["KHR_lights_punctual"]["lights"][2]["spot"] = json!({"innerConeAngle": 0.9, "outerConeAngle": 0.5});
+    assert_eq!(
+        cook_err(bad, &bin),
+        "light 2 'Spot' on node 4 'spot holder': spot cone angles 0.9 (inner) and 0.5 (outer) are not 0 <= inner <= outer <= pi/2 with outer > 0"
+    );
+    let mut bad = j;
+    bad["extensions"]["KHR_lights_punctual"]["lights"][1]["range"] = json!(0.0);
+    assert_eq!(cook_err(bad, &bin), "light 1 on node 2 'lamp': range 0 is not a positive distance");
+
+    // A light on an animated node is baked where the node rests, and the import says so.
+    let (mut j, bin) = rig();
+    j["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "point"}]}});
+    j["nodes"][4]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+    let imported = import_with(&write_gltf(&dir, "rig.gltf", j, &bin), &ImportOptions::default());
+    assert_eq!(imported.scene.lights.len(), 1);
+    assert_eq!(
+        imported.scene.warnings,
+        ["light 0 on node 4 'rider': the node is animated, but lights are baked; imported where the node is at rest"]
+    );
+}
+
+#[test]
+fn the_first_camera_becomes_the_camera_spawn() {
+    let (mut j, bin) = quad();
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    j["cameras"] = json!([
+        {"name": "Wide", "type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1, "zfar": 100.0}},
+        {"type": "orthographic", "orthographic": {"xmag": 2.0, "ymag": 1.0, "znear": 0.0, "zfar": 10.0}}
+    ]);
+    // The eye sits 1 m along +Z of root, which is at (1, 2, 3), scaled by 2 and turned 90
+    // degrees about +Y: 2 m along +X of (1, 2, 3).
+    j["nodes"] = json!([
+        {"name": "root", "children": [1, 2], "translation": [1.0, 2.0, 3.0], "rotation": [0.0, h, 0.0, h], "scale": [2.0, 2.0, 2.0]},
+        {"name": "child", "mesh": 0},
+        {"name": "eye", "translation": [0.0, 0.0, 1.0], "camera": 0},
+        {"name": "topdown", "camera": 1}
+    ]);
+    j["scenes"] = json!([{"nodes": [0, 3]}]);
+    let dir = TempDir::new("camera");
+    let scene = import_with(&write_gltf(&dir, "c.gltf", j.clone(), &bin), &ImportOptions::default()).scene;
+    assert_eq!(scene.spawns.len(), 1, "only the first camera");
+    let s = &scene.spawns[0];
+    assert_eq!((s.name.as_str(), s.kind.as_str()), ("Wide", "camera"));
+    assert!(close(&s.position, &[3.0, 2.0, 3.0]), "{:?}", s.position);
+    assert!(close(&s.rotation, &[0.0, h, 0.0, h]), "scale removed, unit length: {:?}", s.rotation);
+    assert_eq!(s.params, json!({"yfov": f64::from(0.8f32), "znear": f64::from(0.1f32)}));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(build_pack(&scene).unwrap().manifest.spawns, scene.spawns);
+
+    // Without the eye's camera, the orthographic one is first: its magnifications, and a warning.
+    let mut ortho = j.clone();
+    ortho["nodes"][2].as_object_mut().unwrap().remove("camera");
+    let scene = import_with(&write_gltf(&dir, "c.gltf", ortho, &bin), &ImportOptions::default()).scene;
+    let s = &scene.spawns[0];
+    assert_eq!((s.name.as_str(), &s.position, &s.rotation), ("topdown", &[0.0; 3], &[0.0, 0.0, 0.0, 1.0]), "unnamed: the node's name");
+    assert_eq!(s.params, json!({"xmag": 2.0, "ymag": 1.0, "znear": 0.0}));
+    assert_eq!(scene.warnings, ["camera 1 on node 3 'topdown': orthographic; the runtime shows it in perspective"]);
+
+    // A type without its values is an error, not the gltf crate's panic.
+    let mut bad = j.clone();
+    bad["cameras"][0] = json!({"type": "perspective", "orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.0, "zfar": 1.0}});
+    assert_eq!(cook_err(bad, &bin), "camera 0 on node 2 'eye': its type is perspective but it has no perspective values");
+    let mut bad = j;
+    bad["cameras"][0]["perspective"]["yfov"] = json!(0.0);
+    assert_eq!(cook_err(bad, &bin), "camera 0 'Wide' on node 2 'eye': yfov 0 is not a positive number");
+}
+
+#[test]
+fn buffers_and_images_must_stay_inside_the_assets_folder() {
+    let dir = TempDir::new("uris");
+    let (mut j, bin) = quad();
+    for sub in ["asset/tex", "shared"] {
+        std::fs::create_dir_all(dir.path(sub)).unwrap();
+    }
+    std::fs::write(dir.path("asset/quad.bin"), &bin).unwrap();
+    std::fs::write(dir.path("secret.bin"), &bin).unwrap();
+    std::fs::write(dir.path("asset/tex/t.png"), png(2, 2)).unwrap();
+    std::fs::write(dir.path("shared/t.png"), png(2, 2)).unwrap();
+    let canonical = |p: &str| dir.path(p).canonicalize().unwrap();
+    let gltf = dir.path("asset/scene.gltf");
+    // The image serves two usages (colour and data): read twice, listed once.
+    j["materials"][0]["pbrMetallicRoughness"]["metallicRoughnessTexture"] = json!({"index": 0});
+    let write = |buffer: &str, image: &str| {
+        let mut j = j.clone();
+        j["buffers"][0]["uri"] = json!(buffer);
+        j["images"][0]["uri"] = json!(image);
+        std::fs::write(&gltf, serde_json::to_vec(&j).unwrap()).unwrap();
+    };
+    let defaults = ImportOptions::default();
+
+    write("quad.bin", "tex/t.png");
+    let imported = import_with(&gltf, &defaults);
+    assert_eq!(imported.files, [canonical("asset/scene.gltf"), canonical("asset/quad.bin"), canonical("asset/tex/t.png")]);
+    assert_eq!(imported.scene.textures.len(), 2);
+
+    let outside = |object: &str, uri: &str| {
+        format!(
+            "{}: invalid glTF: {object}: URI '{uri}' reaches outside the asset's folder '{}' (pass --allow-external-uris to allow it)",
+            gltf.display(),
+            canonical("asset").display()
+        )
+    };
+    let secret = canonical("secret.bin");
+    let file_uri = format!("file://{}", secret.display());
+    let absolute = secret.display().to_string();
+    for uri in ["../secret.bin", "%2E%2E/secret.bin", "tex/../../secret.bin", absolute.as_str(), file_uri.as_str()] {
+        write(uri, "tex/t.png");
+        assert_eq!(import_err_with(&gltf, &defaults), outside("buffer 0", uri));
+        // Allowed, the old behaviour: the file is read (and reported).
+        let imported = import_with(&gltf, &ImportOptions { allow_external_uris: true, ..Default::default() });
+        assert_eq!(imported.files[1], secret, "{uri}");
+    }
+    // An absolute path inside the folder is inside.
+    write(&canonical("asset/quad.bin").display().to_string(), "tex/t.png");
+    import_with(&gltf, &defaults);
+
+    // A symlink in the folder that leads out of it counts as leaving.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&secret, dir.path("asset/link.bin")).unwrap();
+        write("link.bin", "tex/t.png");
+        assert_eq!(import_err_with(&gltf, &defaults), outside("buffer 0", "link.bin"));
+    }
+
+    // Images too, checked before anything is read; a wider root (a level's folder) lets a
+    // prop share its textures.
+    write("quad.bin", "../shared/t.png");
+    assert_eq!(import_err_with(&gltf, &defaults), outside("image 0", "../shared/t.png"));
+    let imported = import_with(&gltf, &ImportOptions { root: Some(dir.0.clone()), ..Default::default() });
+    assert_eq!(imported.files, [canonical("asset/scene.gltf"), canonical("asset/quad.bin"), canonical("shared/t.png")]);
+    write("../secret.bin", "tex/t.png");
+    import_with(&gltf, &ImportOptions { root: Some(dir.0.clone()), ..Default::default() });
+}
+
+#[test]
+fn broken_lights_and_cameras_give_errors_not_panics() {
+    let base = || {
+        let (mut j, bin) = quad();
+        j["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {}}]}});
+        j["cameras"] = json!([{"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.1}}]);
+        j["nodes"][1]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+        j["nodes"][1]["camera"] = json!(0);
+        (j, bin)
+    };
+    let dir = TempDir::new("broken-lights");
+    let (j, bin) = base();
+    cook(&write_gltf(&dir, "ok.gltf", j, &bin)).unwrap();
+    type Change = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Change)> = vec![
+        ("light index", Box::new(|j| j["nodes"][1]["extensions"]["KHR_lights_punctual"]["light"] = json!(5))),
+        ("light type", Box::new(|j| j["extensions"]["KHR_lights_punctual"]["lights"][0]["type"] = json!("area"))),
+        ("spot without spot", Box::new(|j| j["extensions"]["KHR_lights_punctual"]["lights"][0] = json!({"type": "spot"}))),
+        ("no lights", Box::new(|j| j["extensions"] = json!({}))),
+        ("intensity", Box::new(|j| j["extensions"]["KHR_lights_punctual"]["lights"][0]["intensity"] = json!(-1.0))),
+        ("colour", Box::new(|j| j["extensions"]["KHR_lights_punctual"]["lights"][0]["color"] = json!([1e39, 0.0, 0.0]))),
+        ("camera index", Box::new(|j| j["nodes"][1]["camera"] = json!(3))),
+        ("camera type", Box::new(|j| j["cameras"][0]["type"] = json!("fisheye"))),
+        ("camera values", Box::new(|j| j["cameras"][0] = json!({"type": "orthographic", "perspective": {"yfov": 1.0, "znear": 0.1}}))),
+        ("flat node", Box::new(|j| j["nodes"][1]["scale"] = json!([0.0, 0.0, 0.0]))),
+        ("huge node", Box::new(|j| j["nodes"][1]["translation"] = json!([1e39, 0.0, 0.0]))),
+    ];
+    for (what, change) in cases {
+        let (mut j, bin) = base();
+        change(&mut j);
+        let p = write_gltf(&dir, "h.gltf", j, &bin);
+        let e = cook(&p).expect_err(what).to_string();
+        assert!(!e.contains('\n'), "{what}: {e}");
+    }
 }

@@ -55,6 +55,10 @@ struct WireNode {
     skin: Option<u32>,
     #[serde(default)]
     weights: Option<Vec<f32>>,
+    #[serde(rename = "static", default)]
+    is_static: bool,
+    #[serde(default)]
+    lightmap: Option<pack::LightmapRegion>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -96,8 +100,6 @@ struct WireProbes {
 #[derive(Serialize, Deserialize)]
 struct WireMesh {
     name: String,
-    #[serde(rename = "static", default)]
-    is_static: bool,
     lods: Vec<WireLod>,
     #[serde(default)]
     morph_weights: Vec<f32>,
@@ -109,7 +111,7 @@ struct WireLod {
     triangles: usize,
     materials: usize,
     #[serde(default)]
-    lightmap_pages: Option<usize>,
+    lightmap_blocks: Option<usize>,
     #[serde(default)]
     error: f32,
     /// float32 (targets, n, 3).
@@ -129,6 +131,8 @@ struct WireTexture {
     #[serde(default)]
     usage: Option<Usage>,
     mips: Vec<usize>,
+    #[serde(default)]
+    sampler: pack::Sampler,
 }
 
 /// A scalar type that can cross as a numpy dtype.
@@ -216,7 +220,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             let what = format!("mesh {i} '{}' LOD {l}", m.name);
             let attr = |name: &str| wl.attributes.get(name).copied();
             for name in wl.attributes.keys() {
-                if !["position", "normal", "tangent", "uv0", "uv1", "color", "joints", "weights"].contains(&name.as_str()) {
+                if !["position", "normal", "tangent", "uv0", "uv1", "texcoord1", "color", "joints", "weights"].contains(&name.as_str()) {
                     return Err(format!("{what}: unknown attribute '{name}'"));
                 }
             }
@@ -230,12 +234,13 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
                 tangents: opt4("tangent")?,
                 uv0: opt2("uv0")?,
                 uv1: opt2("uv1")?,
+                texcoord1: opt2("texcoord1")?,
                 colors: attr("color").map(|i| r.rows::<u8, 4>(i, &format!("{what} color"))).transpose()?,
                 joints: attr("joints").map(|i| r.rows::<u16, 4>(i, &format!("{what} joints"))).transpose()?,
                 weights: opt4("weights")?,
                 triangles: r.rows::<u32, 3>(wl.triangles, &format!("{what} triangles"))?,
                 materials: r.scalars::<u32>(wl.materials, &format!("{what} materials"))?,
-                lightmap_pages: wl.lightmap_pages.map(|i| r.scalars::<u32>(i, &format!("{what} lightmap_pages"))).transpose()?,
+                lightmap_blocks: wl.lightmap_blocks.map(|i| r.scalars::<u32>(i, &format!("{what} lightmap_blocks"))).transpose()?,
                 error: wl.error,
                 morph_positions: Vec::new(),
                 morph_normals: Vec::new(),
@@ -252,7 +257,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             }
             lods.push(lod);
         }
-        meshes.push(MeshIr { name: m.name.clone(), is_static: m.is_static, lods, morph_weights: m.morph_weights.clone() });
+        meshes.push(MeshIr { name: m.name.clone(), lods, morph_weights: m.morph_weights.clone() });
     }
     let mut textures = Vec::with_capacity(w.textures.len());
     for (i, t) in w.textures.iter().enumerate() {
@@ -267,7 +272,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         }
         let usage = t.usage.unwrap_or(Usage::of_format(t.format));
         usage.check_format(t.format).map_err(|e| format!("texture {i} '{}': {e}", t.name))?;
-        textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage, mips });
+        textures.push(TextureIr { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage, mips, sampler: t.sampler });
     }
     let probes = match &w.probes {
         None => None,
@@ -309,7 +314,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         .filter(|(_, n)| n.skin.is_some() || n.weights.is_some())
         .map(|(i, n)| pack::NodeBinding { node: i as u32, skin: n.skin, weights: n.weights.clone() })
         .collect();
-    let nodes = w.nodes.into_iter().map(|n| Node { name: n.name, parent: n.parent, local: n.local, mesh: n.mesh }).collect();
+    let nodes = w.nodes.into_iter().map(|n| Node { name: n.name, parent: n.parent, local: n.local, mesh: n.mesh, is_static: n.is_static, lightmap: n.lightmap }).collect();
     let scene = SceneIr {
         name: w.name,
         source: w.source,
@@ -367,7 +372,6 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         .iter()
         .map(|m| WireMesh {
             name: m.name.clone(),
-            is_static: m.is_static,
             lods: m
                 .lods
                 .iter()
@@ -386,6 +390,9 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                     if let Some(v) = &l.uv1 {
                         attributes.insert("uv1".into(), w.rows(v));
                     }
+                    if let Some(v) = &l.texcoord1 {
+                        attributes.insert("texcoord1".into(), w.rows(v));
+                    }
                     if let Some(v) = &l.colors {
                         attributes.insert("color".into(), w.rows(v));
                     }
@@ -399,7 +406,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                         attributes,
                         triangles: w.rows(&l.triangles),
                         materials: w.scalars(&l.materials),
-                        lightmap_pages: l.lightmap_pages.as_ref().map(|p| w.scalars(p)),
+                        lightmap_blocks: l.lightmap_blocks.as_ref().map(|p| w.scalars(p)),
                         error: l.error,
                         morph_positions: (!l.morph_positions.is_empty()).then(|| w.morphs(&l.morph_positions)),
                         morph_normals: (!l.morph_normals.is_empty()).then(|| w.morphs(&l.morph_normals)),
@@ -425,7 +432,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                     w.push(dtype, shape, t.mips[l].clone())
                 })
                 .collect();
-            WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage: Some(t.usage), mips }
+            WireTexture { name: t.name.clone(), width: t.width, height: t.height, format: t.format, usage: Some(t.usage), mips, sampler: t.sampler }
         })
         .collect();
     let probes = scene.probes.as_ref().map(|p| WireProbes {
@@ -447,7 +454,16 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
             .enumerate()
             .map(|(i, n)| {
                 let b = scene.bindings.iter().find(|b| b.node as usize == i);
-                WireNode { name: n.name.clone(), parent: n.parent, local: n.local, mesh: n.mesh, skin: b.and_then(|b| b.skin), weights: b.and_then(|b| b.weights.clone()) }
+                WireNode {
+                    name: n.name.clone(),
+                    parent: n.parent,
+                    local: n.local,
+                    mesh: n.mesh,
+                    skin: b.and_then(|b| b.skin),
+                    weights: b.and_then(|b| b.weights.clone()),
+                    is_static: n.is_static,
+                    lightmap: n.lightmap,
+                }
             })
             .collect(),
         lights: scene.lights.clone(),
