@@ -149,19 +149,77 @@ def test_probes_see_the_room_dark_and_the_yard_bright(room, tmp_path):
 
 
 def _scene(room: Path) -> ir.Scene:
+    """The room level built, with lightmap UVs and a region per static instance (what the cook's
+    level and uv2 stages make)."""
     import dataclasses
 
     from asset_pipeline.csg import build_level
     from asset_pipeline.level import load_level
-    from asset_pipeline.uv2 import Uv2Settings, lightmap_uvs
+    from asset_pipeline.uv2 import Instance, Uv2Settings, lightmap_uvs
 
     scene = build_level(load_level(room))
-    static = [i for i, m in enumerate(scene.meshes) if m.static]
-    lods, layout, _ = lightmap_uvs([(scene.meshes[i].base, 1.0) for i in static], Uv2Settings(texels_per_metre=4.0))
-    meshes = list(scene.meshes)
-    for i, lod in zip(static, lods):
-        meshes[i] = dataclasses.replace(meshes[i], lods=[lod])
-    return dataclasses.replace(scene, meshes=meshes, lightmap=layout)
+    static_meshes, static_nodes = scene.static_meshes(), scene.static_nodes()
+    local = {m: k for k, m in enumerate(static_meshes)}
+    r = lightmap_uvs([scene.meshes[m].base for m in static_meshes], Uv2Settings(texels_per_metre=4.0),
+                     instances=[Instance(local[scene.nodes[n].mesh]) for n in static_nodes])
+    meshes, nodes = list(scene.meshes), list(scene.nodes)
+    for m, lod in zip(static_meshes, r.lods):
+        meshes[m] = dataclasses.replace(meshes[m], lods=[lod])
+    for n, region in zip(static_nodes, r.regions):
+        nodes[n] = dataclasses.replace(nodes[n], lightmap=region)
+    return dataclasses.replace(scene, meshes=meshes, nodes=nodes, lightmap=r.layout)
+
+
+def _quad_lod(size: float, y: float, up: bool) -> ir.Lod:
+    """A size x size quad at height y facing up (or down), its own lightmap UVs in [0.1, 0.9]."""
+    h = size / 2
+    pos = np.array([[-h, y, -h], [h, y, -h], [h, y, h], [-h, y, h]], np.float32)
+    tris = np.array([[0, 2, 1], [0, 3, 2]] if up else [[0, 1, 2], [0, 2, 3]], np.uint32)
+    uv1 = (0.5 + 0.4 * pos[:, [0, 2]] / h).astype(np.float32)
+    nrm = np.tile(np.array([[0.0, 1.0 if up else -1.0, 0.0]], np.float32), (4, 1))
+    return ir.Lod(attributes={"position": pos, "normal": nrm, "uv1": uv1}, triangles=tris, materials=np.zeros(2, np.uint32),
+                  lightmap_blocks=np.zeros(2, np.uint32))
+
+
+def _translate(x: float, y: float, z: float) -> tuple:
+    return (1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, x, y, z, 1)
+
+
+def _two_tiles() -> ir.Scene:
+    """One mesh (a 2 x 2 m floor tile) placed twice: in the open at x = -5 and at x = 5 under a
+    4 x 4 m roof 1 m up; each placement (and the roof) its own quarter of a 32 x 32 page."""
+    tile, roof = _quad_lod(2.0, 0.0, up=True), _quad_lod(4.0, 0.0, up=False)
+    region = lambda ou, ov: {"page": 0, "scale": [0.5, 0.5], "offset": [ou, ov]}
+    return ir.Scene(
+        name="tiles", source="test",
+        meshes=[ir.Mesh("tile", [tile]), ir.Mesh("roof", [roof])],
+        materials=[ir.Material(name="stone", base_color=(0.6, 0.6, 0.6, 1.0))],
+        nodes=[ir.Node("sunny", local=_translate(-5, 0, 0), mesh=0, static=True, lightmap=region(0.0, 0.0)),
+               ir.Node("shaded", local=_translate(5, 0, 0), mesh=0, static=True, lightmap=region(0.5, 0.0)),
+               ir.Node("roof", local=_translate(5, 1, 0), mesh=1, static=True, lightmap=region(0.0, 0.5))],
+        lights=[ir.Light("sun", "sun", intensity=50000.0, direction=(-0.1, -1.0, 0.05))],
+        sky=ir.Sky(color=(0.5, 0.6, 1.0), intensity=2000.0),
+        lightmap=ir.LightmapLayout(texels_per_metre=6.0, pages=[(32, 32)], padding=2),
+    )
+
+
+def test_every_static_instance_gets_its_own_lightmap():
+    # The tile in the sun and its copy under the roof share one mesh (one set of lightmap UVs)
+    # but not their light: each region is baked at its own instance's world positions.
+    scene = _two_tiles()
+    baked = bake.bake_level(scene, QUICK)
+    page = baked.pages[0]
+    sunny, shaded = page[4:12, 4:12], page[4:12, 20:28]  # inside each region's chart
+    assert np.isfinite(page).all() and shaded.min() > 0.0, "the shaded tile is baked (sky light from the sides)"
+    e = 50000.0 / np.pi  # the sunny tile's direct light alone, 0.99 of it at the sun's angle
+    assert sunny.mean() > 0.9 * e and shaded.mean() < 0.1 * e, (sunny.mean(), shaded.mean())
+    stats = baked.stats
+    assert stats["static_instances"] == 3
+    assert [(i["node"], i["mesh"]) for i in stats["instances"]] == [("sunny", "tile"), ("shaded", "tile"), ("roof", "roof")]
+    texels = [i["texels"] for i in stats["instances"]]
+    assert texels[0] == texels[1] > 100 and texels[2] > 100 and sum(texels) == stats["texels"], texels
+    lines = bake.describe(stats)
+    assert any("Static instances: 3" in l for l in lines) and any("instance 'shaded' (mesh 'tile')" in l for l in lines), lines
 
 
 def test_same_seed_one_and_two_threads_give_identical_exr_bytes(room, tmp_path):

@@ -3,13 +3,16 @@
 //! `trace_rays` (closest hits, for the BVH benchmark).
 //! Arrays are read in place and the work runs without the GIL.
 
-use crate::measure::{rows3, vec1};
+use crate::measure::{rows, rows3, vec1};
 use cook_core::bake::bvh::Bvh;
-use cook_core::bake::integrator::{bake_points, BakeScene, BakeSettings};
+use cook_core::bake::integrator::{bake_points, BakeSettings};
 use cook_core::bake::lights::Light;
+use cook_core::bake::material::{Material, VertexAttributes};
 use cook_core::bake::probes::bake_probes;
+use cook_core::bake::scene::{BakeScene, Geometry};
+use cook_core::bake::textures::{Texture, TextureInfo};
 use cook_core::bake::with_threads;
-use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::borrow::Cow;
@@ -36,10 +39,18 @@ fn ids_for<'a>(ids: &'a Option<PyReadonlyArray1<'_, u64>>, n: usize) -> PyResult
     Ok(ids)
 }
 
-/// A static scene ready to bake (its BVH built once).
+/// A static scene ready to bake (its BVH built once), its materials evaluated where rays hit
+/// (see `cook_core::bake::material`).
 ///
-/// `Baker(positions float32 (n, 3), triangles uint32 (m, 3), albedo float32 (m, 3), emission
-/// float32 (m, 3), lights_json, sky)`: per-triangle `albedo` and front-face `emission` (nits);
+/// `Baker(positions float32 (n, 3), triangles uint32 (m, 3), triangle_materials uint32 (m,),
+/// uv0 float32 (n, 2) | None, texcoord1 float32 (n, 2) | None, colors uint8 (n, 4) | None,
+/// materials_json, textures, textures_json, lights_json, sky)`: world-space triangles, each
+/// with an index into `materials_json` (a JSON list of `ir.Material` dicts: base_color,
+/// base_color_texture, base_color_uv, emissive (nits), emissive_texture, emissive_uv,
+/// alpha_mode, alpha_cutoff, double_sided; texture indices into `textures`); per-vertex UV sets
+/// and linear RGBA colours the materials read (None: absent); `textures` a list of uint8
+/// (h, w, 4) level-0 images, rows top to bottom, described by `textures_json` (a JSON list, one
+/// `{"name", "format": "Rgba8Srgb" | "Rgba8Unorm", "sampler": ir.Texture.sampling}` each);
 /// `lights_json` a JSON list of `ir.Light` dicts; `sky` a uniform radiance (r, g, b) in nits
 /// (colour x intensity) or None. Presets draft | medium | high, with `samples`, `bounces`,
 /// `probe_samples` overriding them; the same seed gives the same result for any `threads`
@@ -52,19 +63,49 @@ pub struct PyBaker {
 #[pymethods]
 impl PyBaker {
     #[new]
+    #[allow(clippy::too_many_arguments)]
     fn new<'py>(
         py: Python<'py>,
         positions: PyReadonlyArray2<'py, f32>,
         triangles: PyReadonlyArray2<'py, u32>,
-        albedo: PyReadonlyArray2<'py, f32>,
-        emission: PyReadonlyArray2<'py, f32>,
+        triangle_materials: PyReadonlyArray1<'py, u32>,
+        uv0: Option<PyReadonlyArray2<'py, f32>>,
+        texcoord1: Option<PyReadonlyArray2<'py, f32>>,
+        colors: Option<PyReadonlyArray2<'py, u8>>,
+        materials_json: &str,
+        textures: Vec<PyReadonlyArray3<'py, u8>>,
+        textures_json: &str,
         lights_json: &str,
         sky: Option<(f32, f32, f32)>,
     ) -> PyResult<Self> {
+        let bad = |e: String| PyValueError::new_err(format!("bake: {e}"));
         let (pos, tri) = (rows3(&positions, "positions")?, rows3(&triangles, "triangles")?);
-        let (alb, emi) = (rows3(&albedo, "albedo")?, rows3(&emission, "emission")?);
+        let mats = vec1(&triangle_materials);
+        let uv0 = uv0.as_ref().map(|a| rows::<f32, 2>(a, "uv0")).transpose()?;
+        let uv1 = texcoord1.as_ref().map(|a| rows::<f32, 2>(a, "texcoord1")).transpose()?;
+        let col = colors.as_ref().map(|a| rows::<u8, 4>(a, "colors")).transpose()?;
+        let infos: Vec<TextureInfo> = serde_json::from_str(textures_json).map_err(|e| bad(format!("textures JSON: {e}")))?;
+        if infos.len() != textures.len() {
+            return Err(bad(format!("{} textures but {} texture descriptions", textures.len(), infos.len())));
+        }
+        let mut images = Vec::with_capacity(textures.len());
+        for (info, t) in infos.iter().zip(&textures) {
+            let shape = t.shape();
+            if shape[2] != 4 {
+                return Err(bad(format!("texture '{}' has shape {shape:?}, expected (h, w, 4)", info.name)));
+            }
+            let rgba = |flat: &[u8]| flat.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+            let texels = match t.as_slice() {
+                Ok(flat) => rgba(flat),
+                Err(_) => rgba(&t.as_array().iter().copied().collect::<Vec<u8>>()),
+            };
+            images.push(Texture::from_info(info, shape[1], shape[0], texels).map_err(bad)?);
+        }
+        let materials = Material::from_ir_json(materials_json, images.len()).map_err(bad)?;
         let lights = Light::from_ir_json(lights_json).map_err(PyValueError::new_err)?;
-        let scene = py.detach(|| BakeScene::new(&pos, &tri, &alb, &emi, lights, sky.map(|(r, g, b)| [r, g, b]))).map_err(|e| PyValueError::new_err(format!("bake: {e}")))?;
+        let attributes = VertexAttributes { uv0: uv0.as_deref(), texcoord1: uv1.as_deref(), color: col.as_deref() };
+        let geometry = Geometry { positions: &pos, triangles: &tri, materials: &mats, attributes };
+        let scene = py.detach(|| BakeScene::new(geometry, materials, images, lights, sky.map(|(r, g, b)| [r, g, b]))).map_err(bad)?;
         Ok(PyBaker { scene })
     }
 

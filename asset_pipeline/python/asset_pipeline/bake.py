@@ -7,22 +7,36 @@ module gathers its inputs, batches the work for progress and Ctrl-C, and orders 
 
 What is baked
 -------------
-- **The scene**: every instance of every static mesh (LOD 0, in world space through its node) is
-  an occluder and a bounce surface; its albedo is the material's base colour times the average
-  of its base colour texture over the triangle's UV0 footprint (linear light), its emission the
-  material's emissive (nits). Lights and the sky come from the level. Dynamic meshes (props that
-  move, characters) are not in it.
-- **Lightmaps**: each atlas page is rasterised conservatively in UV2 space (every texel a chart
-  touches, ``uv2.rasterize_page``) at the world position and normal of its sample point (a
-  static mesh placed twice shares one lightmap: its first instance is baked); each covered texel
-  gets B = H/pi (nits, linear). Then ``lightmap_post.finish_page``: OIDN denoise per chart,
-  dilation into the gutters, seam stitching. Pages go into the pack as half-float textures and
-  beside it as OpenEXR files.
+- **The scene**: every static instance (``Scene.static_nodes()``: its mesh's LOD 0, in world
+  space through its node) is an occluder and a bounce surface. Its materials are evaluated where
+  rays hit, in Rust (``cook_core::bake::material``): albedo = base colour factor x base colour
+  texture (bilinear at the hit's UV for that slot, uv0 or texcoord1 by ``tex_coord``, through
+  its KHR_texture_transform and the texture's wrap modes; sRGB decoded) x vertex colour;
+  emission = emissive factor (nits) x emissive texture. Alpha: Mask materials let rays
+  (closest-hit and shadow) through where alpha < cutoff, Blend ones where alpha < a hash of the
+  point (a pane of alpha a stops a fraction a of the light), Opaque ones ignore alpha.
+  Sides: the back face of a **single-sided** material is opaque and black: it blocks light
+  (a single-sided wall still casts its shadow) but reflects and emits nothing, so the insides
+  of closed meshes stay dark; a **double-sided** material's back face is the same surface with
+  the normal flipped (it reflects and emits on both sides). Lights and the sky come from the
+  level. Dynamic instances (props that move, characters) are not in it.
+- **Lightmaps**: every static instance has its own region of the atlas (``Node.lightmap``, from
+  the uv2 stage), so a mesh placed twice gets two lightmaps, each baked at its own world
+  positions and normals. Each atlas page is rasterised conservatively in UV2 space with every
+  instance's LOD 0 placed on it (``uv2.place_on_atlas``; every texel a chart touches,
+  ``uv2.rasterize_page``); each covered texel gets B = H/pi (nits, linear). Then
+  ``lightmap_post.finish_page``: OIDN denoise per chart, dilation into the gutters, seam
+  stitching (within each instance). Pages go into the pack as half-float textures and beside it
+  as OpenEXR files.
 - **Probes**: a grid over the static geometry's bounds, ``probe_spacing`` metres apart (wider if
   it would exceed ``max_probes``); each holds order-2 SH of B(n) = E(n)/pi without the sun's direct
   light, and the fraction of the sun's disk it sees (``cook_core::bake::probes``). Probes inside
-  solid geometry (more than ``max_backface`` of their rays hit back faces) take the mean of their
-  valid neighbours, grown outward until every such probe has a value.
+  solid geometry (more than ``max_backface`` of their rays hit single-sided back faces) take the
+  mean of their valid neighbours, grown outward until every such probe has a value.
+
+The baker's inputs are built once (``StaticScene.baker_args``, the arguments of
+``_core.Baker``) and used as they are by the local bake and by every Ray worker, so the two
+cannot drift apart.
 
 Determinism: a texel's random streams are keyed by (seed, page, texel index), a probe's by its
 grid index, so the same seed gives the same bytes for any thread count and batch size.
@@ -46,7 +60,7 @@ import numpy as np
 
 from asset_pipeline import _core, ir
 from asset_pipeline.lightmap_post import NONE, LightmapPostSettings, finish_page, page_seams
-from asset_pipeline.uv2 import rasterize_page
+from asset_pipeline.uv2 import place_on_atlas, rasterize_page
 
 PRESETS = ("draft", "medium", "high")
 
@@ -90,125 +104,172 @@ class Baked:
 # ---- the scene --------------------------------------------------------------------------------
 
 
-def world_transforms(scene: ir.Scene) -> list[np.ndarray]:
-    """4x4 world matrix (row-major, column vectors) of every node."""
-    world: list[np.ndarray] = []
-    for n in scene.nodes:
-        local = np.array(n.local, dtype=np.float64).reshape(4, 4).T  # column-major -> row-major
-        world.append(world[n.parent] @ local if n.parent is not None else local)
-    return world
+@dataclass
+class StaticInstance:
+    """One static placement of a mesh, as its lightmap is baked."""
+
+    node: int  # index into scene.nodes
+    name: str  # the node's
+    mesh: int
+    mesh_name: str
+    # Its mesh's LOD 0 with uv1 moved into its atlas region and lightmap_blocks made pages
+    # (uv2.place_on_atlas); None when the node has no region (nothing of it is baked).
+    lod: ir.Lod | None
+    world_positions: np.ndarray  # (n, 3) float32, its LOD 0's vertices in world space
+    world_normals: np.ndarray | None  # (n, 3) float32, unit, or None if the mesh has none
 
 
 @dataclass
 class StaticScene:
     """The static geometry as the baker sees it."""
 
-    positions: np.ndarray  # (n, 3) float32, world space, all instances
-    triangles: np.ndarray  # (m, 3) uint32
-    albedo: np.ndarray  # (m, 3) float32
-    emission: np.ndarray  # (m, 3) float32, nits
-    # Per static mesh (scene order): its LOD 0 and the world positions / normals of its first
-    # instance (what its lightmap texels are baked at), or None if no node places it.
-    meshes: list[int]
-    lods: list[ir.Lod]
-    world_positions: list[np.ndarray]
-    world_normals: list[np.ndarray]
+    # The arguments of _core.Baker, built once and used as they are by the local bake and by
+    # every Ray worker (executor._worker_baker): (positions float32 (n, 3) world space of every
+    # static instance, triangles uint32 (m, 3), triangle_materials uint32 (m,), uv0 float32
+    # (n, 2) | None, texcoord1 float32 (n, 2) | None, colors uint8 (n, 4) | None, materials_json,
+    # textures [uint8 (h, w, 4)], textures_json, lights_json, sky (r, g, b) nits | None).
+    baker_args: tuple
+    instances: list[StaticInstance]  # every static instance, node order
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.baker_args[0]
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return self.baker_args[1]
+
+    @property
+    def baked(self) -> list[StaticInstance]:
+        """The instances with a lightmap region: what the pages are rasterised from."""
+        return [i for i in self.instances if i.lod is not None]
 
 
 def static_scene(scene: ir.Scene) -> StaticScene:
-    world = world_transforms(scene)
-    pos, tri, alb, emi = [], [], [], []
-    first: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    base = 0
-    for node, w in zip(scene.nodes, world):
-        if node.mesh is None or not scene.meshes[node.mesh].static:
-            continue
-        lod = scene.meshes[node.mesh].lods[0]
+    world = scene.world_matrices()
+    instances: list[StaticInstance] = []
+    lods: list[ir.Lod] = []
+    tri, base = [], 0
+    for k in scene.static_nodes():
+        node, w = scene.nodes[k], world[k]
+        mesh = scene.meshes[node.mesh]
+        lod = mesh.lods[0]
         p = lod.attributes["position"].astype(np.float64) @ w[:3, :3].T + w[:3, 3]
         nrm = lod.attributes.get("normal")
         if nrm is not None:
             # Normals go through the inverse transpose; renormalised.
             nrm = nrm.astype(np.float64) @ np.linalg.inv(w[:3, :3])
             nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
-        first.setdefault(node.mesh, (p.astype(np.float32), None if nrm is None else nrm.astype(np.float32)))
+        placed = None
+        if node.lightmap is not None and "uv1" in lod.attributes and lod.lightmap_blocks is not None:
+            placed = place_on_atlas(lod, node.lightmap)
+        instances.append(StaticInstance(k, node.name, node.mesh, mesh.name, placed, p.astype(np.float32),
+                                        None if nrm is None else nrm.astype(np.float32)))
         t = lod.triangles.astype(np.int64)
         if np.linalg.det(w[:3, :3]) < 0:
             t = t[:, ::-1]  # a mirroring transform flips the winding: keep fronts outward
-        pos.append(p.astype(np.float32))
         tri.append(t + base)
         base += len(p)
-        a, e = triangle_materials(scene, lod)
-        alb.append(a)
-        emi.append(e)
-    cat = lambda xs, shape, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(shape, dt), dt)
-    meshes = sorted(first)
-    return StaticScene(
-        positions=cat(pos, (0, 3), np.float32),
-        triangles=cat(tri, (0, 3), np.uint32),
-        albedo=cat(alb, (0, 3), np.float32),
-        emission=cat(emi, (0, 3), np.float32),
-        meshes=meshes,
-        lods=[scene.meshes[i].lods[0] for i in meshes],
-        world_positions=[first[i][0] for i in meshes],
-        world_normals=[first[i][1] for i in meshes],
+        lods.append(lod)
+
+    def cat(xs, shape, dt):
+        return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(shape, dt), dt)
+
+    def attribute(name: str, fill, dt):
+        # Per vertex of every instance when any instance's mesh has it (the others read `fill`,
+        # as the runtime's vertices do); None when none has it.
+        if not any(name in l.attributes for l in lods):
+            return None
+        k = ir.ATTRIBUTES[name][1]
+        return cat([l.attributes[name] if name in l.attributes else np.full((l.vertex_count, k), fill, dt) for l in lods], (0, k), dt)
+
+    materials_json, textures, textures_json = _material_args(scene)
+    args = (
+        cat([i.world_positions for i in instances], (0, 3), np.float32),
+        cat(tri, (0, 3), np.uint32),
+        cat([l.materials for l in lods], (0,), np.uint32),
+        attribute("uv0", 0.0, np.float32),
+        attribute("texcoord1", 0.0, np.float32),
+        attribute("color", 255, np.uint8),
+        materials_json,
+        textures,
+        textures_json,
+        _lights_json(scene),
+        _sky(scene),
     )
+    return StaticScene(baker_args=args, instances=instances)
 
 
-def triangle_materials(scene: ir.Scene, lod: ir.Lod) -> tuple[np.ndarray, np.ndarray]:
-    """Per triangle: albedo (base colour x the texture's mean over the triangle's UV0 footprint,
-    linear) and emission (nits)."""
-    mats = scene.materials
-    base = np.array([m.base_color[:3] for m in mats], np.float64).reshape(-1, 3)
-    emissive = np.array([m.emissive for m in mats], np.float64).reshape(-1, 3)
-    albedo = base[lod.materials]
-    uv = lod.attributes.get("uv0")
-    for mi, m in enumerate(mats):
-        if m.base_color_texture is None or uv is None:
-            continue
-        sel = np.flatnonzero(lod.materials == mi)
-        if len(sel):
-            tex = scene.textures[m.base_color_texture]
-            albedo[sel] *= _footprint_means(tex, uv[lod.triangles[sel]])
-    return np.clip(albedo, 0.0, 1.0).astype(np.float32), emissive[lod.materials].astype(np.float32)
+def key_inputs(scene: ir.Scene) -> tuple[dict, list[np.ndarray]]:
+    """Everything ``bake_level`` reads from `scene`, normalised (a material's missing UV
+    transform and the identity one are the same input), as (JSON-able doc, arrays): for the
+    stage's cache key, with the settings and the denoiser's version beside it. It is the
+    baker's own arguments (``StaticScene.baker_args``: world-space geometry of every static
+    instance, per-vertex uv0 / texcoord1 / colour, the materials' baked fields, the textures
+    they read with formats and samplers, lights, sky) plus, per instance, its atlas region and
+    the placed lightmap UVs, pages and normals it is rasterised from, and the atlas layout."""
+    st = static_scene(scene)
+    positions, triangles, materials, uv0, texcoord1, colors, materials_json, textures, textures_json, lights_json, sky = st.baker_args
+    arrays = [positions, triangles, materials, uv0, texcoord1, colors, *textures]
+    doc = {"materials": materials_json, "textures": textures_json, "lights": lights_json, "sky": sky,
+           "arrays": [None if a is None else [a.dtype.str, list(a.shape)] for a in arrays],
+           "layout": None if scene.lightmap is None else {"texels_per_metre": float(scene.lightmap.texels_per_metre),
+                                                         "pages": [list(map(int, p)) for p in scene.lightmap.pages],
+                                                         "padding": int(scene.lightmap.padding)},
+           "instances": []}
+    for i in st.instances:
+        doc["instances"].append({"node": i.node, "name": i.name, "mesh": i.mesh, "vertices": len(i.world_positions), "baked": i.lod is not None})
+        if i.lod is not None:
+            arrays += [i.lod.attributes["uv1"], i.lod.lightmap_blocks, i.lod.triangles, i.world_normals]
+    return doc, [a for a in arrays if a is not None]
 
 
-def _linear_texels(tex: ir.Texture) -> np.ndarray:
-    img = np.asarray(tex.mips[0])[..., :3].astype(np.float64)
-    if tex.format == "Rgba16Float":
-        return img
-    img /= 255.0
-    if tex.format == "Rgba8Srgb":
-        img = np.where(img <= 0.04045, img / 12.92, ((img + 0.055) / 1.055) ** 2.4)
-    return img
+def _material_args(scene: ir.Scene) -> tuple[str, list[np.ndarray], str]:
+    """(materials JSON, textures, textures JSON) for _core.Baker: what the materials' base colour
+    and emissive slots read (texture indices renumbered over just those textures), each texture's
+    level 0 as uint8 RGBA and its format and sampler."""
+    used = sorted({t for m in scene.materials for t in (m.base_color_texture, m.emissive_texture) if t is not None})
+    index = {t: k for k, t in enumerate(used)}
+
+    def uv(t: dict) -> dict:
+        return {"tex_coord": int(t["tex_coord"]), "offset": [float(x) for x in t["offset"]], "rotation": float(t["rotation"]),
+                "scale": [float(x) for x in t["scale"]]}
+
+    mats = [{"name": m.name, "base_color": [float(c) for c in m.base_color], "base_color_texture": index.get(m.base_color_texture),
+             "base_color_uv": uv(m.uv("base_color")), "emissive": [float(c) for c in m.emissive],
+             "emissive_texture": index.get(m.emissive_texture), "emissive_uv": uv(m.uv("emissive")),
+             "alpha_mode": m.alpha_mode, "alpha_cutoff": float(m.alpha_cutoff), "double_sided": bool(m.double_sided)}
+            for m in scene.materials]
+    images, infos = [], []
+    for t in used:
+        tex = scene.textures[t]
+        img, fmt = _rgba8(tex)
+        images.append(img)
+        infos.append({"name": tex.name, "format": fmt, "sampler": tex.sampling})
+    return json.dumps(mats), images, json.dumps(infos)
 
 
-def _footprint_means(tex: ir.Texture, uv: np.ndarray) -> np.ndarray:
-    """Mean linear colour of the texture over each triangle's UV bounding box ((k, 3, 2) UVs),
-    texel-aligned, wrapping like a repeating sampler (a box a whole repeat wide or more covers the
-    texture). A summed-area table makes each box four lookups."""
-    img = _linear_texels(tex)
-    h, w, _ = img.shape
-    sat = np.zeros((h + 1, w + 1, 3))
-    sat[1:, 1:] = img.cumsum(0).cumsum(1)
-    lo, hi = uv.min(axis=1), uv.max(axis=1)  # (k, 2)
-
-    def spans(a, b, size):
-        start = np.floor(a * size).astype(np.int64)
-        width = np.clip(np.ceil(b * size).astype(np.int64) - start, 1, size)
-        start %= size
-        first_end = np.minimum(start + width, size)
-        return start, first_end, width - (first_end - start)  # [start, first_end) then [0, rest)
-
-    def box(y0, y1, x0, x1):
-        return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0]
-
-    xs, xe, xr = spans(lo[:, 0], hi[:, 0], w)
-    # glTF's UV origin is the image's top-left corner: rows go down with v.
-    ys, ye, yr = spans(lo[:, 1], hi[:, 1], h)
-    zero = np.zeros_like(xs)
-    total = box(ys, ye, xs, xe) + box(ys, ye, zero, xr) + box(zero, yr, xs, xe) + box(zero, yr, zero, xr)
-    count = ((xe - xs) + xr) * ((ye - ys) + yr)
-    return total / count[:, None]
+def _rgba8(tex: ir.Texture) -> tuple[np.ndarray, str]:
+    """Level 0 of `tex` as C-contiguous uint8 (h, w, 4) and the format the baker decodes it by:
+    8-bit textures as they are (Rgba8Srgb decoded through sRGB, others as linear); 16-bit ones
+    (not what glTF's colour slots hold, but the IR allows them) rounded to 8 bits: half floats
+    (linear) encoded as sRGB, clipped to [0, 1], UNORM16 kept linear."""
+    img = np.asarray(tex.mips[0])
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.shape[2] < 4:  # grey, grey + alpha or RGB: made RGBA
+        full = 1.0 if img.dtype.kind == "f" else np.iinfo(img.dtype).max
+        rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, 2)
+        alpha = img[..., 1:2] if img.shape[2] == 2 else np.full(img.shape[:2] + (1,), full, img.dtype)
+        img = np.concatenate([rgb, alpha], 2)
+    if img.dtype == np.uint8:
+        return np.ascontiguousarray(img), "Rgba8Srgb" if tex.format == "Rgba8Srgb" else "Rgba8Unorm"
+    if img.dtype == np.uint16:
+        return np.ascontiguousarray(np.round(img / 257.0).astype(np.uint8)), "Rgba8Unorm"
+    lin = np.clip(np.nan_to_num(img.astype(np.float64)), 0.0, 1.0)
+    rgb = np.where(lin[..., :3] <= 0.0031308, lin[..., :3] * 12.92, 1.055 * lin[..., :3] ** (1 / 2.4) - 0.055)
+    out = np.concatenate([rgb, lin[..., 3:4]], 2)
+    return np.ascontiguousarray(np.round(out * 255.0).astype(np.uint8)), "Rgba8Srgb"
 
 
 def _lights_json(scene: ir.Scene) -> str:
@@ -235,36 +296,45 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
         raise ValueError(f"bake: unknown preset '{s.preset}' ({', '.join(PRESETS)})")
     layout = scene.lightmap
     st = static_scene(scene)
-    stats: dict = {"preset": s.preset, "static_triangles": int(len(st.triangles))}
+    baked_instances = st.baked if layout is not None else []
+    stats: dict = {"preset": s.preset, "static_triangles": int(len(st.triangles)), "static_instances": len(st.instances)}
     if len(st.triangles) == 0:
         return Baked(pages=[], probes=None, stats=stats)
     kw = dict(preset=s.preset, seed=int(s.seed), bounces=s.bounces, threads=s.threads)
+    # Every static instance's own region, at its own world positions and normals.
+    lods = [i.lod for i in baked_instances]
+    positions = [i.world_positions for i in baked_instances]
+    normals = [i.world_normals for i in baked_instances]
+    instance_texels = np.zeros(len(baked_instances), np.int64)
     inputs = []  # per page: (w, h, chart, covered, points, normals, ids)
     for page, (w, h) in enumerate(layout.pages if layout else []):
-        r = rasterize_page(st.lods, layout, page, positions=st.world_positions, normals=st.world_normals)
+        r = rasterize_page(lods, layout, page, positions=positions, normals=normals)
         chart = r["chart"]
         covered = np.flatnonzero(chart.ravel() != NONE)
+        instance_texels += np.bincount(r["mesh"][r["triangle"].ravel()[covered]], minlength=len(lods))
         points = np.ascontiguousarray(r["position"].reshape(-1, 3)[covered])
-        normals = np.ascontiguousarray(r["normal"].reshape(-1, 3)[covered])
-        inputs.append((w, h, chart, covered, points, normals, _texel_ids(page, covered)))
+        nrm = np.ascontiguousarray(r["normal"].reshape(-1, 3)[covered])
+        inputs.append((w, h, chart, covered, points, nrm, _texel_ids(page, covered)))
+    texels_of = {i.node: int(n) for i, n in zip(baked_instances, instance_texels)}
+    stats["instances"] = [{"node": i.name, "mesh": i.mesh_name, "texels": texels_of.get(i.node, 0)} for i in st.instances]
     probe_points, probe_layout = _probe_points(st, s)
 
     if executor is None:
         t0 = time.perf_counter()
-        baker = _core.Baker(st.positions, st.triangles, st.albedo, st.emission, _lights_json(scene), _sky(scene))
+        baker = _core.Baker(*st.baker_args)
         stats["bvh_seconds"] = time.perf_counter() - t0
         traced = [_bake_page_local(baker, page, inp, s, kw, progress) for page, inp in enumerate(inputs)]
         t_probes = time.perf_counter()
         probe_out = _bake_probes_local(baker, probe_points, s, progress, kw)
         probe_seconds = time.perf_counter() - t_probes
     else:
-        traced, probe_out, probe_seconds = _bake_on_ray(executor, scene, st, inputs, probe_points, s, kw, progress, stats)
+        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, progress, stats)
 
     pages: list[np.ndarray] = []
     rays_total, texels_total, bake_seconds = 0, 0, 0.0
     page_stats = []
     for page, ((w, h, chart, covered, *_), (raw, rays, seconds)) in enumerate(zip(inputs, traced)):
-        seams = page_seams(st.lods, layout, page, positions=st.world_positions, normals=st.world_normals,
+        seams = page_seams(lods, layout, page, positions=positions, normals=normals,
                            min_normal_cos=s.post.seam_min_normal_cos) if s.post.stitch else None
         t_post = time.perf_counter()
         done = finish_page(raw.reshape(h, w, 3), chart, seams=seams, settings=s.post)
@@ -300,14 +370,15 @@ def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, progress)
     return raw, rays, time.perf_counter() - t_page
 
 
-def _bake_on_ray(executor, scene: ir.Scene, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, progress, stats: dict):
+def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, progress, stats: dict):
     """Every page's texels in tiles and the probes in batches as Ray tasks, submitted together so
     the cluster stays busy across page boundaries. Returns what the local path returns."""
     from asset_pipeline import executor as ex
 
-    # The scene goes into the object store once; tasks carry the reference boxed in a list (a
-    # bare ObjectRef argument would be fetched and deserialised for every task).
-    ref = executor.put((st.positions, st.triangles, st.albedo, st.emission, _lights_json(scene), _sky(scene)))
+    # The baker's arguments (the local bake's, exactly) go into the object store once; tasks
+    # carry the reference boxed in a list (a bare ObjectRef argument would be fetched and
+    # deserialised for every task).
+    ref = executor.put(st.baker_args)
     boxed = [ref]
     key = ref.hex()
     task_kw = {**kw, "threads": 1}  # one CPU per task (executor.RayExecutor._task)
@@ -479,9 +550,23 @@ def _stage(progress, name: str, total: int):
     return progress.stage(name, total)
 
 
+# Instances listed one per line in the report, at most (the rest are summed up in one line).
+DESCRIBE_INSTANCES = 40
+
+
 def describe(stats: dict) -> list[str]:
     """Report lines for the bake."""
     lines = [f"Preset {stats.get('preset')}; {stats.get('static_triangles', 0)} static triangles."]
+    inst = stats.get("instances")
+    if inst is not None:
+        with_texels = [i for i in inst if i["texels"] > 0]
+        lines.append(f"Static instances: {stats.get('static_instances', len(inst))}, {len(with_texels)} with lightmap texels "
+                     f"(each instance its own).")
+        for i in inst[:DESCRIBE_INSTANCES]:
+            lines.append(f"- instance '{i['node']}' (mesh '{i['mesh']}'): {i['texels']} texels")
+        if len(inst) > DESCRIBE_INSTANCES:
+            rest = inst[DESCRIBE_INSTANCES:]
+            lines.append(f"- ... and {len(rest)} more instances: {sum(i['texels'] for i in rest)} texels")
     if stats.get("texels"):
         lines.append(f"Lightmaps: {stats['texels']} texels, {stats['rays'] / 1e6:.1f} M rays in {stats['lightmap_seconds']:.1f} s "
                      f"({stats['rays_per_s'] / 1e6:.2f} M rays/s).")

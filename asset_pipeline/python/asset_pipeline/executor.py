@@ -5,9 +5,10 @@ What goes to Ray: lightmap texel tiles and probe batches (the bake), LOD chains 
 chains per texture. The source import and the lightmap UV atlas stay in the driver: each is one
 item (the atlas packs every mesh's charts together).
 
-The bake's scene (triangles, materials, lights, sky) is put into Ray's object store once per bake
-(``ray.put``); each task carries only a reference to it, boxed in a list so Ray does not fetch it
-per task. A worker process builds the ``_core.Baker`` (the BVH) the first time it sees that
+The bake's scene (``bake.StaticScene.baker_args``, the arguments of ``_core.Baker``: triangles,
+per-vertex attributes, materials and their textures, lights, sky; exactly what a local bake
+builds its Baker from) is put into Ray's object store once per bake (``ray.put``); each task
+carries only a reference to it, boxed in a list so Ray does not fetch it per task. A worker process builds the ``_core.Baker`` (the BVH) the first time it sees that
 reference and keeps it for the following tiles (``_WORKER_BAKER``), so the BVH is built once per
 worker process, not per task.
 
@@ -45,8 +46,8 @@ def _worker_baker(key: str, boxed_ref: list):
 
     from asset_pipeline import _core
 
-    positions, triangles, albedo, emission, lights_json, sky = ray.get(boxed_ref[0])
-    baker = _core.Baker(positions, triangles, albedo, emission, lights_json, sky)
+    # bake.StaticScene.baker_args: the very arguments the local bake builds its Baker from.
+    baker = _core.Baker(*ray.get(boxed_ref[0]))
     _WORKER_BAKER.clear()
     _WORKER_BAKER[key] = baker
     return baker, True
@@ -81,8 +82,8 @@ def texture_levels(level0, usage: str, normal: bool, job: dict):
 
     try:
         if normal:
-            return "ok", normal_chain(level0, filter=job["filter"], edge="wrap")
-        return "ok", mip_chain(level0, usage, filter=job["filter"], edge="wrap", alpha_cutoff=job["alpha_cutoff"])
+            return "ok", normal_chain(level0, filter=job["filter"], edge=job["edge"])
+        return "ok", mip_chain(level0, usage, filter=job["filter"], edge=job["edge"], alpha_cutoff=job["alpha_cutoff"])
     except ValueError as e:
         return "error", str(e)
 

@@ -8,20 +8,31 @@
 //!
 //! Per sample path, at the point and at every bounce vertex:
 //! - next-event estimation for each analytic light (sun cone, point, spot, rect) and for one
-//!   emissive triangle picked in proportion to area x luminance (area sampling moved to solid
-//!   angle, notes §7.2), with a shadow ray;
+//!   emissive triangle picked in proportion to area x emitted luminance (its emissive texture's
+//!   mean over the triangle), at a uniform point whose real emission is then evaluated (area
+//!   sampling moved to solid angle, notes §7.2), with a shadow ray;
 //! - a cosine-weighted continuation ray (pdf cos/pi, so a Lambertian vertex multiplies the
 //!   throughput by its albedo, notes §7.1). When it hits an emissive triangle or crosses a rect
 //!   light, that emission counts with the power-heuristic MIS weight against the light sample, so
 //!   emission is counted exactly once; when it escapes it collects the sky (not NEE-sampled: a
 //!   uniform sky is best found by cosine sampling, notes §7.3);
 //! - Russian roulette on the throughput from bounce `RR_START`, survivors divided by p (unbiased).
-//! A ray hitting a back face ends the path with nothing (it is inside geometry), so texels under
-//! walls stay dark.
+//!
+//! Materials are read where rays hit (`material`): albedo and emission at the hit point's
+//! barycentrics (textures, vertex colours); alpha-tested points (Mask below the cutoff, Blend by
+//! hashed alpha) are not there at all: closest-hit and shadow rays pass through them in the BVH
+//! walk, and a light sample landing on one contributes nothing.
+//!
+//! Sides: a ray reaching the **back face of a single-sided material** ends the path with
+//! nothing. Such a face is opaque and black: it blocks light (a single-sided wall still casts
+//! its shadow), reflects and emits nothing, so the insides of closed meshes stay dark and texels
+//! under walls get no light through them. A **double-sided** material's back face is the same
+//! surface with the normal flipped: it reflects with its albedo and emits from both sides, and
+//! light sampling picks points on it from either side.
 
-use super::bvh::{offset_ray, Bvh, Ray};
-use super::lights::Light;
+use super::bvh::{offset_ray, Ray};
 use super::sampling::*;
+use super::scene::BakeScene;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -32,90 +43,6 @@ const RR_START: u32 = 2;
 const CHUNK: usize = 64;
 /// Shadow rays stop this fraction short of a light point that lies on geometry.
 const SHADOW_SHORTEN: f32 = 1e-4;
-
-pub struct BakeScene {
-    pub(super) bvh: Bvh,
-    tris: Vec<[V3; 3]>,
-    /// Unit geometric normal (b-a)x(c-a) of each triangle: its front side.
-    pub(super) normals: Vec<V3>,
-    pub(super) albedo: Vec<V3>,
-    pub(super) emission: Vec<V3>,
-    /// Emissive triangles and the cumulative distribution that picks them (area x luminance).
-    emitters: Vec<u32>,
-    emitter_cdf: Vec<f32>,
-    /// Per triangle: probability of picking it / its area (the area pdf of emitter sampling).
-    emitter_pdf: Vec<f32>,
-    pub(super) lights: Vec<Light>,
-    pub(super) sky: Option<V3>,
-}
-
-fn luminance(c: V3) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
-}
-
-impl BakeScene {
-    /// `albedo` and `emission` (nits, front face only) are per triangle; `sky` is a uniform
-    /// radiance (nits) or None for no sky.
-    pub fn new(
-        positions: &[V3],
-        triangles: &[[u32; 3]],
-        albedo: &[V3],
-        emission: &[V3],
-        lights: Vec<Light>,
-        sky: Option<V3>,
-    ) -> Result<BakeScene, String> {
-        let m = triangles.len();
-        if albedo.len() != m || emission.len() != m {
-            return Err(format!("{m} triangles but {} albedo and {} emission rows", albedo.len(), emission.len()));
-        }
-        if let Some(i) = triangles.iter().position(|t| t.iter().any(|&v| v as usize >= positions.len())) {
-            return Err(format!("triangle {i} indexes a vertex past the {} positions", positions.len()));
-        }
-        let tris: Vec<[V3; 3]> = triangles.iter().map(|t| t.map(|v| positions[v as usize])).collect();
-        let mut normals = Vec::with_capacity(m);
-        let mut areas = Vec::with_capacity(m);
-        for t in &tris {
-            let c = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-            let l = length(c);
-            normals.push(if l > 0.0 { scale(c, 1.0 / l) } else { [0.0; 3] });
-            areas.push(0.5 * l);
-        }
-        let weight = |i: usize| areas[i] * luminance(emission[i]).max(0.0);
-        let emitters: Vec<u32> = (0..m).filter(|&i| weight(i) > 0.0 && weight(i).is_finite()).map(|i| i as u32).collect();
-        let mut acc = 0.0f64;
-        let mut emitter_cdf: Vec<f32> = emitters
-            .iter()
-            .map(|&i| {
-                acc += weight(i as usize) as f64;
-                acc as f32
-            })
-            .collect();
-        let total = acc as f32;
-        emitter_cdf.iter_mut().for_each(|c| *c /= total);
-        let mut emitter_pdf = vec![0.0; m];
-        for &i in &emitters {
-            let i = i as usize;
-            emitter_pdf[i] = weight(i) / total / areas[i];
-        }
-        let clamp01 = |c: &V3| c.map(|x| if x.is_finite() { x.clamp(0.0, 1.0) } else { 0.0 });
-        Ok(BakeScene {
-            bvh: Bvh::build(positions, triangles),
-            tris,
-            normals,
-            albedo: albedo.iter().map(clamp01).collect(),
-            emission: emission.to_vec(),
-            emitters,
-            emitter_cdf,
-            emitter_pdf,
-            lights,
-            sky,
-        })
-    }
-
-    pub fn bvh(&self) -> &Bvh {
-        &self.bvh
-    }
-}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct BakeSettings {
@@ -235,7 +162,7 @@ pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &m
         let pdf_bsdf = local[2] * FRAC_1_PI;
         let o = offset_ray(p, nrm);
         *rays += 1;
-        let hit = scene.bvh.closest(&Ray { origin: o, dir: w, tmin: 0.0, tmax: f32::INFINITY });
+        let hit = scene.closest(&Ray { origin: o, dir: w, tmin: 0.0, tmax: f32::INFINITY });
         let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
         for l in &scene.lights {
             if let Some((t, le, pdf_light)) = l.hit_rect(o, w) {
@@ -250,21 +177,17 @@ pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &m
             }
             break;
         };
-        let prim = h.prim as usize;
-        let ng = scene.normals[prim];
-        let cos_l = -dot(ng, w);
-        if !(cos_l > 0.0) {
-            break; // back face (or degenerate): inside geometry, nothing arrives.
-        }
-        let pick = scene.emitter_pdf[prim];
+        // A single-sided back face (or a degenerate triangle): nothing arrives, see the module doc.
+        let Some(s) = scene.surface(o, w, &h) else { break };
+        let pick = scene.emitter_pdf(s.prim);
         if pick > 0.0 {
-            let pdf_light = pick * h.t * h.t / cos_l;
-            b = add(b, scale(mul(thr, scene.emission[prim]), power_heuristic(pdf_bsdf, pdf_light)));
+            let pdf_light = pick * h.t * h.t / s.cos;
+            b = add(b, scale(mul(thr, scene.surfaces.emission(s.prim, s.bary)), power_heuristic(pdf_bsdf, pdf_light)));
         }
         if depth == bounces {
             break;
         }
-        thr = mul(thr, scene.albedo[prim]);
+        thr = mul(thr, scene.surfaces.shade(s.prim, s.bary).albedo);
         if depth + 1 >= RR_START {
             let q = thr[0].max(thr[1]).max(thr[2]).clamp(0.05, 0.95);
             if rng.next_f32() >= q {
@@ -275,8 +198,7 @@ pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &m
         if thr == [0.0; 3] {
             break;
         }
-        p = add(o, scale(w, h.t));
-        nrm = ng;
+        (p, nrm) = (s.p, s.n);
         b = add(b, scale(mul(thr, direct(scene, p, nrm, rng, rays)), FRAC_1_PI));
     }
     b
@@ -294,14 +216,13 @@ pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut 
         let w = s.pdf.map_or(1.0, |pl| power_heuristic(pl, dot(n, s.dir) * FRAC_1_PI));
         *rays += 1;
         let tmax = if s.dist.is_finite() { s.dist * (1.0 - SHADOW_SHORTEN) } else { f32::INFINITY };
-        if !scene.bvh.any(&Ray { origin: o, dir: s.dir, tmin: 0.0, tmax }) {
+        if !scene.occluded(&Ray { origin: o, dir: s.dir, tmin: 0.0, tmax }) {
             h = add(h, scale(s.h, w));
         }
     }
-    if !scene.emitters.is_empty() {
+    if scene.has_emitters() {
         let (u0, u1, u2) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
-        let k = scene.emitter_cdf.partition_point(|&c| c <= u0).min(scene.emitters.len() - 1);
-        let prim = scene.emitters[k] as usize;
+        let prim = scene.pick_emitter(u0);
         let [a, bb, c] = scene.tris[prim];
         let (beta, gamma) = uniform_triangle(u1, u2);
         let q = add(a, add(scale(sub(bb, a), beta), scale(sub(c, a), gamma)));
@@ -309,13 +230,21 @@ pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut 
         let r2 = dot(d, d);
         let r = r2.sqrt();
         let w = scale(d, 1.0 / r);
-        let (cos_i, cos_l) = (dot(n, w), -dot(scene.normals[prim], w));
+        let cos_i = dot(n, w);
+        // The emitting side faces x: the front, or either side of a double-sided material.
+        let cos_front = -dot(scene.normals[prim], w);
+        let cos_l = if scene.surfaces.material(prim).double_sided { cos_front.abs() } else { cos_front };
         if cos_i > 0.0 && cos_l > 0.0 && r > 0.0 {
-            let pdf_light = scene.emitter_pdf[prim] * r2 / cos_l;
-            let mis = power_heuristic(pdf_light, cos_i * FRAC_1_PI);
-            *rays += 1;
-            if !scene.bvh.any(&Ray { origin: o, dir: w, tmin: 0.0, tmax: r * (1.0 - SHADOW_SHORTEN) }) {
-                h = add(h, scale(scene.emission[prim], cos_i / pdf_light * mis));
+            let bary = [1.0 - beta - gamma, beta, gamma];
+            let le = scene.surfaces.emission(prim, bary);
+            // A black texel or a cut-out point sends nothing: no shadow ray needed.
+            if le != [0.0; 3] && scene.surfaces.present(prim, q, bary) {
+                let pdf_light = scene.emitter_pdf(prim) * r2 / cos_l;
+                let mis = power_heuristic(pdf_light, cos_i * FRAC_1_PI);
+                *rays += 1;
+                if !scene.occluded(&Ray { origin: o, dir: w, tmin: 0.0, tmax: r * (1.0 - SHADOW_SHORTEN) }) {
+                    h = add(h, scale(le, cos_i / pdf_light * mis));
+                }
             }
         }
     }

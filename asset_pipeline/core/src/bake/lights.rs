@@ -14,8 +14,9 @@ pub enum Light {
     Sun { dir: V3, e: V3, cos_max: f32 },
     /// Intensity `i` (candela); inverse-square falloff, windowed to zero at `range` if given.
     Point { pos: V3, i: V3, range: Option<f32> },
-    /// A point light whose intensity falls from full inside `cos_inner` to zero at `cos_outer`
-    /// (smoothstep in cos of the angle from `dir`).
+    /// A point light whose intensity falls from full inside `cos_inner` to zero at `cos_outer`:
+    /// KHR_lights_punctual's recommended falloff, the square of the cosine's linear ramp between
+    /// them (a hard edge when they are equal), so spots bake as glTF viewers show them.
     Spot { pos: V3, dir: V3, i: V3, cos_inner: f32, cos_outer: f32, range: Option<f32> },
     /// One-sided rectangle: centre, emitting normal `n` (the way light travels), half-extent
     /// vectors `hu`, `hv`, luminance `l` (nits). It lights the scene but does not occlude.
@@ -129,15 +130,8 @@ impl Light {
                 (cos > 0.0).then(|| LightSample { dir: w, dist: f32::INFINITY, h: scale(e, cos), pdf: None })
             }
             Light::Point { pos, i, range } => point(x, n, pos, i, range, |_| 1.0),
-            Light::Spot { pos, dir, i, cos_inner, cos_outer, range } => point(x, n, pos, i, range, |w| {
-                // w points from the light to x.
-                let c = dot(w, dir);
-                if cos_inner <= cos_outer {
-                    return if c >= cos_outer { 1.0 } else { 0.0 };
-                }
-                let s = ((c - cos_outer) / (cos_inner - cos_outer)).clamp(0.0, 1.0);
-                s * s * (3.0 - 2.0 * s)
-            }),
+            // w points from the light to x.
+            Light::Spot { pos, dir, i, cos_inner, cos_outer, range } => point(x, n, pos, i, range, |w| spot_falloff(dot(w, dir), cos_inner, cos_outer)),
             Light::Rect { c, n: ln, hu, hv, l } => {
                 let p = add(c, add(scale(hu, 2.0 * u1 - 1.0), scale(hv, 2.0 * u2 - 1.0)));
                 let d = sub(p, x);
@@ -176,6 +170,17 @@ impl Light {
         let area = 4.0 * length(cross(hu, hv));
         Some((t, l, t * t / (area * -dn)))
     }
+}
+
+/// KHR_lights_punctual's spot attenuation at cosine `c` from the axis:
+/// clamp((c - cos outer) / (cos inner - cos outer), 0, 1)^2; a hard edge at the outer cone when
+/// the inner is not inside it.
+pub fn spot_falloff(c: f32, cos_inner: f32, cos_outer: f32) -> f32 {
+    if cos_inner <= cos_outer {
+        return if c >= cos_outer { 1.0 } else { 0.0 };
+    }
+    let s = ((c - cos_outer) / (cos_inner - cos_outer)).clamp(0.0, 1.0);
+    s * s
 }
 
 fn point(x: V3, n: V3, pos: V3, i: V3, range: Option<f32>, falloff: impl Fn(V3) -> f32) -> Option<LightSample> {

@@ -14,15 +14,17 @@
 //!   estimated by the lightmap integrator's own path). The sun's direct light is left to the
 //!   runtime, which has the surface's own normal and adds it sharply, scaled by the probe's
 //!   **sun visibility** (the fraction of shadow rays to the sun's disk that escape; 1 with no sun).
-//! - the **back-face fraction**: the share of probe rays whose first hit is a back face. A probe
+//! - the **back-face fraction**: the share of probe rays whose first hit is the back face of a
+//!   single-sided material (a double-sided one's back is a surface like its front). A probe
 //!   inside a wall sees mostly back faces; the cooker replaces such probes by their neighbours.
 //!
 //! Deterministic like the lightmaps: probe i's random streams are keyed by (seed, `ids[i]`, sample).
 
-use super::integrator::{direct, par_bake, sample_path, BakeScene, BakeSettings, Cancelled};
 use super::bvh::Ray;
+use super::integrator::{direct, par_bake, sample_path, BakeSettings, Cancelled};
 use super::lights::Light;
 use super::sampling::*;
+use super::scene::BakeScene;
 use std::f32::consts::{FRAC_1_PI, PI};
 use std::sync::atomic::AtomicBool;
 
@@ -110,7 +112,7 @@ fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u6
             let Some(ls) = light.sample(x, toward, u1, u2) else { continue };
             let tmax = if ls.dist.is_finite() { ls.dist * (1.0 - SHADOW_SHORTEN) } else { f32::INFINITY };
             *rays += 1;
-            let visible = !scene.bvh.any(&Ray { origin: x, dir: ls.dir, tmin: 0.0, tmax });
+            let visible = !scene.occluded(&Ray { origin: x, dir: ls.dir, tmin: 0.0, tmax });
             if let Light::Sun { .. } = light {
                 sun_tried += 1;
                 sun_seen += visible as u32;
@@ -133,19 +135,18 @@ fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u6
 }
 
 /// Radiance arriving at x from direction w (travelling along -w), leaving out analytic lights
-/// (sampled separately): the sky on a miss; on a front face its emission plus albedo x B there
-/// (B with `bounces - 1` further bounces, or direct light only at 0). Also: was it a back face.
+/// (sampled separately): the sky on a miss; on a surface (a front face, or either face of a
+/// double-sided material) its emission plus albedo x B there (B with `bounces - 1` further
+/// bounces, or direct light only at 0). Also: was it a single-sided back face.
 fn incoming(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: &mut u64) -> (V3, bool) {
     *rays += 1;
-    let Some(h) = scene.bvh.closest(&Ray { origin: x, dir: w, tmin: 0.0, tmax: f32::INFINITY }) else {
+    let Some(h) = scene.closest(&Ray { origin: x, dir: w, tmin: 0.0, tmax: f32::INFINITY }) else {
         return (scene.sky.unwrap_or([0.0; 3]), false);
     };
-    let prim = h.prim as usize;
-    let ng = scene.normals[prim];
-    if !(dot(ng, w) < 0.0) {
+    let Some(s) = scene.surface(x, w, &h) else {
         return ([0.0; 3], true);
-    }
-    let p = add(x, scale(w, h.t));
-    let b = if bounces == 0 { scale(direct(scene, p, ng, rng, rays), FRAC_1_PI) } else { sample_path(scene, p, ng, bounces - 1, rng, rays) };
-    (add(scene.emission[prim], mul(scene.albedo[prim], b)), false)
+    };
+    let b = if bounces == 0 { scale(direct(scene, s.p, s.n, rng, rays), FRAC_1_PI) } else { sample_path(scene, s.p, s.n, bounces - 1, rng, rays) };
+    let shade = scene.surfaces.shade(s.prim, s.bary);
+    (add(shade.emission, mul(shade.albedo, b)), false)
 }

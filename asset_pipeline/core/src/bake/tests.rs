@@ -4,8 +4,12 @@
 use super::bvh::*;
 use super::integrator::*;
 use super::lights::Light;
+use super::material::*;
 use super::probes::*;
 use super::sampling::*;
+use super::scene::*;
+use super::textures::*;
+use pack::{Filter, Sampler, TextureTransform, Wrap};
 use std::f32::consts::PI;
 use std::sync::atomic::AtomicBool;
 
@@ -176,27 +180,46 @@ fn empty_and_tiny_bvh() {
 
 // ---- integrator --------------------------------------------------------------------------
 
+/// A test scene built quad by quad, each with its own material.
 struct Soup {
     pos: Vec<V3>,
     tris: Vec<[u32; 3]>,
-    albedo: Vec<V3>,
-    emission: Vec<V3>,
+    mats: Vec<u32>,
+    materials: Vec<Material>,
+    textures: Vec<Texture>,
+    uv0: Vec<[f32; 2]>,
+    colors: Vec<[u8; 4]>,
 }
 
 impl Soup {
     fn new() -> Soup {
-        Soup { pos: vec![], tris: vec![], albedo: vec![], emission: vec![] }
+        Soup { pos: vec![], tris: vec![], mats: vec![], materials: vec![], textures: vec![], uv0: vec![], colors: vec![] }
     }
     /// Quad centred at c with half-extents u, v; front face along u x v.
     fn quad(&mut self, c: V3, u: V3, v: V3, albedo: f32, emission: f32) {
+        self.quad_with(c, u, v, Material { base_color: [albedo, albedo, albedo, 1.0], emissive: [emission; 3], ..Material::default() });
+    }
+    /// Quad with its own material; uv0 (0, 0) at c - u - v, (1, 0) at c + u - v, (1, 1) at
+    /// c + u + v; white vertex colours. Returns its first vertex.
+    fn quad_with(&mut self, c: V3, u: V3, v: V3, material: Material) -> usize {
         let b = self.pos.len() as u32;
         self.pos.extend([sub(sub(c, u), v), sub(add(c, u), v), add(add(c, u), v), add(sub(c, u), v)]);
+        self.uv0.extend([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
+        self.colors.extend([[255; 4]; 4]);
         self.tris.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
-        self.albedo.extend([[albedo; 3]; 2]);
-        self.emission.extend([[emission; 3]; 2]);
+        self.mats.extend([self.materials.len() as u32; 2]);
+        self.materials.push(material);
+        b as usize
+    }
+    fn texture(&mut self, t: Texture) -> u32 {
+        self.textures.push(t);
+        self.textures.len() as u32 - 1
     }
     /// Axis-aligned box with faces pointing out (or in).
     fn cube(&mut self, c: V3, h: V3, inward: bool, albedo: f32, emission: f32) {
+        self.cube_with(c, h, inward, Material { base_color: [albedo, albedo, albedo, 1.0], emissive: [emission; 3], ..Material::default() });
+    }
+    fn cube_with(&mut self, c: V3, h: V3, inward: bool, material: Material) {
         for k in 0..3 {
             for s in [-1.0f32, 1.0] {
                 let mut n = [0.0; 3];
@@ -209,13 +232,24 @@ impl Soup {
                 // u x v points along +k; flip to get the wanted side.
                 let out = s > 0.0;
                 let v = if out != inward { v } else { scale(v, -1.0) };
-                self.quad(add(c, scale(n, h[k])), u, v, albedo, emission);
+                self.quad_with(add(c, scale(n, h[k])), u, v, material.clone());
             }
         }
     }
     fn scene(&self, lights: Vec<Light>, sky: Option<V3>) -> BakeScene {
-        BakeScene::new(&self.pos, &self.tris, &self.albedo, &self.emission, lights, sky).unwrap()
+        let geometry = Geometry {
+            positions: &self.pos,
+            triangles: &self.tris,
+            materials: &self.mats,
+            attributes: VertexAttributes { uv0: Some(&self.uv0), texcoord1: None, color: Some(&self.colors) },
+        };
+        BakeScene::new(geometry, self.materials.clone(), self.textures.clone(), lights, sky).unwrap()
     }
+}
+
+/// A texture of `w` x `h` RGBA texels (rows top to bottom), sRGB unless `linear`.
+fn texture(w: usize, h: usize, texels: &[[u8; 4]], filter: Filter, wrap: Wrap) -> Texture {
+    Texture::new(w, h, texels.to_vec(), true, Sampler { wrap_s: wrap, wrap_t: wrap, mag_filter: filter, min_filter: filter, mipmap_filter: None }).unwrap()
 }
 
 fn bake(scene: &BakeScene, pts: &[V3], nrm: &[V3], s: &BakeSettings) -> Baked {
@@ -352,9 +386,15 @@ fn point_spot_and_sun_closed_forms() {
     let spot = |inner: f32, outer: f32| format!(r#"[{{"name":"s","kind":"spot","intensity":100,"position":[0,2,0],"direction":[0,-1,0],"inner_cone":{inner},"outer_cone":{outer}}}]"#);
     check(&spot(ang + 0.1, ang + 0.2), 100.0 * cos / r2 / PI as f64);
     check(&spot(ang - 0.2, ang - 0.1), 0.0);
-    let (ci, co) = (((ang - 0.1) as f64).cos(), ((ang + 0.1) as f64).cos());
-    let t = (cos - co) / (ci - co);
-    check(&spot(ang - 0.1, ang + 0.1), 100.0 * cos / r2 / PI as f64 * t * t * (3.0 - 2.0 * t));
+    // Between the cones: KHR_lights_punctual's falloff, the square of the cosine's linear ramp.
+    for (inner, outer) in [(ang - 0.1, ang + 0.1), (ang - 0.3, ang + 0.05), (0.0, ang + 0.2)] {
+        let (ci, co) = ((inner as f64).cos(), (outer as f64).cos());
+        let t = (cos - co) / (ci - co);
+        check(&spot(inner, outer), 100.0 * cos / r2 / PI as f64 * t * t);
+    }
+    // Inner = outer: a hard edge.
+    check(&spot(ang + 0.01, ang + 0.01), 100.0 * cos / r2 / PI as f64);
+    check(&spot(ang - 0.01, ang - 0.01), 0.0);
     // Sun, 1000 lux at 60 degrees from the normal: H = lux cos (cone of the real sun's size).
     let dir = [0.0, -0.5, -(3f32.sqrt() / 2.0)];
     check(&format!(r#"[{{"name":"sun","kind":"sun","intensity":1000,"direction":[{},{},{}]}}]"#, dir[0], dir[1], dir[2]), 1000.0 * 0.5 / PI as f64);
@@ -382,6 +422,12 @@ fn same_seed_same_result_on_one_and_two_threads_and_pinned_ray_count() {
     s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.8, 0.0);
     s.cube([0.0, 1.0, 0.0], [0.5, 1.0, 0.5], false, 0.5, 0.0);
     s.quad([2.0, 1.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.2], 0.0, 5.0);
+    // Materials read at the hit: a textured emitter, a hashed-alpha pane, a masked double-sided leaf.
+    let t = s.texture(texture(2, 2, &[[255, 0, 0, 255], [0, 0, 0, 0], [20, 200, 90, 200], [255; 4]], Filter::Linear, Wrap::Repeat));
+    s.quad_with([-1.5, 1.2, 0.5], [0.3, 0.0, 0.0], [0.0, 0.0, 0.3], Material { emissive: [4.0; 3], emissive_texture: Some(Slot::plain(t)), ..Material::default() });
+    s.quad_with([1.0, 1.5, 1.0], [0.6, 0.0, 0.0], [0.0, 0.0, 0.6], Material { base_color: [0.2, 0.5, 0.9, 0.4], alpha: Alpha::Blend, ..Material::default() });
+    let leaf = Material { base_color_texture: Some(Slot::plain(t)), alpha: Alpha::Mask(0.5), double_sided: true, ..Material::default() };
+    s.quad_with([-1.0, 1.8, -0.5], [0.5, 0.0, 0.0], [0.0, 0.3, 0.3], leaf);
     let json = r#"[{"name":"sun","kind":"sun","intensity":1000,"direction":[-0.6,-0.8,0]},
                    {"name":"p","kind":"point","intensity":50,"position":[1,2,1]},
                    {"name":"r","kind":"rect","intensity":3,"position":[-2,2,0],"direction":[0,-1,0]}]"#;
@@ -482,6 +528,325 @@ fn probe_inside_a_solid_sees_back_faces_and_bakes_deterministically() {
     assert!(down > 150.0 && down > 10.0 * up.max(0.0), "{far:?}");
 }
 
+// ---- materials at the hit point ------------------------------------------------------------
+
+/// A 1000 lux sun straight down.
+const SUN_LUX: f64 = 1000.0;
+fn sun_down() -> Vec<Light> {
+    lights(r#"[{"name":"sun","kind":"sun","intensity":1000,"direction":[0,-1,0]}]"#)
+}
+
+/// Channel k's mean over points.
+fn channel_mean(v: &[V3], k: usize) -> f64 {
+    v.iter().map(|x| x[k] as f64).sum::<f64>() / v.len() as f64
+}
+
+/// 64 points `h` above the floor within 0.1 m of (x, 0), facing down: under a sun straight down
+/// each sees the floor around it, so B there is the floor's radiance: albedo x E/pi.
+fn looking_down_at(x: f32, h: f32) -> (Vec<V3>, Vec<V3>) {
+    let pts = (0..64).map(|i| [x - 0.1 + 0.2 * (i % 8) as f32 / 7.0, h, -0.1 + 0.2 * (i / 8) as f32 / 7.0]).collect();
+    (pts, vec![[0.0, -1.0, 0.0]; 64])
+}
+
+fn srgb_to_linear(byte: u8) -> f64 {
+    let c = byte as f64 / 255.0;
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+#[test]
+fn texture_sampling_decodes_srgb_filters_in_linear_light_and_wraps() {
+    let px = |t: &Texture, u: f32, v: f32| t.sample([u, v]);
+    // 2 x 1, black | white: bilinear halfway is 0.5 in linear light (not the sRGB midpoint).
+    let t = texture(2, 1, &[[0, 0, 0, 255], [255, 255, 255, 51]], Filter::Linear, Wrap::Clamp);
+    assert_eq!(px(&t, 0.5, 0.5), [0.5, 0.5, 0.5, 0.6]);
+    assert_eq!(px(&t, 0.1, 0.5)[0], 0.0, "clamped at the edge");
+    let grey = texture(1, 1, &[[188, 188, 188, 255]], Filter::Linear, Wrap::Repeat);
+    assert!((px(&grey, 0.3, 0.7)[0] as f64 - srgb_to_linear(188)).abs() < 1e-6 && (srgb_to_linear(188) - 0.5029).abs() < 1e-4);
+    // 4 x 1, texels 0..3 by their red channel; nearest reads floor(u * 4) wrapped.
+    let ramp: Vec<[u8; 4]> = (0..4).map(|i| [[0, 90, 160, 255][i], 0, 0, 255]).collect();
+    let red = |wrap: Wrap, u: f32| {
+        let t = Texture::new(4, 1, ramp.clone(), false, Sampler { wrap_s: wrap, wrap_t: wrap, mag_filter: Filter::Nearest, min_filter: Filter::Nearest, mipmap_filter: None }).unwrap();
+        (t.sample([u, 0.5])[0] * 255.0).round() as u8
+    };
+    assert_eq!([1.1, -0.1, 2.6].map(|u| red(Wrap::Repeat, u)), [0, 255, 160]);
+    assert_eq!([1.1, -0.1, 2.6].map(|u| red(Wrap::Clamp, u)), [255, 0, 255]);
+    // Mirrored repeat: 1.1 reads texel 3 (its mirror image of 0.9), -0.1 texel 0, 1.6 texel 1.
+    assert_eq!([1.1, -0.1, 1.6].map(|u| red(Wrap::Mirror, u)), [255, 0, 90]);
+}
+
+#[test]
+fn materials_read_their_slot_uv_set_through_its_transform_and_the_vertex_colour() {
+    // One triangle; texcoord1 differs from uv0; a 2 x 2 nearest texture A B / C D.
+    let (a, b, c, d) = ([255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [188, 188, 188, 255]);
+    let tex = texture(2, 2, &[a, b, c, d], Filter::Nearest, Wrap::Repeat);
+    let uv0 = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
+    let uv1 = [[0.25, 0.25], [0.75, 0.25], [0.25, 0.75]];
+    let colors = [[255, 255, 255, 255], [128, 255, 255, 255], [255, 255, 255, 0]];
+    let surfaces = |slot: Slot| {
+        let m = Material { base_color: [1.0, 1.0, 1.0, 0.5], base_color_texture: Some(slot), emissive: [3.0; 3], emissive_texture: Some(slot), ..Material::default() };
+        let attributes = VertexAttributes { uv0: Some(&uv0), texcoord1: Some(&uv1), color: Some(&colors) };
+        Surfaces::new(&[[0, 1, 2]], 3, &[0], attributes, vec![m], vec![tex.clone()]).unwrap()
+    };
+    let corner = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    // texcoord1 moved by offset (0.5, 0): the first corner reads (0.75, 0.25) = B, the last (0.75, 0.75) = D.
+    let offset = TextureTransform { tex_coord: 1, offset: [0.5, 0.0], ..TextureTransform::default() };
+    let s = surfaces(Slot { texture: 0, set: 1, matrix: offset.matrix() });
+    assert_eq!(s.shade(0, corner[0]).albedo, [0.0, 1.0, 0.0]);
+    let grey = srgb_to_linear(188) as f32;
+    assert_eq!(s.shade(0, corner[2]), Shade { albedo: [grey; 3], emission: [3.0 * grey; 3] });
+    // The second corner reads (1.25, 0.25), repeated: A. The vertex colour (red 128/255 there)
+    // multiplies the albedo, not the emission.
+    let second = s.shade(0, corner[1]);
+    assert_eq!((second.albedo, second.emission), ([128.0 / 255.0, 0.0, 0.0], [3.0, 0.0, 0.0]));
+    // Alpha: factor 0.5 x texture 1 x vertex alpha (0 at the last corner, 0.5 halfway to it).
+    assert_eq!((s.alpha(0, corner[0]), s.alpha(0, corner[2]), s.alpha(0, [0.5, 0.0, 0.5])), (0.5, 0.0, 0.25));
+    // A quarter turn (KHR_texture_transform's T R S), (u, v) -> (v, -u): uv0 (0.25, 0.125) ->
+    // (0.125, -0.25) reads C (the identity would read A), uv0 (0.75, 0.125) -> (0.125, -0.75)
+    // reads A (the identity: B).
+    let turn = TextureTransform { rotation: std::f32::consts::FRAC_PI_2, ..TextureTransform::default() };
+    let s = surfaces(Slot { texture: 0, set: 0, matrix: turn.matrix() });
+    assert_eq!(s.shade(0, [0.625, 0.25, 0.125]).albedo, [0.0, 0.0, 1.0]);
+    // (Red x the vertex colour there: 0.125 + 0.75 x 128/255 + 0.125.)
+    assert_eq!(s.shade(0, [0.125, 0.75, 0.125]).albedo, [159.75 / 255.0, 0.0, 0.0]);
+    // Without texcoord1 in the vertices, set 1 reads (0, 0) through its transform: A.
+    let m = Material { base_color_texture: Some(Slot { texture: 0, set: 1, matrix: offset.matrix() }), ..Material::default() };
+    let s = Surfaces::new(&[[0, 1, 2]], 3, &[0], VertexAttributes { uv0: Some(&uv0), ..Default::default() }, vec![m], vec![tex.clone()]).unwrap();
+    assert_eq!(s.shade(0, corner[2]).albedo, [0.0, 1.0, 0.0], "(0, 0) + (0.5, 0) reads B");
+}
+
+#[test]
+fn emitter_footprints_cover_every_texel_a_read_can_reach() {
+    // Unbiased light sampling needs a positive weight wherever a read can return light: random
+    // sparse textures (one big enough to be summed in blocks), random UV boxes (beyond [0, 1],
+    // huge, tiny), every wrap mode and filter; the mean is zero only if every read is black.
+    let mut r = Rng::for_sample(21, 0, 0);
+    for (w, h) in [(7usize, 5usize), (1, 1), (2048, 1030)] {
+        for wrap in [Wrap::Repeat, Wrap::Clamp, Wrap::Mirror] {
+            for filter in [Filter::Linear, Filter::Nearest] {
+                let mut texels = vec![[0u8, 0, 0, 255]; w * h];
+                for _ in 0..(w * h / 40).clamp(1, 3) {
+                    texels[(r.next_u32() as usize) % (w * h)] = [0, 0, 40, 255];
+                }
+                let tex = Texture::new(w, h, texels, true, Sampler { wrap_s: wrap, wrap_t: wrap, mag_filter: filter, min_filter: filter, mipmap_filter: None }).unwrap();
+                let textures = [tex];
+                let fp = Footprint::new(&textures[0]);
+                let (mut lit, mut dark) = (0, 0);
+                for _ in 0..300 {
+                    let size = [0.001f32, 0.05, 0.3, 3.0][(r.next_u32() % 4) as usize];
+                    let lo = [(r.next_f32() - 0.5) * 6.0, (r.next_f32() - 0.5) * 6.0];
+                    let hi = [lo[0] + size * r.next_f32(), lo[1] + size * r.next_f32()];
+                    let mean = fp.mean(&textures[0], lo, hi);
+                    let reads = (0..400).any(|_| {
+                        let uv = [lo[0] + (hi[0] - lo[0]) * r.next_f32(), lo[1] + (hi[1] - lo[1]) * r.next_f32()];
+                        textures[0].sample(uv)[2] > 0.0
+                    });
+                    assert!(!reads || mean > 0.0, "{w}x{h} {wrap:?} {filter:?}: box {lo:?}..{hi:?} reads light but weighs {mean}");
+                    if mean > 0.0 { lit += 1 } else { dark += 1 }
+                }
+                assert!(w * h < 40 || dark > 0, "{w}x{h} {wrap:?}: some boxes should miss the few lit texels ({lit} lit)");
+            }
+        }
+    }
+}
+
+#[test]
+fn albedo_comes_from_the_texture_at_the_hit_point() {
+    // A floor whose texture is red on its left half and sRGB 188 grey on its right, as one quad
+    // (two triangles, each spanning both halves): the bounce light above each half has the
+    // colour of the texels under it, sRGB decoded (188 -> 0.5029), not a per-triangle mean.
+    let mut s = Soup::new();
+    let (red, grey) = ([255, 0, 0, 255], [188, 188, 188, 255]);
+    let t = s.texture(texture(8, 1, &[red, red, red, red, grey, grey, grey, grey], Filter::Linear, Wrap::Repeat));
+    s.quad_with([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], Material { base_color_texture: Some(Slot::plain(t)), ..Material::default() });
+    let scene = s.scene(sun_down(), None);
+    let e = SUN_LUX / PI as f64;
+    let g = srgb_to_linear(188);
+    for (x, want) in [(-5.0, [1.0, 0.0, 0.0]), (5.0, [g, g, g])] {
+        let (pts, nrm) = looking_down_at(x, 0.02);
+        let out = bake(&scene, &pts, &nrm, &settings(64, 1, 11));
+        for (k, want) in want.iter().enumerate() {
+            let m = channel_mean(&out.b, k);
+            assert!((m - want * e).abs() <= 0.01 * e, "x = {x} channel {k}: B = {m}, want {}", want * e);
+        }
+    }
+}
+
+#[test]
+fn vertex_colour_multiplies_the_albedo_where_the_ray_hits() {
+    // The floor's green channel runs linearly from 0 at x = -10 to 1 at x = 10 (vertex colours):
+    // above x = -5 and x = 5 (symmetric neighbourhoods of a linear function) B's green is a
+    // quarter and three quarters of the white floor's.
+    let mut s = Soup::new();
+    let b = s.quad_with([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], Material::default());
+    for corner in [b, b + 3] {
+        s.colors[corner] = [255, 0, 255, 255]; // the x = -10 side
+    }
+    let scene = s.scene(sun_down(), None);
+    let e = SUN_LUX / PI as f64;
+    for (x, green) in [(-5.0, 0.25), (5.0, 0.75)] {
+        let (pts, nrm) = looking_down_at(x, 0.02);
+        let out = bake(&scene, &pts, &nrm, &settings(64, 1, 12));
+        let (r, g) = (channel_mean(&out.b, 0), channel_mean(&out.b, 1));
+        assert!((r / e - 1.0).abs() < 0.01 && (g / e - green).abs() < 0.01, "x = {x}: B = ({r}, {g}), want ({e}, {})", green * e);
+    }
+}
+
+/// An emissive quad (radiance 2 x texture) 1.5 above the origin facing down, its texture white
+/// on the half over x < 0 and black on the other, over a black floor; and B at the origin that
+/// the white half alone gives (Lambert's polygon formula).
+fn half_white_emitter(filter: Filter, wrap: Wrap) -> (BakeScene, f64) {
+    let mut s = Soup::new();
+    s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.0, 0.0);
+    let t = s.texture(texture(2, 1, &[[255; 4], [0, 0, 0, 255]], filter, wrap));
+    s.quad_with([0.0, 1.5, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], Material { base_color: [0.0, 0.0, 0.0, 1.0], emissive: [2.0; 3], emissive_texture: Some(Slot::plain(t)), ..Material::default() });
+    // Far off, an emitter whose transform reads only the black texel: never worth sampling.
+    let black = Slot { texture: t, set: 0, matrix: [[0.0, 0.0, 0.75], [0.0, 0.0, 0.5]] };
+    s.quad_with([30.0, 1.5, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], Material { emissive: [5.0; 3], emissive_texture: Some(black), ..Material::default() });
+    let white_half = [[-1.0, 1.5, -1.0], [0.0, 1.5, -1.0], [0.0, 1.5, 1.0], [-1.0, 1.5, 1.0]];
+    (s.scene(vec![], None), 2.0 * polygon_irradiance([0.0; 3], [0.0, 1.0, 0.0], &white_half) / PI as f64)
+}
+
+#[test]
+fn textured_emission_matches_the_polygon_irradiance_of_its_lit_half() {
+    // Nearest: the emitting half is exactly x < 0. Bilinear (clamped): the ramp between the two
+    // texel centres is antisymmetric about x = 0, as is nothing else, and the point's view is
+    // symmetric: the same irradiance. Light sampling picks the quad by its texture's mean and
+    // evaluates the texture at each sampled point; MIS with the hits as before.
+    for (filter, wrap) in [(Filter::Nearest, Wrap::Repeat), (Filter::Linear, Wrap::Clamp)] {
+        let (scene, want) = half_white_emitter(filter, wrap);
+        let out = bake(&scene, &[[0.0; 3]; 64], &[[0.0, 1.0, 0.0]; 64], &settings(4096, 0, 13));
+        let (m, se) = mean_se(&out.b);
+        assert!((m / want - 1.0).abs() < 0.01, "{filter:?} {wrap:?}: B = {m} (se {se}), want {want} (the whole quad would give about twice)");
+        if wrap == Wrap::Clamp {
+            // The far quad reads black everywhere (clamped), so it is no emitter at all.
+            assert!(scene.emitter_pdf(4) == 0.0 && scene.emitter_pdf(5) == 0.0 && scene.emitter_pdf(2) > 0.0);
+        }
+    }
+}
+
+#[test]
+fn alpha_mask_cuts_a_hard_edged_hole_for_shadow_and_closest_hit_rays() {
+    // A black quad 1 m above the floor whose alpha runs from 1 (x = -0.5) to 0 (x = 0.5),
+    // bilinear, masked at 0.5: it is there for x <= 0 only.
+    let masked = |s: &mut Soup| {
+        let t = s.texture(texture(2, 1, &[[0, 0, 0, 255], [0, 0, 0, 0]], Filter::Linear, Wrap::Clamp));
+        s.quad_with([0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], Material { base_color_texture: Some(Slot::plain(t)), alpha: Alpha::Mask(0.5), ..Material::default() });
+    };
+    // Under a sun straight down (its disk makes a penumbra ~5 mm wide here): shadow exactly
+    // under the opaque half, full sun 2 cm away on the other side of x = 0.
+    let mut s = Soup::new();
+    s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.5, 0.0);
+    masked(&mut s);
+    let scene = s.scene(sun_down(), None);
+    let xs = [-0.9f32, -0.5, -0.05, -0.02, 0.02, 0.05, 0.5, 0.9];
+    let pts: Vec<V3> = xs.iter().map(|&x| [x, 0.0, 0.3]).collect();
+    let out = bake(&scene, &pts, &[[0.0, 1.0, 0.0]; 8], &settings(64, 0, 14));
+    let e = (SUN_LUX / PI as f64) as f32;
+    for (x, b) in xs.iter().zip(&out.b) {
+        if *x < 0.0 {
+            assert_eq!(b[0], 0.0, "x = {x}: under the opaque half");
+        } else {
+            assert!((b[0] / e - 1.0).abs() < 2e-4, "x = {x}: B = {} under the cut-out half, want {e}", b[0]);
+        }
+    }
+    // Under a uniform sky (radiance 1) and no sun: hemisphere rays pass through the cut-out, so
+    // B = 1 - (irradiance the opaque half would send) / pi.
+    let mut s = Soup::new();
+    s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.0, 0.0);
+    masked(&mut s);
+    let scene = s.scene(vec![], Some([1.0; 3]));
+    let opaque_half = [[-1.0, 1.0, -1.0], [0.0, 1.0, -1.0], [0.0, 1.0, 1.0], [-1.0, 1.0, 1.0]];
+    let want = 1.0 - polygon_irradiance([0.0; 3], [0.0, 1.0, 0.0], &opaque_half) / PI as f64;
+    let out = bake(&scene, &[[0.0; 3]; 64], &[[0.0, 1.0, 0.0]; 64], &settings(256, 0, 15));
+    let (m, se) = mean_se(&out.b);
+    assert!((m - want).abs() < 4.0 * se && (m - want).abs() < 0.01, "sky through the hole: B = {m} (se {se}), want {want}");
+}
+
+#[test]
+fn hashed_alpha_lets_one_minus_alpha_through_and_opaque_ignores_alpha() {
+    // A pane of alpha 0.3 1 m above the floor under a sun straight down.
+    let pane = |alpha: Alpha| {
+        let mut s = Soup::new();
+        s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.5, 0.0);
+        s.quad_with([0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], Material { base_color: [0.2, 0.6, 0.9, 0.3], alpha, ..Material::default() });
+        s.scene(sun_down(), None)
+    };
+    let pts: Vec<V3> = (0..256).map(|i| [-0.8 + 1.6 * (i % 16) as f32 / 15.0, 0.0, -0.8 + 1.6 * (i / 16) as f32 / 15.0]).collect();
+    let nrm = vec![[0.0, 1.0, 0.0]; pts.len()];
+    let e = SUN_LUX / PI as f64;
+    // Blend: each shadow ray passes where alpha < a hash of the point it crosses.
+    let out = bake(&pane(Alpha::Blend), &pts, &nrm, &settings(64, 0, 16));
+    let (m, se) = mean_se(&out.b);
+    let (m, se) = (m / e, se / e);
+    assert!((m - 0.7).abs() < 4.0 * se && se < 0.01, "transmittance {m} (se {se}), want 0.7");
+    // Opaque ignores alpha: full shadow. Mask at 0.5 with alpha 0.3 everywhere: no shadow.
+    assert!(bake(&pane(Alpha::Opaque), &pts, &nrm, &settings(8, 0, 16)).b.iter().all(|b| b[0] == 0.0));
+    let m = mean(&bake(&pane(Alpha::Mask(0.5)), &pts, &nrm, &settings(8, 0, 16)).b);
+    assert!((m / e - 1.0).abs() < 2e-4, "{m}");
+}
+
+#[test]
+fn single_sided_back_faces_are_black_double_sided_ones_reflect() {
+    // A 4 x 4 m quad of albedo 0.8 1 m above a black floor, a point light between them: floor
+    // points get the light directly plus what the quad's underside reflects. The underside is
+    // the front of a quad facing down, the back of one facing up: black if single-sided (B is
+    // then the direct light alone, exactly), the same surface if double-sided.
+    let light = lights(r#"[{"name":"p","kind":"point","intensity":100,"position":[0.5,0.5,0]}]"#);
+    let pts: Vec<V3> = (0..64).map(|i| [-0.7 + 0.2 * (i % 8) as f32, 0.0, -0.7 + 0.2 * (i / 8) as f32]).collect();
+    let nrm = vec![[0.0, 1.0, 0.0]; pts.len()];
+    let run = |facing_up: bool, double_sided: bool| {
+        let mut s = Soup::new();
+        s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.0, 0.0);
+        let v = if facing_up { [0.0, 0.0, -2.0] } else { [0.0, 0.0, 2.0] };
+        s.quad_with([0.0, 1.0, 0.0], [2.0, 0.0, 0.0], v, Material { base_color: [0.8, 0.8, 0.8, 1.0], double_sided, ..Material::default() });
+        bake(&s.scene(light.clone(), None), &pts, &nrm, &settings(256, 1, 17)).b
+    };
+    let (down, up, up_double) = (run(false, false), run(true, false), run(true, true));
+    for (x, b) in pts.iter().zip(&up) {
+        let d = sub([0.5, 0.5, 0.0], *x);
+        let direct = 100.0 * d[1] / length(d) / dot(d, d) / PI;
+        assert!((b[0] / direct - 1.0).abs() < 1e-5, "{x:?}: {} want the direct light {direct}", b[0]);
+    }
+    // Point by point (the direct light varies over the points): the underside's reflection,
+    // down - up, is large against its noise; down and double-sided up agree within theirs.
+    let diff = |a: &[V3], b: &[V3]| -> Vec<V3> { a.iter().zip(b).map(|(x, y)| [x[0] - y[0]; 3]).collect() };
+    let ((reflected, se_r), (delta, se_d)) = (mean_se(&diff(&down, &up)), mean_se(&diff(&down, &up_double)));
+    assert!(reflected > 20.0 * se_r && reflected > 0.2 * mean(&up), "the underside's reflection {reflected} (se {se_r}), direct {}", mean(&up));
+    assert!(delta.abs() < 4.0 * se_d, "facing down vs double-sided facing up: {delta} (se {se_d})");
+}
+
+#[test]
+fn double_sided_emitters_emit_and_are_sampled_from_both_sides() {
+    // T11's square light as emissive triangles, facing away from the point: nothing if
+    // single-sided, the full closed form if double-sided (light samples and MIS from the back).
+    for (down, double_sided, lit) in [(true, false, true), (false, false, false), (false, true, true)] {
+        let mut s = Soup::new();
+        s.quad([0.0; 3], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.0, 0.0);
+        let v = if down { [0.0, 0.0, 1.0] } else { [0.0, 0.0, -1.0] };
+        s.quad_with([0.0, 1.5, 0.0], [1.0, 0.0, 0.0], v, Material { base_color: [0.0, 0.0, 0.0, 1.0], emissive: [2.0; 3], double_sided, ..Material::default() });
+        let poly = [[-1.0, 1.5, -1.0], [1.0, 1.5, -1.0], [1.0, 1.5, 1.0], [-1.0, 1.5, 1.0]];
+        let want = if lit { 2.0 * polygon_irradiance([0.0; 3], [0.0, 1.0, 0.0], &poly) / PI as f64 } else { 0.0 };
+        let m = mean(&bake(&s.scene(vec![], None), &[[0.0; 3]; 64], &[[0.0, 1.0, 0.0]; 64], &settings(512, 0, 18)).b);
+        assert!((m - want).abs() <= 0.01 * want, "facing down {down}, double-sided {double_sided}: {m} want {want}");
+    }
+}
+
+#[test]
+fn probes_count_only_single_sided_back_faces_as_inside() {
+    // A probe inside a closed box (faces outward) with a point light: single-sided, it sees only
+    // back faces (inside geometry) and the light's direct delta; double-sided, the walls' inner
+    // sides are surfaces that reflect the light back to it.
+    let probe = |double_sided: bool| {
+        let mut s = Soup::new();
+        s.cube_with([0.0; 3], [1.0; 3], false, Material { base_color: [0.5, 0.5, 0.5, 1.0], double_sided, ..Material::default() });
+        let scene = s.scene(lights(r#"[{"name":"p","kind":"point","intensity":10,"position":[0.3,0.2,0.1]}]"#), Some([1.0; 3]));
+        probes(&scene, &[[0.0; 3]], &settings(256, 1, 19))[0].clone()
+    };
+    let (single, double) = (probe(false), probe(true));
+    assert_eq!((single.backface, double.backface), (1.0, 0.0));
+    assert!(double.sh[0][0] > 1.1 * single.sh[0][0], "the walls' reflection: {:?} vs {:?}", double.sh[0], single.sh[0]);
+}
+
 /// Benchmark on a raw scene (tools/bench_bvh.py --write-raw): `BVH_RAW=/tmp/temple.bin cargo
 /// test --release -p cook_core bvh_raw_bench -- --ignored --nocapture`. Prints rays/s on one
 /// thread and the box/triangle tests per ray (the lanes tested, used or not).
@@ -521,5 +886,26 @@ fn bvh_raw_bench() {
         boxes as f64 / (3 * n) as f64,
         prims as f64 / (3 * n) as f64
     );
+    // Shadow rays: the same rays as any-hit queries.
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let t0 = std::time::Instant::now();
+        hits = rays.iter().filter(|r| bvh.any(r)).count();
+        best = best.min(t0.elapsed().as_secs_f64());
+    }
+    stats::take();
+    println!("any-hit: hit {:.4}, {:.2} Mrays/s", hits as f64 / n as f64, n as f64 / best / 1e6);
+    // The filtered walk (alpha-tested surfaces): every 16th triangle flagged, a filter that keeps
+    // every hit (so the answers are the unfiltered ones): what asking the filter costs.
+    let flagged: Vec<bool> = (0..tris.len()).map(|i| i % 16 == 0).collect();
+    let fbvh = Bvh::build_flagged(&pos, &tris, Some(&flagged));
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let t0 = std::time::Instant::now();
+        hits = rays.iter().filter(|r| fbvh.closest_filtered(r, |p, t| p != u32::MAX && t >= 0.0).is_some()).count();
+        best = best.min(t0.elapsed().as_secs_f64());
+    }
+    stats::take();
+    println!("filtered closest (1/16 of triangles flagged): hit {:.4}, {:.2} Mrays/s", hits as f64 / n as f64, n as f64 / best / 1e6);
 }
 

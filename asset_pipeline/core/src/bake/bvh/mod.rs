@@ -24,6 +24,11 @@
 //! - Box test: slabs with the reciprocal direction (IEEE infinities handle zero components; a
 //!   NaN from 0*inf is dropped by `max`/`min`, which keeps the box, conservatively), and the far
 //!   distance widened by 1+2*gamma(3) (pbrt's robust bound) so rounding never culls a real hit.
+//! - Hit filters ([`Bvh::closest_filtered`], [`Bvh::any_filtered`]): triangles flagged at build
+//!   time (alpha-tested surfaces) can be passed through: the walk asks a closure about each hit
+//!   on one and goes on when it says no, so a ray through a cut-out finds what lies behind in the
+//!   same walk. Only leaves holding a flagged triangle are marked; the unfiltered queries are a
+//!   separate instantiation with the filter compiled out (the opaque path does not pay for it).
 //! - [`offset_ray`]: the origin offset of Wächter & Binder ("A Fast and Robust Method for Avoiding
 //!   Self-Intersection", Ray Tracing Gems ch. 6): a few ulps along the normal, scaled with the
 //!   position's magnitude, instead of a fixed epsilon.
@@ -81,6 +86,8 @@ pub struct Bvh {
     nodes: Vec<wide::Wide>,
     /// Leaf triangles, a block of 8 per leaf.
     blocks: Vec<wide::Tris>,
+    /// Per block, the lanes whose triangle was flagged for the hit filter (empty if none was).
+    filter_lanes: Vec<u8>,
     /// The implementation queries run with: the fastest this CPU has.
     kernel: traverse::Kernel,
 }
@@ -89,18 +96,39 @@ impl Bvh {
     /// Build over `triangles` (indices into `positions`). Triangles with an index out of range
     /// or a non-finite corner are left out (they can never be hit).
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Bvh {
-        let kernel = *traverse::Kernel::available().last().expect("the portable kernel");
-        let Some(bin) = build::binary(positions, triangles) else {
-            return Bvh { nodes: vec![wide::Wide::EMPTY], blocks: Vec::new(), kernel };
-        };
-        let w = wide::collapse(&bin, positions, triangles);
-        assert!(w.stack < traverse::STACK, "BVH deeper than the traversal stack");
-        Bvh { nodes: w.nodes, blocks: w.blocks, kernel }
+        Bvh::build_flagged(positions, triangles, None)
     }
 
-    /// Closest hit with `tmin < t < tmax`, or None.
+    /// As [`Bvh::build`], with `flagged[i]` marking the triangles whose hits the filtered
+    /// queries hand to their filter (one flag per triangle).
+    pub fn build_flagged(positions: &[[f32; 3]], triangles: &[[u32; 3]], flagged: Option<&[bool]>) -> Bvh {
+        assert!(flagged.is_none_or(|f| f.len() == triangles.len()), "one flag per triangle");
+        let kernel = *traverse::Kernel::available().last().expect("the portable kernel");
+        let Some(bin) = build::binary(positions, triangles) else {
+            return Bvh { nodes: vec![wide::Wide::EMPTY], blocks: Vec::new(), filter_lanes: Vec::new(), kernel };
+        };
+        let w = wide::collapse(&bin, &wide::Soup { positions, triangles, flagged });
+        assert!(w.stack < traverse::STACK, "BVH deeper than the traversal stack");
+        Bvh { nodes: w.nodes, blocks: w.blocks, filter_lanes: w.filter_lanes, kernel }
+    }
+
+    /// Closest hit with `tmin < t < tmax`, or None. Every triangle counts, flagged or not.
     pub fn closest(&self, ray: &Ray) -> Option<Hit> {
-        traverse::closest(self, ray)
+        traverse::closest(self, ray, &traverse::Opaque)
+    }
+
+    /// Closest hit with `tmin < t < tmax` among those kept: a hit on a flagged triangle counts
+    /// only if `keep(triangle, t)`. `keep` must depend on nothing else (not on the order it is
+    /// asked in), so the answer does not depend on the walk; it may be asked about hits that
+    /// turn out to lie behind the closest.
+    pub fn closest_filtered(&self, ray: &Ray, keep: impl Fn(u32, f32) -> bool) -> Option<Hit> {
+        traverse::closest(self, ray, &traverse::Filtered(keep))
+    }
+
+    /// Whether a kept hit lies within `tmin < t < tmax` (shadow rays through alpha-tested
+    /// surfaces): stops at the first one. `keep` as in [`Bvh::closest_filtered`].
+    pub fn any_filtered(&self, ray: &Ray, keep: impl Fn(u32, f32) -> bool) -> bool {
+        traverse::any(self, ray, &traverse::Filtered(keep))
     }
 
     /// Closest hits of many rays (t in (0, inf)) in parallel on the current rayon pool:
@@ -119,8 +147,9 @@ impl Bvh {
     }
 
     /// Whether anything is hit with `tmin < t < tmax` (shadow rays): stops at the first hit.
+    /// Every triangle counts, flagged or not.
     pub fn any(&self, ray: &Ray) -> bool {
-        traverse::any(self, ray)
+        traverse::any(self, ray, &traverse::Opaque)
     }
 }
 

@@ -219,3 +219,43 @@ fn block_triangle_test_equals_the_scalar_one() {
     }
 }
 
+
+/// The filtered walk against brute force: the closest hit among those kept (a flagged
+/// triangle's hit counts only where the filter keeps it), any-hit likewise, on every kernel;
+/// the unfiltered queries on the flagged tree are those of the unflagged tree.
+#[test]
+fn filtered_queries_keep_only_what_the_filter_keeps() {
+    let mut r = Rng::for_sample(15, 0, 0);
+    let (pos, tris) = soup(&mut r, 3000, 5.0, 1.0);
+    let flagged: Vec<bool> = (0..tris.len()).map(|i| i % 3 != 0).collect();
+    // Keep a hit by a hash of (triangle, t): deterministic, and about half of them.
+    let keep = |prim: u32, t: f32| (prim.wrapping_mul(0x9E37_79B9) ^ t.to_bits()).wrapping_mul(0x85EB_CA6B) >> 31 == 0;
+    let mut rays = random_rays(&mut r, 20000, -7.0, 7.0);
+    rays.extend(random_rays(&mut r, 2000, -7.0, 7.0).into_iter().map(|ray| Ray { tmin: 0.5, tmax: 4.0, ..ray }));
+    let plain = Bvh::build(&pos, &tris);
+    let (mut filtered_away, mut hits) = (0, 0);
+    for k in Kernel::available() {
+        let bvh = Bvh::build_flagged(&pos, &tris, Some(&flagged)).with_kernel(k);
+        for (i, ray) in rays.iter().enumerate() {
+            let mut want: Option<Hit> = None;
+            for (p, t) in tris.iter().enumerate() {
+                let tri = t.map(|v| pos[v as usize]);
+                let Some(th) = intersect_triangle(ray, &tri) else { continue };
+                if (!flagged[p] || keep(p as u32, th)) && want.is_none_or(|w| th < w.t) {
+                    want = Some(Hit { t: th, prim: p as u32 });
+                }
+            }
+            let got = bvh.closest_filtered(ray, keep);
+            assert_eq!(got.map(|h| h.t), want.map(|h| h.t), "{k:?} ray {i}: {ray:?}");
+            if let Some(h) = got {
+                assert!(!flagged[h.prim as usize] || keep(h.prim, h.t), "{k:?} ray {i}: a filtered hit was returned");
+            }
+            assert_eq!(bvh.any_filtered(ray, keep), want.is_some(), "{k:?} ray {i}");
+            assert_eq!(bvh.closest_filtered(ray, |_, _| true), bvh.closest(ray), "{k:?} ray {i}: keep-all filter");
+            assert_eq!((bvh.closest(ray), bvh.any(ray)), (plain.closest(ray), plain.any(ray)), "{k:?} ray {i}: flags change the unfiltered walk");
+            filtered_away += (plain.closest(ray).map(|h| h.t) != want.map(|h| h.t)) as usize;
+            hits += want.is_some() as usize;
+        }
+    }
+    assert!(hits > rays.len() / 4 && filtered_away > rays.len() / 20, "{hits} hits, {filtered_away} changed by the filter");
+}

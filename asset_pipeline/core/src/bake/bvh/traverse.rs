@@ -1,6 +1,11 @@
 //! Walking the wide tree: 8 child boxes per visit, 8 triangles per test. One generic source,
 //! instantiated as the portable kernel (plain arrays) and, on x86_64 CPUs that have it, the AVX
 //! kernel; both compute the same bits (see [`super::lanes`]), so results do not depend on it.
+//!
+//! Hit filters (any-hit programs, for alpha-tested surfaces) are a type parameter too: the
+//! unfiltered walk is instantiated with [`Opaque`], whose filter code is compiled out, so it is
+//! the walk it was before filters existed; a filtered walk asks the filter only about hits on
+//! triangles flagged at build time, in leaves marked `child::FILTER`.
 
 use super::lanes::{Lanes, Scalar};
 use super::triangle::{intersect, Prepared, ROBUST};
@@ -39,21 +44,51 @@ impl Kernel {
     }
 }
 
-pub(super) fn closest(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
-    match bvh.kernel {
-        Kernel::Portable => walk::<Scalar<WIDTH>, true>(bvh, ray),
-        // SAFETY: `Bvh` only holds a kernel that `Kernel::available` listed.
-        #[cfg(target_arch = "x86_64")]
-        Kernel::Avx => unsafe { avx::walk::<true>(bvh, ray) },
+/// What a walk does with a hit on a flagged triangle.
+pub(super) trait AnyHit {
+    /// False: no triangle is ever filtered; the checks are compiled out.
+    const ACTIVE: bool;
+    /// Whether the hit on triangle `prim` at distance `t` counts (false: the ray goes on).
+    fn keep(&self, prim: u32, t: f32) -> bool;
+}
+
+/// Every hit counts: the unfiltered walk.
+pub(super) struct Opaque;
+
+impl AnyHit for Opaque {
+    const ACTIVE: bool = false;
+    #[inline(always)]
+    fn keep(&self, _: u32, _: f32) -> bool {
+        true
     }
 }
 
-pub(super) fn any(bvh: &Bvh, ray: &Ray) -> bool {
+/// Hits on flagged triangles count where the closure says so.
+pub(super) struct Filtered<F>(pub(super) F);
+
+impl<F: Fn(u32, f32) -> bool> AnyHit for Filtered<F> {
+    const ACTIVE: bool = true;
+    #[inline]
+    fn keep(&self, prim: u32, t: f32) -> bool {
+        (self.0)(prim, t)
+    }
+}
+
+pub(super) fn closest<F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: &F) -> Option<Hit> {
     match bvh.kernel {
-        Kernel::Portable => walk::<Scalar<WIDTH>, false>(bvh, ray),
+        Kernel::Portable => walk::<Scalar<WIDTH>, true, F>(bvh, ray, filter),
+        // SAFETY: `Bvh` only holds a kernel that `Kernel::available` listed.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx => unsafe { avx::walk::<true, F>(bvh, ray, filter) },
+    }
+}
+
+pub(super) fn any<F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: &F) -> bool {
+    match bvh.kernel {
+        Kernel::Portable => walk::<Scalar<WIDTH>, false, F>(bvh, ray, filter),
         // SAFETY: as in `closest`.
         #[cfg(target_arch = "x86_64")]
-        Kernel::Avx => unsafe { avx::walk::<false>(bvh, ray) },
+        Kernel::Avx => unsafe { avx::walk::<false, F>(bvh, ray, filter) },
     }
     .is_some()
 }
@@ -61,13 +96,13 @@ pub(super) fn any(bvh: &Bvh, ray: &Ray) -> bool {
 #[cfg(target_arch = "x86_64")]
 mod avx {
     use super::super::lanes::Avx;
-    use super::{Bvh, Hit, Ray};
+    use super::{AnyHit, Bvh, Hit, Ray};
 
     /// # Safety
     /// The CPU must have AVX and POPCNT.
     #[target_feature(enable = "avx,popcnt")]
-    pub(super) unsafe fn walk<const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
-        super::walk::<Avx, CLOSEST>(bvh, ray)
+    pub(super) unsafe fn walk<const CLOSEST: bool, F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: &F) -> Option<Hit> {
+        super::walk::<Avx, CLOSEST, F>(bvh, ray, filter)
     }
 }
 
@@ -199,9 +234,11 @@ impl<T: Lanes> TriRay<T> {
 
 /// Depth-first walk. CLOSEST: the closest hit, children visited nearest first and subtrees
 /// behind the closest hit so far skipped. Otherwise (shadow rays) the first hit found, in no
-/// particular order; `Some` with any t then.
+/// particular order; `Some` with any t then. Hits on flagged triangles count only where
+/// `filter` keeps them (so the closest hit is the closest kept one, whatever the order of the
+/// walk, as long as the filter's answer depends only on the triangle and t).
 #[inline(always)]
-fn walk<L: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
+fn walk<L: Lanes, const CLOSEST: bool, F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: &F) -> Option<Hit> {
     let br = BoxRay::<L>::new(ray);
     let tr = TriRay::<L>::new(ray);
     let mut tmax = ray.tmax;
@@ -265,7 +302,8 @@ fn walk<L: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
                 continue;
             }
         } else {
-            let b = unsafe { bvh.blocks.get_unchecked(child::block(cur)) };
+            let blk = child::block(cur);
+            let b = unsafe { bvh.blocks.get_unchecked(blk) };
             stats::add(0, BLOCK as u64);
             let (mut hit, redo, t) = tr.block(b, tmax);
             if hit | redo != 0 {
@@ -280,15 +318,28 @@ fn walk<L: Lanes, const CLOSEST: bool>(bvh: &Bvh, ray: &Ray) -> Option<Hit> {
                         hit |= 1 << lane;
                     }
                 }
-                if !CLOSEST && hit != 0 {
-                    let lane = hit.trailing_zeros() as usize;
-                    return Some(Hit { t: ts[lane], prim: b.id[lane] });
+                // Lanes whose hits the filter decides (none unless F filters and the leaf is marked).
+                let flagged = if F::ACTIVE && cur & child::FILTER != 0 { unsafe { *bvh.filter_lanes.get_unchecked(blk) as u32 } } else { 0 };
+                if !CLOSEST {
+                    let mut m = hit & flagged;
+                    while m != 0 {
+                        let lane = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        if !filter.keep(b.id[lane], ts[lane]) {
+                            hit &= !(1 << lane);
+                        }
+                    }
+                    if hit != 0 {
+                        let lane = hit.trailing_zeros() as usize;
+                        return Some(Hit { t: ts[lane], prim: b.id[lane] });
+                    }
                 }
-                // Lowest t, the lowest lane on a tie (all were tested against the same tmax).
+                // Lowest t, the lowest lane on a tie (all were tested against the same tmax). A
+                // flagged lane is asked only when it would be the closest so far.
                 while hit != 0 {
                     let lane = hit.trailing_zeros() as usize;
                     hit &= hit - 1;
-                    if ts[lane] < tmax {
+                    if ts[lane] < tmax && (flagged >> lane & 1 == 0 || filter.keep(b.id[lane], ts[lane])) {
                         tmax = ts[lane];
                         tcull = tmax * CULL_SLACK;
                         best = b.id[lane];

@@ -1,6 +1,9 @@
 //! The traversed layout: the binary tree collapsed into 8-wide nodes whose child boxes are
 //! stored plane by plane (8 boxes tested in one pass of 8-lane arithmetic), and leaves of up to
-//! 8 triangles packed in one block, corner coordinates lane by lane (tested at once).
+//! 8 triangles packed in one block, corner coordinates lane by lane (tested at once). A leaf
+//! holding a triangle the caller flagged for a hit filter (alpha-tested surfaces) says so in its
+//! child reference, and its lanes' flags are kept beside the blocks: a walk learns from a bit it
+//! already holds in a register whether it must look further, so unflagged leaves cost nothing.
 
 use super::build::Binary;
 
@@ -34,17 +37,19 @@ impl Wide {
     };
 }
 
-/// Child references: a node index, or (top bit set) a leaf, which is one triangle block.
+/// Child references: a node index, or (top bit set) a leaf, which is one triangle block; a
+/// leaf with a triangle flagged for the hit filter also has the next bit set.
 pub(super) mod child {
     pub const LEAF: u32 = 1 << 31;
+    pub const FILTER: u32 = 1 << 30;
 
-    pub fn leaf(block: usize) -> u32 {
-        assert!(block < LEAF as usize, "BVH too large");
-        LEAF | block as u32
+    pub fn leaf(block: usize, filtered: bool) -> u32 {
+        assert!(block < FILTER as usize, "BVH too large");
+        LEAF | if filtered { FILTER } else { 0 } | block as u32
     }
     #[inline(always)]
     pub fn block(c: u32) -> usize {
-        (c & !LEAF) as usize
+        (c & !(LEAF | FILTER)) as usize
     }
 }
 
@@ -65,24 +70,36 @@ impl Tris {
     }
 }
 
-/// The wide tree: nodes (the root first), triangle blocks, and how many stack entries a
-/// traversal can need at most.
+/// The wide tree: nodes (the root first), triangle blocks, how many stack entries a traversal
+/// can need at most, and per block the mask of its lanes whose triangle is flagged for the hit
+/// filter (empty when nothing is flagged; read only for leaves whose reference has `FILTER`).
 pub(super) struct Collapsed {
     pub(super) nodes: Vec<Wide>,
     pub(super) blocks: Vec<Tris>,
     pub(super) stack: usize,
+    pub(super) filter_lanes: Vec<u8>,
 }
 
-pub(super) fn collapse(bin: &Binary, positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Collapsed {
-    let mut out = Collapsed { nodes: Vec::new(), blocks: Vec::new(), stack: 0 };
-    out.stack = node(bin, 0, positions, triangles, &mut out);
+/// The geometry a collapse reads: corners, triangles, and which triangles are flagged.
+pub(super) struct Soup<'a> {
+    pub(super) positions: &'a [[f32; 3]],
+    pub(super) triangles: &'a [[u32; 3]],
+    pub(super) flagged: Option<&'a [bool]>,
+}
+
+pub(super) fn collapse(bin: &Binary, soup: &Soup) -> Collapsed {
+    let mut out = Collapsed { nodes: Vec::new(), blocks: Vec::new(), stack: 0, filter_lanes: Vec::new() };
+    out.stack = node(bin, 0, soup, &mut out);
+    if soup.flagged.is_none() {
+        out.filter_lanes = Vec::new();
+    }
     out
 }
 
 /// Makes the wide node for the binary subtree at `at` (its children are the up-to-8 subtrees
 /// found by opening the largest interior node first, which keeps the boxes tested per visit
 /// the likeliest to be hit); returns the stack entries the subtree can need.
-fn node(bin: &Binary, at: usize, positions: &[[f32; 3]], triangles: &[[u32; 3]], out: &mut Collapsed) -> usize {
+fn node(bin: &Binary, at: usize, soup: &Soup, out: &mut Collapsed) -> usize {
     let mut kids = vec![at];
     while kids.len() < WIDTH {
         let open = kids
@@ -106,27 +123,33 @@ fn node(bin: &Binary, at: usize, positions: &[[f32; 3]], triangles: &[[u32; 3]],
         }
         out.nodes[me].child[slot] = if n.count == 0 {
             let c = out.nodes.len() as u32;
-            deepest = deepest.max(node(bin, k, positions, triangles, out));
+            deepest = deepest.max(node(bin, k, soup, out));
             c
         } else {
-            leaf(&bin.ids[n.offset as usize..][..n.count as usize], positions, triangles, &mut out.blocks)
+            leaf(&bin.ids[n.offset as usize..][..n.count as usize], soup, out)
         };
     }
     kids.len() - 1 + deepest
 }
 
-fn leaf(ids: &[u32], positions: &[[f32; 3]], triangles: &[[u32; 3]], blocks: &mut Vec<Tris>) -> u32 {
+fn leaf(ids: &[u32], soup: &Soup, out: &mut Collapsed) -> u32 {
     assert!((1..=BLOCK).contains(&ids.len()), "the build makes leaves of one block");
+    const { assert!(BLOCK <= 8, "lane masks are bytes") };
     let mut b = Tris { v: [[[0.0; BLOCK]; 3]; 3], id: [0; BLOCK] };
+    let mut flagged = 0u8;
     for lane in 0..BLOCK {
         let id = ids[lane.min(ids.len() - 1)];
         b.id[lane] = id;
-        for (c, &v) in triangles[id as usize].iter().enumerate() {
+        for (c, &v) in soup.triangles[id as usize].iter().enumerate() {
             for a in 0..3 {
-                b.v[c][a][lane] = positions[v as usize][a];
+                b.v[c][a][lane] = soup.positions[v as usize][a];
             }
         }
+        if soup.flagged.is_some_and(|f| f[id as usize]) {
+            flagged |= 1 << lane;
+        }
     }
-    blocks.push(b);
-    child::leaf(blocks.len() - 1)
+    out.blocks.push(b);
+    out.filter_lanes.push(flagged);
+    child::leaf(out.blocks.len() - 1, flagged != 0)
 }
