@@ -40,9 +40,9 @@ $(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt tools/constr
 # the glTF path covered without third-party files. The cooker skips what is up to date.
 cook: cooker
 	@mkdir -p build/content
-	$(PY) content/characters/make_creature.py content/characters/golem.gltf
+	$(PY) content/characters/make_creature.py content/levels/characters/golem.gltf
 	$(VENV)/bin/cook content/levels/temple.toml -o $(LEVEL_PACK)
-	$(VENV)/bin/cook content/characters/golem.gltf -o $(CHARACTER_PACK)
+	$(VENV)/bin/cook content/levels/characters/golem.gltf -o $(CHARACTER_PACK)
 	$(PY) content/demo/make_scene.py build/content/demo.gltf
 	$(VENV)/bin/cook build/content/demo.gltf -o $(GLTF_PACK)
 

@@ -97,12 +97,22 @@ class GltfWriter:
             self.doc["scenes"][0]["nodes"].append(index)
         return index
 
-    def write(self, path: Path):
-        self.doc["buffers"] = [{"byteLength": len(self.blob), "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(self.blob)).decode()}]
+    def write(self, path: Path, external: bool = False):
+        """Write the .gltf at `path`: self-contained (data: URIs), or with `external` the buffer as
+        `<stem>.bin` and each image as `<stem>.image<N>.png` beside it."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if external:
+            (path.parent / f"{path.stem}.bin").write_bytes(bytes(self.blob))
+            self.doc["buffers"] = [{"byteLength": len(self.blob), "uri": f"{path.stem}.bin"}]
+            for i, image in enumerate(self.doc["images"]):
+                if image.get("uri", "").startswith("data:"):
+                    (path.parent / f"{path.stem}.image{i}.png").write_bytes(base64.b64decode(image["uri"].split(",", 1)[1]))
+                    image["uri"] = f"{path.stem}.image{i}.png"
+        else:
+            self.doc["buffers"] = [{"byteLength": len(self.blob), "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(self.blob)).decode()}]
         if not self.doc["textures"]:
             self.doc["samplers"] = []
         self.doc = {k: v for k, v in self.doc.items() if v != []}
-        path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(path.suffix + ".tmp")
         tmp.write_text(json.dumps(self.doc, indent=1))
         tmp.replace(path)

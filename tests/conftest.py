@@ -45,9 +45,9 @@ def run_demo(args, timeout=300, env=None) -> subprocess.CompletedProcess:
     return subprocess.run([str(DEMO), *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env)
 
 
-def cook_ok(source: Path, out: Path) -> None:
-    """Cook `source` to `out` with the CLI and require success."""
-    result = subprocess.run([str(COOK), str(source), "-o", str(out)], capture_output=True, text=True, timeout=300)
+def cook_ok(source: Path, out: Path, *args: str) -> None:
+    """Cook `source` to `out` with the CLI (and `args`) and require success."""
+    result = subprocess.run([str(COOK), str(source), "-o", str(out), *args], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, f"cook {source} failed ({result.returncode}):\n{result.stderr}"
     assert out.exists()
 
@@ -55,16 +55,15 @@ def cook_ok(source: Path, out: Path) -> None:
 @pytest.fixture(scope="session")
 def demo_level_uv2():
     """The demo level's static meshes with lightmap UVs, computed once per test session:
-    (static meshes, their LODs with uv1, LightmapLayout, stats, Uv2Settings)."""
+    (static meshes, their LODs placed on the atlas, LightmapLayout, stats, Uv2Settings)."""
     from asset_pipeline import uv2
     from asset_pipeline.csg import build_level
     from asset_pipeline.level import load_level
 
     level_path = REPO / "content" / "levels" / "temple.toml"
     level = load_level(level_path)
-    scene = build_level(level, level_path.parent)
-    static = [m for m in scene.meshes if m.static]
+    scene = build_level(level)
+    static = [scene.meshes[i] for i in scene.static_meshes()]
     settings = uv2.Uv2Settings(texels_per_metre=float(level.texels_per_metre))
-    lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings,
-                                           names=[m.name for m in static])
-    return static, lods, layout, stats, settings
+    r = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings, names=[m.name for m in static])
+    return static, r.placed, r.layout, r.stats, settings

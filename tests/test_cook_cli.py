@@ -75,14 +75,17 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
     # Not a terminal: one plain line per stage, no bar.
     assert "%|" not in r.stderr and all(l.startswith("cook: ") for l in r.stderr.splitlines()), r.stderr
     assert "cook: import: 1/1" in r.stderr and "cook: write: 1/1" in r.stderr
-    assert r.stdout.splitlines() == [f"cook: wrote {out}: 1 mesh, 12 triangles, 1 texture, {out.stat().st_size} bytes"]
+    # A static box: baked (its lightmap page is the second texture) under the default sky.
+    assert r.stdout.splitlines() == [f"cook: wrote {out}: 1 mesh, 12 triangles, 2 textures, {out.stat().st_size} bytes"]
     s = asset_pipeline.read_pack_summary(out)
+    page = s["texture_sizes"][1]
     assert s == {
         "meshes": 1, "submeshes": 1, "vertices": 24, "indices": 36, "triangles": 12, "materials": 1,
-        "textures": 1, "texture_sizes": [[256, 256]], "texture_mips": [9], "nodes": 2, "bytes": out.stat().st_size,
-        "lightmap_pages": 0, "lightmaps_baked": 0, "probes": 0,
+        "textures": 2, "texture_sizes": [[256, 256], page], "texture_mips": [9, 1], "nodes": 2, "bytes": out.stat().st_size,
+        "lightmap_pages": 1, "lightmaps_baked": 1, "probes": s["probes"],
     }
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "box.pack", "box.report.md"]
+    assert s["probes"] >= 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "box.lightmap0.exr", "box.pack", "box.report", "box.report.md"]
 
 
 @pytest.mark.parametrize(
@@ -90,13 +93,27 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
     SAMPLES or [pytest.param(None, marks=pytest.mark.skip(reason=f"no glTF samples at {gltf_samples_path()}"))],
     ids=lambda p: p.stem if p else "none",
 )
-def test_every_sample_cooks(source, tmp_path):
+def test_every_sample_cooks_and_bakes_its_static_meshes(source, tmp_path):
+    """Cooked directly, as `cook model.glb`: a model with static mesh nodes is baked (a quick
+    preset here; tools/bake_samples.py reports every model at medium)."""
+    from asset_pipeline.bake import BakeSettings
+    from asset_pipeline.gltf_import import import_gltf
+    from asset_pipeline.pipeline import CookSettings
+
     out = tmp_path / f"{source.stem}.pack"
     calls = []
-    summary = asset_pipeline.cook(source, out, progress=lambda stage, done, total: calls.append((stage, done, total)))
+    settings = CookSettings(bake=BakeSettings(preset="draft", samples=4, probe_samples=8))
+    summary = asset_pipeline.cook(source, out, progress=lambda stage, done, total: calls.append((stage, done, total)), settings=settings)
     assert summary["meshes"] >= 1 and summary["triangles"] >= 1
     assert asset_pipeline.read_pack_summary(out) == summary
     assert calls[0] == ("import", 0, 1) and calls[-1] == ("write", 1, 1), calls
+    static = import_gltf(source).static_nodes()
+    if static:
+        assert summary["lightmap_pages"] >= 1 and summary["lightmaps_baked"] == summary["lightmap_pages"], summary
+        assert summary["probes"] >= 1
+        assert out.with_name(f"{source.stem}.lightmap0.exr").exists()
+    else:
+        assert summary["lightmap_pages"] == 0, summary
 
 
 def test_broken_sample_accessor(gltf_samples, run_cook, tmp_path):
@@ -196,9 +213,9 @@ def test_successful_cook_replaces_existing_output(run_cook, tmp_path):
     src = write_json(tmp_path / "tri.gltf", triangle_gltf())
     out = tmp_path / "tri.pack"
     out.write_bytes(b"stale")
-    assert run_cook(src, "-o", out).returncode == 0
+    assert run_cook(src, "-o", out, "--no-bake").returncode == 0
     assert asset_pipeline.read_pack_summary(out)["vertices"] == 3
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "tri.gltf", "tri.pack", "tri.report.md"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cook-cache", "tri.gltf", "tri.pack", "tri.report", "tri.report.md"]
 
 
 def test_api_raises_cook_error_with_the_message(tmp_path):

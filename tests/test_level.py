@@ -113,12 +113,13 @@ def temple() -> ir.Scene:
 def test_temple_meshes_are_closed_and_outward(temple):
     assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
     # The character spawns' golems are the only dynamic meshes, each skinned by its own skin.
-    assert [m.name for m in temple.meshes if not m.static] == ["golem", "golem"]
+    static = set(temple.static_meshes())
+    assert [m.name for i, m in enumerate(temple.meshes) if i not in static] == ["golem", "golem"]
     assert [s.name for s in temple.skins] == ["priest/golem", "pilgrim/golem"]
-    for m in (m for m in temple.meshes if m.static):
+    for m in (temple.meshes[i] for i in static):
         check_closed(m.base, m.name)
         check_shading(m.base, m.name)
-        assert m.static and m.texels_per_metre is None
+        assert m.texels_per_metre is None
     assert temple.lightmap.texels_per_metre == 5 and temple.lightmap.pages == []
 
 
@@ -130,10 +131,10 @@ def test_temple_contents(temple):
     assert temple.sky is not None and temple.sky.intensity > 0
     assert any(max(m.emissive) > 0 for m in temple.materials)
     assert all(t.format == "Rgba8Srgb" and t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
-    assert 1_000 < sum(m.base.triangle_count for m in temple.meshes if m.static) < 50_000
+    assert 1_000 < sum(temple.meshes[i].base.triangle_count for i in temple.static_meshes()) < 50_000
     # every level mesh sits at the world origin: positions are world space (characters are placed
     # by their spawn's root node)
-    assert all(n.local == ir.Node(n.name).local for n in temple.nodes if n.mesh is not None and temple.meshes[n.mesh].static)
+    assert all(n.local == ir.Node(n.name).local for n in temple.nodes if n.mesh is not None and n.static)
     # the hall is open to the sky: straight down through the oculus the first surface is the floor
     lod = temple.meshes[[m.name for m in temple.meshes].index("temple")].base
     p = lod.attributes["position"].astype(np.float64)[lod.triangles]
@@ -419,19 +420,20 @@ def test_object_settings(tmp_path):
         static = false
     """)
     by = {m.name: m for m in scene.meshes}
+    static = {n.name: n.static for n in scene.nodes}
     assert scene.lightmap.texels_per_metre == 8 and scene.lightmap.pages == []
     assert by["static_default"].texels_per_metre is None and by["dense"].texels_per_metre == 64
-    assert not by["moving"].static
+    assert static == {"static_default": True, "dense": True, "moving": False}
 
 
 def test_props_are_merged_under_a_placed_node(tmp_path):
     (tmp_path / "statue.glb").write_bytes(b"glTF")  # only its existence is checked here
     lod = ir.Lod(attributes={"position": np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)},
                  triangles=np.array([[0, 1, 2]], np.uint32), materials=np.array([1], np.uint32))
-    prop = ir.Scene(name="statue", source="statue.glb", meshes=[ir.Mesh("body", [lod], static=True)],
+    prop = ir.Scene(name="statue", source="statue.glb", meshes=[ir.Mesh("body", [lod])],
                     materials=[ir.Material("a"), ir.Material("b", base_color_texture=0)],
                     textures=[ir.Texture("t", 1, 1, "Rgba8Srgb", [np.zeros((1, 1, 4), np.uint8)])],
-                    nodes=[ir.Node("root"), ir.Node("child", parent=0, mesh=0)],
+                    nodes=[ir.Node("root"), ir.Node("child", parent=0, mesh=0, static=True)],
                     lights=[ir.Light("lamp", "point", position=(0, 1, 0))])
     spec = load_level(write(tmp_path, HEADER + textwrap.dedent(ONE_BOX + """
 
@@ -444,7 +446,9 @@ def test_props_are_merged_under_a_placed_node(tmp_path):
     seen = []
     scene = build_level(spec, import_gltf=lambda p: seen.append(p) or prop)
     assert seen == [tmp_path / "statue.glb"]
-    assert [m.name for m in scene.meshes] == ["o", "body"] and not scene.meshes[1].static
+    # The level's switch decides for the prop's mesh nodes (default: not static), whatever the
+    # prop's own import said.
+    assert [m.name for m in scene.meshes] == ["o", "body"] and scene.static_meshes() == [0]
     assert scene.meshes[1].base.materials.tolist() == [2 + 1]  # after the level's two materials
     assert scene.materials[3].base_color_texture == 0 and len(scene.textures) == 1
     assert [n.name for n in scene.nodes] == ["o", "statue", "statue/root", "statue/child"]
@@ -455,7 +459,7 @@ def test_props_are_merged_under_a_placed_node(tmp_path):
     assert prop.meshes[0].base.materials.tolist() == [1] and prop.nodes[0].parent is None  # prop untouched
     spec_static = load_level(tmp_path / "level.toml")
     spec_static.props[0].static = True
-    assert build_level(spec_static, import_gltf=lambda p: prop).meshes[1].static
+    assert build_level(spec_static, import_gltf=lambda p: prop).static_meshes() == [0, 1]
 
 
 def test_lights_and_spawns_in_physical_units(tmp_path):
@@ -668,15 +672,20 @@ def test_real_gltf_prop(tmp_path, gltf_samples):
     box = gltf_samples / "BoxTextured" / "BoxTextured.gltf"
     if not box.is_file():
         pytest.skip(f"{box} missing")
-    scene = build_level(load_level(write(tmp_path, HEADER + ONE_BOX + f"""
+    level = write(tmp_path, HEADER + ONE_BOX + f"""
 [[props]]
 name = "crate"
 gltf = "{box}"
 translation = [0, 0.5, 3]
 static = true
-""")))
+""")
+    # The samples live outside the level's folder: allowed only when asked.
+    with pytest.raises(CookError, match="reaches outside the level's folder"):
+        load_level(level)
+    scene = build_level(load_level(level, allow_external_uris=True))
     scene.validate()
-    assert [m.name for m in scene.meshes][0] == "o" and len(scene.meshes) == 2 and scene.meshes[1].static
+    assert [m.name for m in scene.meshes][0] == "o" and len(scene.meshes) == 2 and scene.static_meshes() == [0, 1]
+    assert str(box.resolve()) in scene.files  # what the cook's key covers
     assert scene.materials[2].base_color_texture == 0 and len(scene.textures) == 1
     assert scene.nodes[1].name == "crate" and scene.nodes[2].parent == 1
 
@@ -688,7 +697,7 @@ def skinned_prop() -> ir.Scene:
     lod = ir.Lod(attributes={"position": np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)},
                  triangles=np.array([[0, 1, 2]], np.uint32), materials=np.array([0], np.uint32))
     key = lambda node, x: ir.Channel(node, "translation", "linear", np.array([0, 1], np.float32), np.array([[0, 0, 0], [x, 0, 0]], np.float32))
-    return ir.Scene(name="golem", source="golem.gltf", meshes=[ir.Mesh("body", [lod], static=True)], materials=[ir.Material("skin")],
+    return ir.Scene(name="golem", source="golem.gltf", meshes=[ir.Mesh("body", [lod])], materials=[ir.Material("skin")],
                     nodes=[ir.Node("root"), ir.Node("body", parent=0, mesh=0, skin=0), ir.Node("hip", parent=0)],
                     skins=[ir.Skin("rig", joints=[2], inverse_bind=np.eye(4, dtype=np.float32).reshape(1, 16))],
                     clips=[ir.Clip("idle", [key(2, 0.1)]), ir.Clip("walk", [key(2, 1.0)])])
@@ -718,7 +727,7 @@ def test_character_spawns_merge_their_asset_as_dynamic_skinned_meshes(tmp_path):
     assert [n.name for n in scene.nodes] == ["o", "priest", "priest/root", "priest/body", "priest/hip",
                                               "pilgrim", "pilgrim/root", "pilgrim/body", "pilgrim/hip"]
     # Both characters are dynamic (never lightmapped), each node skinned by its own copy of the skin.
-    assert [m.static for m in scene.meshes] == [True, False, False]
+    assert scene.static_meshes() == [0] and [n.name for n in scene.nodes if n.static] == ["o"]
     assert [scene.nodes[i].skin for i in (3, 7)] == [0, 1]
     assert [s.joints for s in scene.skins] == [[4], [8]]
     assert [c.name for c in scene.clips] == ["priest/idle", "priest/walk", "pilgrim/idle", "pilgrim/walk"]

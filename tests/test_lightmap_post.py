@@ -145,7 +145,8 @@ def cylinder_side(radius=1.0, height=2.0, segments=24) -> ir.Lod:
 @pytest.fixture(scope="module")
 def cylinder_page():
     settings = uv2.Uv2Settings(texels_per_metre=12.0)
-    (lod,), layout, _ = uv2.lightmap_uvs([(cylinder_side(), 1.0)], settings)
+    placed = uv2.lightmap_uvs([(cylinder_side(), 1.0)], settings)
+    (lod,), layout = placed.placed, placed.layout  # the one instance's Lod on the atlas
     assert len(layout.pages) == 1
     r = uv2.rasterize_page([lod], layout, 0, surface=True)
     return lod, layout, r

@@ -322,14 +322,14 @@ def test_stop_rules():
     assert build_lods(lod0, LodSettings(floor_triangles=m)) == []
 
 
-def test_lightmap_pages_and_uv1_are_carried():
+def test_lightmap_blocks_and_uv1_are_carried():
     lod0 = two_material_box(12)
     m = lod0.triangle_count
     pages = (np.arange(m) >= m // 2).astype(np.uint32)  # two pages, split along face order
     lod0 = ir.Lod({**lod0.attributes, "uv1": lod0.attributes["uv0"] * 0.5}, lod0.triangles, lod0.materials, pages)
     for lod in build_lods(lod0):
         lod.validate("lod")
-        assert lod.lightmap_pages is not None and set(np.unique(lod.lightmap_pages)) <= {0, 1}
+        assert lod.lightmap_blocks is not None and set(np.unique(lod.lightmap_blocks)) <= {0, 1}
 
 
 def test_open_and_messy_input():

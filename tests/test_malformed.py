@@ -340,6 +340,10 @@ GLTF_CASES = [
     gltf_case("attribute-count-mismatch", q("accessors.1.count", 3), "accessor 1 (NORMAL) has 3 elements but POSITION has 4"),
     gltf_case("no-position", q("meshes.0.primitives.0.attributes.POSITION", None), 'meshes[0].primitives[0].attributes["POSITION"]: Missing data'),
     gltf_case("mode-lines", q("meshes.0.primitives.0.mode", 1), "mode Lines is not supported"),
+    # extensions: one the cooker does not implement, if required, is refused by name
+    gltf_case("extension-required-unsupported", lambda: {**quad_doc(False), "extensionsUsed": ["KHR_draco_mesh_compression"],
+                                                         "extensionsRequired": ["KHR_draco_mesh_compression"]},
+              "requires extension 'KHR_draco_mesh_compression', which the cooker does not support"),
     # indices
     gltf_case("index-beyond-vertex-count", lambda: set_index(quad_doc(False), 4, 4), "accessor 3 (indices) element 4 is 4, but there are only 4 vertices"),
     gltf_case("index-u32-max", lambda: set_index(quad_doc(False), 0, 2**32 - 1), "accessor 3 (indices) element 0 is 4294967295"),
@@ -394,6 +398,59 @@ GLTF_CASES = [
     # the Khronos sample with a sparse accessor, its sparse index pointed past the end
     Case("sample-sparse-index-out-of-range", lambda d: sample_with_sparse_index(d, 200),
          ["accessor 1 (POSITION): sparse index 2 is 200, past the accessor's 14 elements"]),
+]
+
+
+# ---- paths that reach outside the asset's folder --------------------------------------------------
+# A downloaded asset must not carry the user's files away inside a cooked pack: buffer and image
+# URIs stay inside the asset's folder tree (and a level's paths inside the level's), unless
+# --allow-external-uris. Each case puts a real file outside the folder, so only the rule stops it.
+
+
+def outside_case(name: str, uri: str, kind: str, fragment: str) -> Case:
+    """A .gltf in d/asset/ whose buffer 0 or image 0 URI (`uri`, with {outside} replaced by the
+    absolute folder d/) names a file that exists in d/, outside the asset's folder."""
+    def make(d: Path) -> Path:
+        asset = d / "asset"
+        asset.mkdir()
+        doc = quad_doc(texture=kind == "image")
+        blob = bytes(get_blob(doc))
+        (d / "secret.bin").write_bytes(blob)
+        (d / "secret.png").write_bytes(png(4, 4))
+        target = uri.replace("{outside}", d.resolve().as_posix())
+        if kind == "buffer":
+            doc["buffers"][0] = {"byteLength": len(blob), "uri": target}
+        else:
+            doc["images"][0] = {"uri": target}
+        p = asset / f"{name}.gltf"
+        p.write_text(json.dumps(doc))
+        return p
+    return Case(f"outside-{name}", make, [fragment, "reaches outside the asset's folder", "--allow-external-uris"])
+
+
+def outside_level_case(name: str, extra: str, fragment: str, files: dict[str, Callable[[], bytes]]) -> Case:
+    """A level in d/level/ naming a file (`files`, written relative to d/level/, so '../x' lands
+    in d/) that lies outside the level's folder."""
+    def make(d: Path) -> Path:
+        level = d / "level"
+        level.mkdir()
+        for n, data in files.items():
+            (level / n).resolve().parent.mkdir(parents=True, exist_ok=True)
+            (level / n).resolve().write_bytes(data())
+        p = level / f"{name}.toml"
+        p.write_text(LEVEL + textwrap.dedent(extra).replace("{outside}", d.resolve().as_posix()))
+        return p
+    return Case(f"outside-level-{name}", make, [fragment, "reaches outside the level's folder", "--allow-external-uris"])
+
+
+OUTSIDE_CASES = [
+    outside_case("buffer-dotdot", "../secret.bin", "buffer", "buffer 0: URI '../secret.bin'"),
+    outside_case("buffer-dotdot-inside-first", "sub/../../secret.bin", "buffer", "buffer 0: URI 'sub/../../secret.bin'"),
+    outside_case("buffer-absolute", "{outside}/secret.bin", "buffer", "buffer 0: URI '/"),
+    outside_case("buffer-file-uri", "file://{outside}/secret.bin", "buffer", "buffer 0: URI 'file://"),
+    outside_case("image-dotdot", "../secret.png", "image", "image 0"),
+    outside_case("image-absolute", "{outside}/secret.png", "image", "image 0"),
+    outside_case("image-file-uri", "file:{outside}/secret.png", "image", "image 0"),
 ]
 
 
@@ -483,7 +540,7 @@ LEVEL_CASES = [
     level_case("texels-per-metre-absurd", sub('texels_per_metre = 4', 'texels_per_metre = 1e9'), "uv2: o:", "more than the cooker's limit", "lower texels_per_metre"),
     level_case("material-unknown", sub('size = [1, 1, 1]\nmaterial = "stone"', 'size = [1, 1, 1]\nmaterial = "granite"'), "brushes[0].material: unknown material 'granite'"),
     level_case("name-duplicate", sub('name = "c"', 'name = "b"'), "brushes[1].name: 'b' is already the name of brushes[0]"),
-    level_case("no-objects", lambda s: s[:s.index("[[objects]]")], "objects: a level needs at least one [[objects]] entry"),
+    level_case("no-objects", lambda s: s[:s.index("[[objects]]")], "objects: a level needs at least one [[objects]] or [[props]] entry"),
     level_case("light-zero-direction", add('\n[[lights]]\nname = "sun"\nkind = "sun"\nintensity = 1000\ndirection = [0, 0, 0]\n'), "lights[0].direction: must not be the zero vector"),
     level_case("spawn-param-unknown", add('\n[[spawns]]\nname = "p"\nkind = "player"\nparams = { jump = 3 }\n'), "spawns[0].params.jump: unknown parameter 'jump'"),
     level_case("texture-missing", add(TEXTURED), "materials[1].texture: texture file 'tiles.png' not found"),
@@ -498,7 +555,42 @@ LEVEL_CASES = [
                "spawns[0].params.asset: character 'hero': cannot import 'hero.glb'", files={"hero.glb": lambda: GLB()[:100]}),
 ]
 
-CASES = GLTF_CASES + LEVEL_CASES
+def texture_at(path: str) -> str:
+    return TEXTURED.replace('"tiles.png"', f'"{path}"')
+
+
+LEVEL_OUTSIDE_CASES = [
+    outside_level_case("texture-dotdot", texture_at("../tiles.png"), "materials[1].texture: texture file '../tiles.png'",
+                       {"../tiles.png": lambda: png(4, 4)}),
+    outside_level_case("texture-absolute", texture_at("{outside}/tiles.png"), "materials[1].texture: texture file '/",
+                       {"../tiles.png": lambda: png(4, 4)}),
+    outside_level_case("prop-dotdot", PROP.replace("statue.gltf", "../statue.gltf"), "props[0].gltf: prop file '../statue.gltf'",
+                       {"../statue.gltf": lambda: json.dumps(quad_doc(False)).encode()}),
+    outside_level_case("character-dotdot", '\n[[spawns]]\nname = "hero"\nkind = "character"\nparams = { asset = "../hero.glb" }\n',
+                       "spawns[0].params.asset: character 'hero': asset '../hero.glb'", {"../hero.glb": GLB}),
+]
+
+
+def prop_buffer_outside_level(d: Path) -> Path:
+    """A prop inside the level's folder whose buffer lies outside it: the prop's URIs may not
+    leave the level's folder tree either."""
+    level = d / "level"
+    (level / "props").mkdir(parents=True)
+    doc = quad_doc(False)
+    blob = bytes(get_blob(doc))
+    (d / "secret.bin").write_bytes(blob)
+    doc["buffers"][0] = {"byteLength": len(blob), "uri": "../../secret.bin"}
+    (level / "props" / "statue.gltf").write_text(json.dumps(doc))
+    p = level / "prop-buffer.toml"
+    p.write_text(LEVEL + PROP.replace("statue.gltf", "props/statue.gltf"))
+    return p
+
+
+LEVEL_OUTSIDE_CASES.append(Case("outside-level-prop-buffer", prop_buffer_outside_level,
+                                ["buffer 0: URI '../../secret.bin' reaches outside the asset's folder", "--allow-external-uris"],
+                                lambda d: d / "level" / "props" / "statue.gltf"))
+
+CASES = GLTF_CASES + OUTSIDE_CASES + LEVEL_CASES + LEVEL_OUTSIDE_CASES
 
 
 @pytest.fixture(scope="module")

@@ -187,10 +187,10 @@ def test_no_mips_keeps_one_level(run_cook, tmp_path):
     src = tmp_path / "q.gltf"
     src.write_text(json.dumps(quad_gltf(png_bytes(foliage_rgba(32)))))
     out = tmp_path / "q.pack"
-    r = run_cook(src, "-o", out, "--no-mips")
+    r = run_cook(src, "-o", out, "--no-mips", "--no-bake")
     assert r.returncode == 0, r.stderr
     assert asset_pipeline.read_pack_summary(out)["texture_mips"] == [1]
-    r = run_cook(src, "-o", out, "--mip-filter", "box")
+    r = run_cook(src, "-o", out, "--mip-filter", "box", "--no-bake")
     assert r.returncode == 0, r.stderr
     assert asset_pipeline.read_pack_summary(out)["texture_mips"] == [6]
 

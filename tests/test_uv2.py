@@ -93,10 +93,15 @@ def generated_meshes():
 SETTINGS = uv2.Uv2Settings(texels_per_metre=10.0)
 
 
+def placed(r: uv2.Uv2Result):
+    """(instances' Lods on the atlas, layout, stats): what the page checks read."""
+    return r.placed, r.layout, r.stats
+
+
 @pytest.fixture(scope="module")
 def generated():
     meshes = generated_meshes()
-    lods, layout, stats = uv2.lightmap_uvs([m[:3] for m in meshes], SETTINGS, names=[m[3] for m in meshes])
+    lods, layout, stats = placed(uv2.lightmap_uvs([m[:3] for m in meshes], SETTINGS, names=[m[3] for m in meshes]))
     return meshes, lods, layout, stats
 
 
@@ -178,15 +183,16 @@ def test_generated_meshes_have_no_overlap_and_keep_padding(generated):
     for lod in lods:
         uv = lod.attributes["uv1"]
         assert uv.dtype == np.float32 and (uv >= 0).all() and (uv <= 1).all()
-        assert lod.lightmap_pages is not None and int(lod.lightmap_pages.max()) < len(layout.pages)
+        assert lod.lightmap_blocks is not None and int(lod.lightmap_blocks.max()) < len(layout.pages)
     for w, h in layout.pages:
         assert w % 4 == 0 and h % 4 == 0 and 0 < w <= SETTINGS.max_page_size and 0 < h <= SETTINGS.max_page_size
+    assert len(set(layout.pages)) == 1, "pages share one size (the runtime's array texture)"
 
 
 def test_density_within_ten_percent_per_mesh_with_scale_and_override(generated):
     meshes, lods, layout, stats = generated
     assert abs(stats["density_ratio"] - 1) < 0.1
-    for (lod_in, scale, tpm, name), lod, m in zip(meshes, lods, stats["meshes"]):
+    for (lod_in, scale, tpm, name), lod, m in zip(meshes, lods, stats["instances"]):
         want = tpm or SETTINGS.texels_per_metre
         d, w = uv2.triangle_densities(lod, scale, layout.pages)
         measured = float((d * w).sum() / w.sum())
@@ -194,7 +200,7 @@ def test_density_within_ten_percent_per_mesh_with_scale_and_override(generated):
         assert m["name"] == name and m["density_ratio"] == pytest.approx(measured / want, abs=1e-3)
     # The scaled box is a 2.5 m cube: its faces are ~25 texels across, not 10.
     scaled = lods[5]
-    extent = np.ptp(scaled.attributes["uv1"][scaled.triangles[:2].ravel()], axis=0) * layout.pages[int(scaled.lightmap_pages[0])]
+    extent = np.ptp(scaled.attributes["uv1"][scaled.triangles[:2].ravel()], axis=0) * layout.pages[int(scaled.lightmap_blocks[0])]
     assert 24 <= max(extent) <= 27, extent
 
 
@@ -223,10 +229,10 @@ def test_charts_recovered_from_uv_topology_match_xatlas(generated):
 def test_multiple_pages_when_the_level_exceeds_the_max_page_size():
     meshes = generated_meshes()
     small = dataclasses.replace(SETTINGS, max_page_size=64)
-    lods, layout, stats = uv2.lightmap_uvs([m[:3] for m in meshes], small)
+    lods, layout, stats = placed(uv2.lightmap_uvs([m[:3] for m in meshes], small))
     assert len(layout.pages) > 1 and stats["pages"] == len(layout.pages)
     assert all(w <= 64 and h <= 64 for w, h in layout.pages)
-    assert set(np.concatenate([l.lightmap_pages for l in lods])) == set(range(len(layout.pages)))
+    assert set(np.concatenate([l.lightmap_blocks for l in lods])) == set(range(len(layout.pages)))
     assert stats["overlapping_texels"] == 0 and stats["texels_within_padding"] == 0
     check_layout(lods, layout, small.padding)
     assert abs(stats["density_ratio"] - 1) < 0.1
@@ -238,12 +244,12 @@ def test_deterministic_and_parallel_charting_gives_the_same_result():
     b = uv2.lightmap_uvs(meshes, SETTINGS)
     par = uv2.lightmap_uvs(meshes, dataclasses.replace(SETTINGS, workers=2, parallel_min_triangles=0))
     for other in (b, par):
-        assert other[1] == a[1] and other[2] == a[2]
-        for x, y in zip(a[0], other[0]):
+        assert other.layout == a.layout and other.stats == a.stats and other.regions == a.regions
+        for x, y in zip(a.lods, other.lods):
             for k in x.attributes:
                 np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
             np.testing.assert_array_equal(x.triangles, y.triangles)
-            np.testing.assert_array_equal(x.lightmap_pages, y.lightmap_pages)
+            np.testing.assert_array_equal(x.lightmap_blocks, y.lightmap_blocks)
 
 
 class DictCache:
@@ -273,15 +279,15 @@ def test_charts_are_cached_per_mesh():
     second = uv2.lightmap_uvs(changed, SETTINGS, cache=cache)
     assert cache.hits == len(meshes) - 1 and len(cache.entries) == len(meshes) + 1
     fresh = uv2.lightmap_uvs(changed, SETTINGS)
-    assert fresh[1] == second[1] and fresh[2] == second[2]
-    np.testing.assert_array_equal(fresh[0][3].attributes["uv1"], second[0][3].attributes["uv1"])
-    assert first[1] != second[1] or first[2] != second[2]
+    assert fresh.layout == second.layout and fresh.stats == second.stats
+    np.testing.assert_array_equal(fresh.lods[3].attributes["uv1"], second.lods[3].attributes["uv1"])
+    assert first.layout != second.layout or first.stats != second.stats
 
 
 def test_surface_samples_lie_on_their_triangles(generated):
     meshes, lods, layout, stats = generated
     lod_index = 0  # box 1x2x3, centred at the origin
-    page = int(lods[lod_index].lightmap_pages[0])
+    page = int(lods[lod_index].lightmap_blocks[0])
     r = uv2.rasterize_page(lods, layout, page, conservative=True)
     covered = r["triangle"] != _core.UV_NONE
     mine = covered.copy()
@@ -303,6 +309,62 @@ def test_surface_samples_lie_on_their_triangles(generated):
     assert mine.sum() > centre_mine.sum()
 
 
+# ---- several placements of one mesh -------------------------------------------------------------
+
+
+def test_every_placement_of_a_mesh_gets_its_own_texels_scaled_by_its_world_scale():
+    """One box placed three times (twice at scale 1, once at 2.5) and a beam placed once: one set
+    of box vertices, three regions of their own, the large one 2.5 times as wide."""
+    lods = [box((1, 1, 1)), box((4, 0.5, 0.5), (5, 0, 0))]
+    instances = [uv2.Instance(0, 1.0), uv2.Instance(1, 1.0), uv2.Instance(0, 1.0), uv2.Instance(0, 2.5)]
+    r = uv2.lightmap_uvs(lods, SETTINGS, instances=instances, names=["box", "beam"], instance_names=["a", "beam", "b", "big"])
+    assert len(r.lods) == 2 and len(r.regions) == 4
+    assert r.lods[0].vertex_count < 2 * 24, "the box's vertices are not copied per placement"
+    box_regions = [r.regions[k] for k in (0, 2, 3)]
+    assert len({(g["page"], *g["offset"]) for g in box_regions}) == 3, "each placement has texels of its own"
+    a, b, big = box_regions
+    assert a["scale"] == b["scale"]
+    np.testing.assert_allclose(np.divide(big["scale"], a["scale"]), 2.5, rtol=1e-6)
+    assert r.stats["overlapping_texels"] == 0 and r.stats["texels_within_padding"] == 0
+    check_layout(r.placed, r.layout, SETTINGS.padding)
+    for inst, m in zip(instances, r.stats["instances"]):
+        assert abs(m["density_ratio"] - 1) < 0.1, m
+        assert m["texels"] > 0
+    # The 2.5 m cube bakes about 2.5^2 times the texels of a 1 m one.
+    texels = [m["texels"] for m in r.stats["instances"]]
+    assert 2.5 ** 2 * 0.8 < texels[3] / texels[0] < 2.5 ** 2 * 1.2, texels
+
+
+def row_of_boxes(count: int) -> ir.Lod:
+    """`count` unit boxes in a row, as one mesh."""
+    parts = [box((1, 1, 1), (2 * i, 0, 0)) for i in range(count)]
+    pos = np.concatenate([p.attributes["position"] for p in parts])
+    nrm = np.concatenate([p.attributes["normal"] for p in parts])
+    tris = np.concatenate([p.triangles + 24 * i for i, p in enumerate(parts)])
+    return make_lod(pos, tris, nrm)
+
+
+def test_a_mesh_of_several_blocks_placed_twice_takes_whole_pages_each():
+    small = dataclasses.replace(SETTINGS, max_page_size=64)
+    r = uv2.lightmap_uvs([row_of_boxes(12), box((1, 1, 1))], small, instances=[uv2.Instance(0), uv2.Instance(0), uv2.Instance(1)])
+    blocks = int(r.lods[0].lightmap_blocks.max()) + 1
+    assert blocks > 1
+    first, second = r.regions[0], r.regions[1]
+    assert first["offset"] == second["offset"] == [0.0, 0.0] and abs(first["page"] - second["page"]) >= blocks
+    assert len(r.layout.pages) >= 2 * blocks
+    assert r.stats["overlapping_texels"] == 0 and r.stats["texels_within_padding"] == 0
+    check_layout(r.placed, r.layout, small.padding)
+
+
+def test_a_placement_too_large_for_a_page_gets_a_lower_density_and_a_warning():
+    lods = [box((1, 1, 1))]
+    small = dataclasses.replace(SETTINGS, max_page_size=64)
+    r = uv2.lightmap_uvs(lods, small, instances=[uv2.Instance(0, 1.0), uv2.Instance(0, 20.0)], instance_names=["small", "huge"])
+    assert len(r.stats["warnings"]) == 1 and r.stats["warnings"][0].startswith("huge: lightmap density lowered from 10 to ")
+    assert r.stats["overlapping_texels"] == 0 and r.stats["texels_within_padding"] == 0
+    check_layout(r.placed, r.layout, small.padding)
+
+
 def test_a_triangle_larger_than_a_page_is_a_clear_error():
     floor = make_lod([[0, 0, 0], [50, 0, 0], [50, 0, 50], [0, 0, 50]], [[0, 2, 1], [0, 3, 2]])
     with pytest.raises(CookError, match="floor.*does not fit a 256-texel page"):
@@ -315,15 +377,15 @@ def test_bad_settings_and_inputs_are_errors():
             uv2.lightmap_uvs([(box((1, 1, 1)), 1.0)], uv2.Uv2Settings(**bad))
     with pytest.raises(CookError, match="world scale"):
         uv2.lightmap_uvs([(box((1, 1, 1)), 0.0)])
-    lods, layout, stats = uv2.lightmap_uvs([])
-    assert lods == [] and layout.pages == []
+    r = uv2.lightmap_uvs([])
+    assert r.lods == [] and r.regions == [] and r.layout.pages == []
 
 
 def test_degenerate_triangles_are_carried_without_breaking_the_layout():
     b = box((1, 1, 1))
     pos = np.vstack([b.attributes["position"], [[0, 0, 0], [0, 0, 0], [1, 0, 0]]]).astype(np.float32)
     lod = make_lod(pos, np.vstack([b.triangles, [[24, 25, 26]]]), None)
-    (out,), layout, stats = uv2.lightmap_uvs([(lod, 1.0)], SETTINGS)
+    (out,), layout, stats = placed(uv2.lightmap_uvs([(lod, 1.0)], SETTINGS))
     assert out.triangle_count == 13 and stats["overlapping_texels"] == 0
     np.testing.assert_array_equal(out.attributes["position"][out.triangles], lod.attributes["position"][lod.triangles])
     assert np.isfinite(out.attributes["uv1"]).all()
@@ -332,8 +394,11 @@ def test_degenerate_triangles_are_carried_without_breaking_the_layout():
 def test_previews_are_written(generated, tmp_path):
     from PIL import Image
 
-    meshes, lods, layout, stats = generated
-    scene = ir.Scene(name="t", source="generated", meshes=[ir.Mesh(name=m[3], lods=[l]) for m, l in zip(meshes, lods)],
+    meshes = generated_meshes()
+    r = uv2.lightmap_uvs([m[:3] for m in meshes], SETTINGS)
+    layout = r.layout
+    scene = ir.Scene(name="t", source="generated", meshes=[ir.Mesh(name=m[3], lods=[l]) for m, l in zip(meshes, r.lods)],
+                     nodes=[ir.Node(m[3], mesh=i, static=True, lightmap=reg) for i, (m, reg) in enumerate(zip(meshes, r.regions))],
                      materials=[ir.Material()] * 3, lightmap=layout)
     paths = uv2.write_previews(scene, tmp_path / "previews")
     assert [p.name for p in paths] == [f"uv2_page{i}.png" for i in range(len(layout.pages))]
@@ -373,7 +438,7 @@ def test_demo_level_meets_the_acceptance_numbers(demo):
     assert stats["texels_within_padding"] == 0 and stats["min_chart_gap_texels"] >= settings.padding
     assert stats["utilisation"] >= 0.6, stats["page_utilisation"]
     assert abs(stats["density_ratio"] - 1) < 0.1
-    for m in stats["meshes"]:
+    for m in stats["instances"]:
         assert abs(m["density_ratio"] - 1) < 0.1, m
     for w, h in layout.pages:
         assert max(w, h) <= settings.max_page_size
@@ -392,7 +457,7 @@ def test_demo_level_independent_overlap_check(demo):
 def test_demo_level_over_several_pages(demo):
     static, lods_one, layout_one, stats_one, settings = demo
     small = dataclasses.replace(settings, max_page_size=512)
-    lods, layout, stats = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], small)
+    lods, layout, stats = placed(uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], small))
     assert len(layout.pages) > 1
     assert stats["overlapping_texels"] == 0 and stats["texels_within_padding"] == 0
     assert stats["utilisation"] >= 0.6 and abs(stats["density_ratio"] - 1) < 0.1

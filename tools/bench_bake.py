@@ -10,7 +10,6 @@ probes. The issue's goal for the demo level at ``medium`` on 2 cores: under 60 s
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 import time
@@ -19,21 +18,13 @@ from pathlib import Path
 from asset_pipeline import bake
 from asset_pipeline.csg import build_level
 from asset_pipeline.level import load_level
-from asset_pipeline.uv2 import Uv2Settings, lightmap_uvs
+from asset_pipeline.pipeline import with_lightmap_uvs
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def level_with_uv2(path: Path):
-    spec = load_level(path)
-    scene = build_level(spec, path.parent)
-    static = [i for i, m in enumerate(scene.meshes) if m.static]
-    lods, layout, _ = lightmap_uvs([(scene.meshes[i].base, 1.0, scene.meshes[i].texels_per_metre) for i in static],
-                                   Uv2Settings(texels_per_metre=float(spec.texels_per_metre)))
-    meshes = list(scene.meshes)
-    for i, lod in zip(static, lods):
-        meshes[i] = dataclasses.replace(meshes[i], lods=[lod])
-    return dataclasses.replace(scene, meshes=meshes, lightmap=layout)
+    return with_lightmap_uvs(build_level(load_level(path)))[0]
 
 
 def main() -> int:

@@ -11,8 +11,9 @@ use pyo3::prelude::*;
 /// `mip_chain(level0, usage, filter=None, edge="wrap", alpha_cutoff=None)`: `level0` is an
 /// (h, w, 4) C-contiguous array, uint8 for usage "color" (sRGB), "data" or "normal", or the
 /// float16 bits viewed as uint16 for "hdr". `filter`: box, tent, bspline, mitchell,
-/// catmull-rom, lanczos3 (default: mitchell, tent for hdr). `edge`: wrap (tiling textures) or
-/// clamp. `alpha_cutoff`: keep alpha-test coverage at every level (color only). Bad arguments
+/// catmull-rom, lanczos3 (default: mitchell, tent for hdr). `edge`: how taps past the edge read,
+/// as the runtime's sampler: wrap (repeating), clamp or mirror, for both axes or per axis
+/// ("wrap,clamp": along the width, then the height). `alpha_cutoff`: keep alpha-test coverage at every level (color only). Bad arguments
 /// raise ValueError with a one-line message.
 #[pyfunction]
 #[pyo3(signature = (level0, usage, filter=None, edge="wrap", alpha_cutoff=None))]
@@ -22,7 +23,7 @@ fn mip_chain(py: Python<'_>, level0: &Bound<'_, PyAny>, usage: &str, filter: Opt
     let settings = MipSettings {
         usage,
         filter: filter.map(Filter::parse).transpose().map_err(bad)?.unwrap_or(usage.default_filter()),
-        edge: Edge::parse(edge).map_err(bad)?,
+        edges: Edge::parse_axes(edge).map_err(bad)?,
         alpha_cutoff,
     };
     let sizes = |w: usize, h: usize| (1..mips::level_count(w as u32, h as u32)).map(move |l| mips::level_size(w as u32, h as u32, l));
@@ -51,7 +52,7 @@ fn normal_chain(py: Python<'_>, level0: &Bound<'_, PyAny>, filter: Option<&str>,
     let settings = MipSettings {
         usage: Usage::Normal,
         filter: filter.map(Filter::parse).transpose().map_err(bad)?.unwrap_or(Usage::Normal.default_filter()),
-        edge: Edge::parse(edge).map_err(bad)?,
+        edges: Edge::parse_axes(edge).map_err(bad)?,
         alpha_cutoff: None,
     };
     let levels = if let Ok(a) = level0.extract::<PyReadonlyArray3<'_, u8>>() {

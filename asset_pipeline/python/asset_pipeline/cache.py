@@ -9,6 +9,7 @@ temporary file and renamed into place, so a crash never leaves a half entry.
 from __future__ import annotations
 
 import hashlib
+import importlib.metadata
 import json
 import os
 import zipfile
@@ -36,6 +37,16 @@ def cooker_id() -> str:
             h.update(f"{native.name}:{st.st_size}:{st.st_mtime_ns}".encode())
         _COOKER_ID = h.hexdigest()[:16]
     return _COOKER_ID
+
+
+def library_version(name: str) -> str:
+    """The installed version of a Python distribution whose code shapes a stage's output
+    (manifold3d, xatlas, fast-simplification, pyoidn): part of that stage's key, so upgrading
+    it reruns the stage."""
+    try:
+        return f"{name} {importlib.metadata.version(name)}"
+    except importlib.metadata.PackageNotFoundError:
+        return f"{name} not installed"
 
 
 class Hasher:

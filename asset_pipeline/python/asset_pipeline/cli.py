@@ -7,6 +7,7 @@ Errors are one line on stderr, ``cook: error: <message>``, never a traceback.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -39,6 +40,23 @@ def _whole(minimum: int):
 _positive, _non_negative = _whole(1), _whole(0)
 
 
+def _number(minimum: float, strict: bool):
+    """argparse type: a finite number > minimum (or >= when not strict)."""
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+        if not (math.isfinite(x) and (x > minimum if strict else x >= minimum)):
+            raise argparse.ArgumentTypeError(f"{text} is not a {'positive' if strict else 'non-negative'} number")
+        return x
+
+    return parse
+
+
+_positive_number, _non_negative_number = _number(0.0, True), _number(0.0, False)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="cook", description="Cook a glTF 2.0 file (.gltf/.glb) or a CSG level (.toml) into a pack.")
     parser.add_argument("source", help="the .gltf, .glb or level .toml to cook")
@@ -48,12 +66,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
+    parser.add_argument("--texels-per-metre", type=_positive_number, metavar="N",
+                        help="lightmap density of static surfaces (default: the level's; for a glTF scene 16, lowered to fit a 2048x2048 page)")
     parser.add_argument("--no-report", action="store_true", help="do not write OUT.report.md")
+    parser.add_argument("--allow-external-uris", action="store_true",
+                        help="let the source read files outside its folder tree (absolute paths, file: URIs, '..' leading out); "
+                             "off, such a path is an error")
     parser.add_argument("--no-mips", action="store_true", help="skip the textures stage (textures keep one level)")
     parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
                         help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
     bake = parser.add_argument_group("baking (lightmaps and probes, for levels with lightmap UVs)")
     bake.add_argument("--no-bake", action="store_true", help="skip the bake stage")
+    bake.add_argument("--sky-nits", type=_non_negative_number, default=CookSettings.sky_nits, metavar="NITS",
+                      help=f"a glTF scene's uniform white sky, in nits (default {CookSettings.sky_nits:g}, an overcast day; 0: none); levels bring their own")
     bake.add_argument("--quality", choices=PRESETS, default="medium", help="bake preset: samples and bounces (default: medium)")
     bake.add_argument("--samples", type=_positive, metavar="N", help="paths per lightmap texel (overrides the preset)")
     bake.add_argument("--bounces", type=_non_negative, metavar="N", help="indirect bounces (overrides the preset)")
@@ -73,8 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
                                  seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
-                            lightmap_uvs=not args.no_lightmap_uvs, report=not args.no_report,
-                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=args.executor, ray_address=args.ray_address)
+                            lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
+                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=args.executor, ray_address=args.ray_address,
+                            allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
     except CookError as e:

@@ -1,7 +1,7 @@
 """Level spec -> scene IR: brushes through manifold3d into closed meshes, plus materials, props,
 lights, spawns and sky.
 
-``build_level(spec, base_dir=None) -> ir.Scene``. One mesh per output object (see
+``build_level(spec) -> ir.Scene``. One mesh per output object (see
 ``LevelSpec.outputs``), positions in world space under an identity node. Each output triangle
 gets the material of the brush whose surface it lies on: every brush is made an *original* in
 manifold3d (``as_original``), and the ids survive the booleans as ``run_original_id``.
@@ -153,12 +153,15 @@ def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray
     mesh0, mat0, tex0 = len(scene.meshes), len(scene.materials), len(scene.textures)
     scene.textures += prop.textures
     scene.materials += [mt.with_textures_offset(tex0) for mt in prop.materials]
-    scene.meshes += [dataclasses.replace(me, static=static, lods=[
+    scene.meshes += [dataclasses.replace(me, lods=[
         dataclasses.replace(l, materials=(l.materials + mat0).astype(np.uint32)) for l in me.lods]) for me in prop.meshes]
     root = len(scene.nodes)
     scene.nodes.append(ir.Node(name=name, local=tuple(float(x) for x in transform.ravel(order="F"))))
+    # The level's switch decides for every mesh node of the prop (a prop's animation is not
+    # brought in, so nothing in a static prop moves).
     scene.nodes += [dataclasses.replace(nd, name=f"{name}/{nd.name}", parent=root if nd.parent is None else root + 1 + nd.parent,
-                                        mesh=None if nd.mesh is None else nd.mesh + mesh0) for nd in prop.nodes]
+                                        mesh=None if nd.mesh is None else nd.mesh + mesh0, static=static and nd.mesh is not None)
+                    for nd in prop.nodes]
     # ir.Light positions are world space: carry the prop's lights along with its transform
     for li in prop.lights:
         pos = transform @ np.array([*li.position, 1.0])
@@ -167,7 +170,7 @@ def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray
                                                 direction=tuple(float(x) for x in d)))
 
 
-def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, base_dir: Path, import_gltf) -> None:
+def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -> None:
     """Bring in the glTF of character spawn `index` (`asset`, relative to the toml) as dynamic
     meshes under a root node named after the spawn, placed at its position and rotation, with
     its skins and clips remapped onto the merged nodes. Clips are renamed "<spawn>/<clip>" so
@@ -177,9 +180,7 @@ def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, base_dir: Path
     asset = sp.params["asset"]
     if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
         raise spec.error(key, f"character '{sp.name}': expected a .gltf or .glb asset, got {asset!r}")
-    path = base_dir / asset
-    if not path.is_file():
-        raise spec.error(key, f"character '{sp.name}': asset '{asset}' not found (looked in {base_dir})")
+    path = spec.check_file(key, asset, f"character '{sp.name}': asset")
     try:
         prop = import_gltf(path)
     except Exception as e:  # the importer's message names the problem; the level error names the spawn
@@ -200,6 +201,7 @@ def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, base_dir: Path
     transform[:3, 3] = sp.position
     node0, skin0 = len(scene.nodes) + 1, len(scene.skins)  # +1: merge_prop's root node
     merge_prop(scene, prop, sp.name, transform, static=False)
+    scene.files += [f for f in prop.files if f not in scene.files]
     for nd in scene.nodes[node0:]:
         if nd.skin is not None:
             nd.skin += skin0
@@ -208,14 +210,19 @@ def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, base_dir: Path
                     for c in prop.clips]
 
 
-def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_gltf=None) -> ir.Scene:
-    """Build the scene of a loaded level. Relative paths (textures, props) resolve against
-    `base_dir`, by default the spec's directory. `import_gltf(path) -> ir.Scene` loads props
-    (default: asset_pipeline.gltf_import.import_gltf). Raises CookError on an empty object."""
-    base_dir = Path(base_dir) if base_dir is not None else spec.path.parent
+def build_level(spec: LevelSpec, *, import_gltf=None) -> ir.Scene:
+    """Build the scene of a loaded level. Relative paths (textures, props) resolve against the
+    spec's directory. `import_gltf(path) -> ir.Scene` loads props (default:
+    asset_pipeline.gltf_import.import_gltf, keeping their URIs inside the level's folder tree).
+    The scene's `files` lists every file read. Raises CookError on an empty object."""
+    base_dir = spec.path.parent
+    if import_gltf is None:
+        # Props' and characters' buffers and images must stay inside the level's folder tree too.
+        def import_gltf(path):
+            return gltf_import.import_gltf(path, root=spec.path.parent, allow_external_uris=spec.allow_external)
     # The level's lightmap density rides in a layout with no pages yet: the uv2 stage lays it out.
     scene = ir.Scene(name=spec.name, source=str(spec.path), sky=spec.sky, lights=list(spec.lights),
-                     spawns=list(spec.spawns), lightmap=ir.LightmapLayout(spec.texels_per_metre, pages=[]))
+                     spawns=list(spec.spawns), lightmap=ir.LightmapLayout(spec.texels_per_metre, pages=[]), files=[str(spec.path)])
 
     textures: dict[str, int] = {}
     for i, m in enumerate(spec.materials):
@@ -225,6 +232,8 @@ def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_g
             if k not in textures:
                 textures[k] = len(scene.textures)
                 scene.textures.append(_texture(spec, i, base_dir))
+                if isinstance(m.texture, str):
+                    scene.files.append(str(base_dir / m.texture))
             tex = textures[k]
         scene.materials.append(ir.Material(name=m.name, base_color=m.base_color, base_color_texture=tex, metallic=m.metallic,
                                            roughness=m.roughness, emissive=m.emissive, double_sided=m.double_sided))
@@ -269,15 +278,17 @@ def build_level(spec: LevelSpec, base_dir: str | Path | None = None, *, import_g
         brush = np.repeat([brush_of_id[r] for r in mesh.run_original_id], np.diff(runs))
         tri_mat = brush_material[brush]
         attrs, tris = surface(pos, np.asarray(mesh.tri_verts), tri_mat, uv_scale)
-        scene.nodes.append(ir.Node(name=o.name, mesh=len(scene.meshes)))
+        scene.nodes.append(ir.Node(name=o.name, mesh=len(scene.meshes), static=o.static))
         scene.meshes.append(ir.Mesh(name=o.name, lods=[ir.Lod(attributes=attrs, triangles=tris, materials=tri_mat)],
-                                    static=o.static, texels_per_metre=o.texels_per_metre))
+                                    texels_per_metre=o.texels_per_metre))
 
     for i, p in enumerate(spec.props):
-        merge_prop(scene, (import_gltf or gltf_import.import_gltf)(base_dir / p.gltf), p.name, p.transform, p.static)
+        prop = import_gltf(base_dir / p.gltf)
+        merge_prop(scene, prop, p.name, p.transform, p.static)
+        scene.files += [f for f in [str(base_dir / p.gltf), *prop.files] if f not in scene.files]
     for i, sp in enumerate(spec.spawns):
         if sp.kind == "character" and "asset" in sp.params:
-            merge_character(scene, spec, i, base_dir, import_gltf or gltf_import.import_gltf)
+            merge_character(scene, spec, i, import_gltf)
     scene.pillars = obstacles.pillars(spec)
 
     scene.validate()

@@ -25,10 +25,14 @@ def arrays_to_wire(arrays: list[np.ndarray]) -> list[tuple[str, tuple[int, ...],
     return out
 
 
-def import_gltf(path: str | os.PathLike) -> ir.Scene:
-    """Import a glTF file. Raises asset_pipeline.CookError naming the file and the problem."""
-    text, raw = _core.import_gltf(os.fspath(path))
-    return ir.from_wire(text, arrays_from_wire(raw))
+def import_gltf(path: str | os.PathLike, root: str | os.PathLike | None = None, allow_external_uris: bool = False) -> ir.Scene:
+    """Import a glTF file. Its buffer and image URIs must stay inside `root` (default: the
+    file's own folder) unless `allow_external_uris`. The scene's `files` lists every file read.
+    Raises asset_pipeline.CookError naming the file and the problem."""
+    text, raw, files = _core.import_gltf(os.fspath(path), None if root is None else os.fspath(root), allow_external_uris)
+    scene = ir.from_wire(text, arrays_from_wire(raw))
+    scene.files = [os.fspath(f) for f in files]
+    return scene
 
 
 def write_pack(scene: ir.Scene, out: str | os.PathLike) -> dict:

@@ -24,8 +24,12 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
     "position": (np.dtype(np.float32), 3),
     "normal": (np.dtype(np.float32), 3),
     "tangent": (np.dtype(np.float32), 4),
-    "uv0": (np.dtype(np.float32), 2),
-    "uv1": (np.dtype(np.float32), 2),  # lightmap UVs, in [0,1] of the triangle's lightmap page
+    "uv0": (np.dtype(np.float32), 2),  # glTF TEXCOORD_0
+    # Lightmap UVs (the uv2 stage's), in the mesh's own lightmap space, [0, 1]: of the page for a
+    # mesh placed once (its region is the identity), of its largest block for a mesh placed
+    # several times; a static instance's Node.lightmap region maps them onto its atlas page.
+    "uv1": (np.dtype(np.float32), 2),
+    "texcoord1": (np.dtype(np.float32), 2),  # glTF TEXCOORD_1 (texture slots with tex_coord 1)
     "color": (np.dtype(np.uint8), 4),
     "joints": (np.dtype(np.uint16), 4),
     "weights": (np.dtype(np.float32), 4),
@@ -47,7 +51,9 @@ class Lod:
     attributes: dict[str, np.ndarray]  # name -> (n, k) array, dtypes as ATTRIBUTES
     triangles: np.ndarray  # (m, 3) uint32 indices into the attributes
     materials: np.ndarray  # (m,) uint32 material index per triangle
-    lightmap_pages: np.ndarray | None = None  # (m,) uint32 atlas page per triangle, after uv2
+    # (m,) uint32 lightmap block per triangle, after uv2: a mesh too big for one atlas page is laid
+    # out in several blocks; a static instance puts block b on its region's page + b.
+    lightmap_blocks: np.ndarray | None = None
     error: float = 0.0  # geometric error to LOD 0 in metres, object space (0 for LOD 0)
     # Morph target deltas added to position/normal before skinning: (targets, n, 3) float32.
     # Only LOD 0 carries them (the lod stage leaves meshes with morph targets at one level).
@@ -80,7 +86,7 @@ class Lod:
         for name, d in (("morph_positions", self.morph_positions), ("morph_normals", self.morph_normals)):
             if d is not None and (d.dtype != np.float32 or d.ndim != 3 or d.shape[1:] != (n, 3)):
                 raise IrError(f"{what}: {name} is {d.dtype}{d.shape}, expected float32(targets, {n}, 3)")
-        for name, arr in (("materials", self.materials), ("lightmap_pages", self.lightmap_pages)):
+        for name, arr in (("materials", self.materials), ("lightmap_blocks", self.lightmap_blocks)):
             if arr is not None and (arr.dtype != np.uint32 or arr.shape != (m,)):
                 raise IrError(f"{what}: {name} is {arr.dtype}{arr.shape}, expected uint32({m},)")
 
@@ -89,8 +95,8 @@ class Lod:
 class Mesh:
     name: str
     lods: list[Lod]  # lods[0] is the full-detail mesh; the lod stage appends the rest
-    static: bool = True  # static level geometry: gets lightmap UVs and is baked
-    texels_per_metre: float | None = None  # per-object override of the level's lightmap density
+    # Per-object override of the scene's lightmap density for its static instances.
+    texels_per_metre: float | None = None
     morph_weights: list[float] = field(default_factory=list)  # default weight per morph target
 
     @property
@@ -115,6 +121,18 @@ class Material:
     occlusion_texture: int | None = None  # ambient occlusion in r (usage "data")
     occlusion_strength: float = 1.0
     emissive_texture: int | None = None  # emission colour, sRGB (usage "color")
+    # Per slot: the UV set it reads and its KHR_texture_transform (pack::TextureTransform):
+    # {"tex_coord": 0|1, "offset": [u, v], "rotation": radians, "scale": [u, v]}; None is the
+    # identity on TEXCOORD_0.
+    base_color_uv: dict | None = None
+    normal_uv: dict | None = None
+    metallic_roughness_uv: dict | None = None
+    occlusion_uv: dict | None = None
+    emissive_uv: dict | None = None
+
+    def uv(self, slot: str) -> dict:
+        """The UV transform of `slot` ("base_color", "emissive", ...), identity filled in."""
+        return texture_transform(getattr(self, f"{slot}_uv"))
 
     def with_textures_offset(self, offset: int) -> "Material":
         """The material with every texture index moved by `offset` (scenes being merged)."""
@@ -123,6 +141,29 @@ class Material:
 
 # Material fields that hold a texture index.
 TEXTURE_SLOTS = ("base_color_texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture", "emissive_texture")
+
+# The slots' names as in the `<slot>_uv` fields.
+UV_SLOTS = ("base_color", "normal", "metallic_roughness", "occlusion", "emissive")
+IDENTITY_UV = {"tex_coord": 0, "offset": [0.0, 0.0], "rotation": 0.0, "scale": [1.0, 1.0]}
+
+
+def texture_transform(t: dict | None) -> dict:
+    """A slot's UV transform with every field present (None: the identity on TEXCOORD_0)."""
+    return {**IDENTITY_UV, **(t or {})}
+
+
+def uv_matrix(t: dict | None) -> np.ndarray:
+    """(2, 3) matrix of a KHR_texture_transform: uv' = M @ (u, v, 1), M = T(offset) R(rotation) S(scale)
+    (pack::TextureTransform::matrix)."""
+    t = texture_transform(t)
+    c, s = np.cos(t["rotation"]), np.sin(t["rotation"])
+    (sx, sy), (ox, oy) = t["scale"], t["offset"]
+    return np.array([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]], np.float64)
+
+
+# pack::Sampler: wrap per axis (repeat | clamp | mirror), filters (nearest | linear) and the mip
+# blend (None: level 0 only).
+DEFAULT_SAMPLER = {"wrap_s": "repeat", "wrap_t": "repeat", "mag_filter": "linear", "min_filter": "linear", "mipmap_filter": "linear"}
 
 
 @dataclass
@@ -137,10 +178,17 @@ class Texture:
     # format implies (Rgba8Srgb colour, Rgba8Unorm data, Rgba16Float hdr, Rgba16Unorm normal).
     # Normal maps arrive as Rgba8Unorm (or Rgba16Unorm) and leave the textures stage Rgba16Unorm.
     usage: str | None = None
+    # How it is sampled (DEFAULT_SAMPLER's keys); None: repeating, trilinear.
+    sampler: dict | None = None
 
     def __post_init__(self):
         if self.usage is None:
             self.usage = USAGE_OF_FORMAT.get(self.format, "color")
+
+    @property
+    def sampling(self) -> dict:
+        """The sampler with every field present."""
+        return {**DEFAULT_SAMPLER, **(self.sampler or {})}
 
 
 @dataclass
@@ -151,6 +199,13 @@ class Node:
     mesh: int | None = None
     skin: int | None = None  # the skin deforming this node's mesh
     weights: tuple[float, ...] | None = None  # this instance's morph weights (overrides the mesh's)
+    # A static instance of its mesh: it never moves (not skinned, morphed or animated), so it is
+    # baked into the lightmaps and lights the probes.
+    static: bool = False
+    # Its lightmap region once the uv2 stage has run (pack::LightmapRegion): {"page": p,
+    # "scale": [su, sv], "offset": [ou, ov]}; the mesh's uv1 map to uv1 * scale + offset on page
+    # p + block.
+    lightmap: dict | None = None
 
 
 @dataclass
@@ -263,6 +318,25 @@ class Scene:
     skins: list[Skin] = field(default_factory=list)
     clips: list[Clip] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  # fixes the import made (one line each)
+    # Every file the source stage read to make this scene (the source first): what the cook's
+    # cache key covers. Python-side only (not part of the wire form).
+    files: list[str] = field(default_factory=list)
+
+    def static_meshes(self) -> list[int]:
+        """Meshes placed by at least one static node (they get lightmap UVs), in mesh order."""
+        return sorted({n.mesh for n in self.nodes if n.static and n.mesh is not None})
+
+    def static_nodes(self) -> list[int]:
+        """Static instances: nodes that place a mesh and are static, in node order."""
+        return [i for i, n in enumerate(self.nodes) if n.static and n.mesh is not None]
+
+    def world_matrices(self) -> list[np.ndarray]:
+        """4x4 world matrix (row-major, column vectors, float64) of every node."""
+        world: list[np.ndarray] = []
+        for n in self.nodes:
+            local = np.array(n.local, dtype=np.float64).reshape(4, 4).T  # column-major -> row-major
+            world.append(world[n.parent] @ local if n.parent is not None else local)
+        return world
 
     def validate(self) -> None:
         for i, m in enumerate(self.meshes):
@@ -290,7 +364,7 @@ def _lod_doc(l: Lod, put) -> dict:
         "attributes": {k: put(v) for k, v in l.attributes.items()},
         "triangles": put(l.triangles),
         "materials": put(l.materials),
-        "lightmap_pages": None if l.lightmap_pages is None else put(l.lightmap_pages),
+        "lightmap_blocks": None if l.lightmap_blocks is None else put(l.lightmap_blocks),
         "error": float(l.error),
         "morph_positions": None if l.morph_positions is None else put(l.morph_positions),
         "morph_normals": None if l.morph_normals is None else put(l.morph_normals),
@@ -298,12 +372,12 @@ def _lod_doc(l: Lod, put) -> dict:
 
 
 def _lod_from_doc(d: dict, arrays: list[np.ndarray]) -> Lod:
-    pages = d.get("lightmap_pages")
+    pages = d.get("lightmap_blocks")
     return Lod(
         attributes={k: arrays[i] for k, i in d["attributes"].items()},
         triangles=arrays[d["triangles"]],
         materials=arrays[d["materials"]],
-        lightmap_pages=None if pages is None else arrays[pages],
+        lightmap_blocks=None if pages is None else arrays[pages],
         error=d.get("error", 0.0),
         morph_positions=None if d.get("morph_positions") is None else arrays[d["morph_positions"]],
         morph_normals=None if d.get("morph_normals") is None else arrays[d["morph_normals"]],
@@ -339,10 +413,11 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
     doc = {
         "name": scene.name,
         "source": scene.source,
-        "meshes": [{"name": m.name, "static": m.static, "texels_per_metre": m.texels_per_metre, "morph_weights": [float(w) for w in m.morph_weights],
+        "meshes": [{"name": m.name, "texels_per_metre": m.texels_per_metre, "morph_weights": [float(w) for w in m.morph_weights],
                     "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
-        "materials": [dataclasses.asdict(m) for m in scene.materials],
-        "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "usage": t.usage, "mips": [put(m) for m in t.mips]} for t in scene.textures],
+        "materials": [{**dataclasses.asdict(m), **{f"{slot}_uv": m.uv(slot) for slot in UV_SLOTS}} for m in scene.materials],
+        "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "usage": t.usage, "sampler": t.sampling,
+                      "mips": [put(m) for m in t.mips]} for t in scene.textures],
         "nodes": [dataclasses.asdict(n) for n in scene.nodes],
         "lights": [dataclasses.asdict(l) for l in scene.lights],
         "spawns": [dataclasses.asdict(s) for s in scene.spawns],
@@ -377,10 +452,11 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     scene = Scene(
         name=doc["name"],
         source=doc["source"],
-        meshes=[Mesh(name=m["name"], static=m.get("static", True), texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]],
+        meshes=[Mesh(name=m["name"], texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]],
                      morph_weights=list(m.get("morph_weights", []))) for m in doc["meshes"]],
         materials=[tup(m, Material) for m in doc["materials"]],
-        textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]], t.get("usage")) for t in doc["textures"]],
+        textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]], t.get("usage"),
+                          None if t.get("sampler") in (None, DEFAULT_SAMPLER) else t["sampler"]) for t in doc["textures"]],
         nodes=[tup(n, Node) for n in doc["nodes"]],
         lights=[tup(l, Light) for l in doc.get("lights", [])],
         spawns=[tup(s, Spawn) for s in doc.get("spawns", [])],

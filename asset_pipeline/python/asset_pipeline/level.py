@@ -50,14 +50,17 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
     static = true                   # static geometry gets lightmaps (default true)
     texels_per_metre = 32           # optional override of the level's density (static objects)
     # The level's geometry is every object that is not an operand of another object: one mesh each.
+    # A level needs at least one object or one prop.
 
     [[props]]                       # a placed glTF model
     name = "statue"
-    gltf = "props/statue.glb"       # relative to the toml
+    gltf = "props/statue.glb"       # relative to the toml, inside its folder tree (as are textures
+                                    # and characters' assets, and the props' own buffers and images)
     translation = [0, 0, 0]
     rotation = [0, 0, 0]
     scale = [1, 1, 1]
-    static = false                  # static props are baked into the lightmaps
+    static = false                  # static props are baked into the lightmaps (this switch decides
+                                    # for every mesh node of the prop)
 
     [[lights]]                      # physical units, as ir.Light
     name = "sun"
@@ -158,9 +161,15 @@ class LevelSpec:
     lights: list[ir.Light] = field(default_factory=list)
     spawns: list[ir.Spawn] = field(default_factory=list)
     text: str = ""  # the source, to find line numbers for errors found later (e.g. empty CSG)
+    allow_external: bool = False  # files outside the level's folder may be read (--allow-external-uris)
 
     def error(self, key: tuple, reason: str) -> CookError:
         return _error(self.path, self.text, key, reason)
+
+    def check_file(self, key: tuple, relative: str, what: str) -> Path:
+        """The path of a file the level names at `key` (see _Checker.file); CookError if not allowed or missing."""
+        _Checker(self.path, self.text, self.allow_external).file(key, relative, what)
+        return self.path.parent / relative
 
     @property
     def outputs(self) -> list[int]:
@@ -226,12 +235,31 @@ def _error(path: Path, text: str, key: tuple, reason: str) -> CookError:
 # ---- typed readers: each takes (checker, value, key) and returns the clean value --------------
 
 
+def escapes(root: Path, relative: str) -> bool:
+    """Whether `relative`, a path a content file names, reaches outside the folder tree `root`:
+    absolute, a file: URI, or `..` or a symbolic link that leads out (checked on the resolved
+    path)."""
+    if relative.lower().startswith("file:") or Path(relative).is_absolute():
+        return True
+    root = root.resolve()
+    return not (root / relative).resolve().is_relative_to(root)
+
+
 class _Checker:
-    def __init__(self, path: Path, text: str):
-        self.path, self.text = path, text
+    def __init__(self, path: Path, text: str, allow_external: bool = False):
+        self.path, self.text, self.allow_external = path, text, allow_external
 
     def fail(self, key: tuple, reason: str):
         raise _error(self.path, self.text, key, reason)
+
+    def file(self, key: tuple, relative: str, what: str) -> None:
+        """`relative` (from the level) must name a file inside the level's folder tree (unless
+        external paths are allowed) that exists."""
+        if not self.allow_external and escapes(self.path.parent, relative):
+            self.fail(key, f"{what} '{relative}' reaches outside the level's folder '{self.path.parent.resolve()}' "
+                           "(pass --allow-external-uris to allow it)")
+        if not (self.path.parent / relative).is_file():
+            self.fail(key, f"{what} '{relative}' not found (looked in {self.path.parent})")
 
     def table(self, value, key: tuple, fields: dict, what: str = "") -> dict:
         """Check `value` is a table with only `fields` keys; read each with its reader.
@@ -432,8 +460,7 @@ def _texture(c: _Checker, v, key):
     if isinstance(v, str):
         if not v.lower().endswith(".png"):
             c.fail(key, f"texture files must be PNG, got '{v}'")
-        if not (c.path.parent / v).is_file():
-            c.fail(key, f"texture file '{v}' not found (looked in {c.path.parent})")
+        c.file(key, v, "texture file")
         return v
     if isinstance(v, dict):
         t = c.table(v, key, TEXTURE_KEYS)
@@ -525,8 +552,10 @@ def _check_brush_budget(c: "_Checker", spec: "LevelSpec") -> None:
                         f"{MAX_BRUSH_TRIANGLES} (lower segments or repeat counts)")
 
 
-def load_level(path: str | Path) -> LevelSpec:
-    """Parse and validate the level spec at `path`. Raises CookError naming file, line and key."""
+def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec:
+    """Parse and validate the level spec at `path`. Every file it names (textures, props,
+    characters) must lie inside the level's folder tree unless `allow_external_uris`. Raises
+    CookError naming file, line and key."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -541,7 +570,7 @@ def load_level(path: str | Path) -> LevelSpec:
             raise CookError(f"{path}:{m[1]}:{m[2]}: {msg[:m.start()] + msg[m.end():]}") from None
         raise CookError(f"{path}: {msg}") from None
 
-    c = _Checker(path, text)
+    c = _Checker(path, text, allow_external_uris)
     top = c.table(doc, (), {
         "level": (lambda c, v, k: v, {}), "materials": (array_of_tables, []), "brushes": (array_of_tables, []),
         "objects": (array_of_tables, []), "props": (array_of_tables, []), "lights": (array_of_tables, []),
@@ -554,7 +583,7 @@ def load_level(path: str | Path) -> LevelSpec:
                                                 "intensity": (number(0), 1.0)}), None),
     })
     spec = LevelSpec(path=path, name=lvl["name"], texels_per_metre=lvl["texels_per_metre"],
-                     sky=None if lvl["sky"] is None else ir.Sky(**lvl["sky"]), text=text)
+                     sky=None if lvl["sky"] is None else ir.Sky(**lvl["sky"]), text=text, allow_external=allow_external_uris)
 
     mats = [c.table(m, ("materials", i), MATERIAL_KEYS) for i, m in enumerate(top["materials"])]
     _unique(c, mats, "materials")
@@ -607,8 +636,7 @@ def load_level(path: str | Path) -> LevelSpec:
                                "static": (boolean, False)})
         if not p["gltf"].lower().endswith((".gltf", ".glb")):
             c.fail(key + ("gltf",), f"expected a .gltf or .glb file, got '{p['gltf']}'")
-        if not (path.parent / p["gltf"]).is_file():
-            c.fail(key + ("gltf",), f"prop file '{p['gltf']}' not found (looked in {path.parent})")
+        c.file(key + ("gltf",), p["gltf"], "prop file")
         props.append(p)
         spec.props.append(PropSpec(p["name"], p["gltf"], trs(p["translation"], p["rotation"], p["scale"]), p["static"]))
     _unique(c, props, "props")
@@ -665,6 +693,6 @@ def load_level(path: str | Path) -> LevelSpec:
                                     rotation=euler_quaternion(s["rotation"]), params=s["params"]))
     _unique(c, spawns, "spawns")
 
-    if not spec.objects:
-        c.fail(("objects",), "a level needs at least one [[objects]] entry")
+    if not spec.objects and not spec.props:
+        c.fail(("objects",), "a level needs at least one [[objects]] or [[props]] entry")
     return spec

@@ -104,6 +104,14 @@ def _load_pyoidn():
     return pyoidn, None
 
 
+def denoiser() -> str:
+    """What denoising will run: the pyoidn version, or why none will."""
+    from asset_pipeline.cache import library_version
+
+    pyoidn, why = _load_pyoidn()
+    return library_version("pyoidn") if pyoidn is not None else f"no denoiser ({why})"
+
+
 def denoise(rgb: np.ndarray, chart: np.ndarray, margin: int = 8) -> tuple[np.ndarray, dict]:
     """Denoise every chart's covered texels with OIDN's RTLightmap filter, each chart on its own
     (see the module notes). Gutter texels are returned unchanged. If ``pyoidn`` cannot be

@@ -147,7 +147,7 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
             attributes={k: attributes[k] for k in lod0.attributes},  # the input's attribute order
             triangles=triangles,
             materials=lod0.materials[origin].astype(np.uint32),
-            lightmap_pages=None if lod0.lightmap_pages is None else lod0.lightmap_pages[origin].astype(np.uint32),
+            lightmap_blocks=None if lod0.lightmap_blocks is None else lod0.lightmap_blocks[origin].astype(np.uint32),
             error=error,
         ))
     return lods
@@ -186,12 +186,12 @@ def _walk_keys(lod0: ir.Lod) -> np.ndarray:
     """A key per face: walks cross edges whose split vertices both faces share, between faces of
     one material and lightmap page, so they stay within a region where attributes are continuous."""
     key = lod0.materials
-    if lod0.lightmap_pages is not None:
-        pages = int(lod0.lightmap_pages.max(initial=0)) + 1
+    if lod0.lightmap_blocks is not None:
+        pages = int(lod0.lightmap_blocks.max(initial=0)) + 1
         if int(key.max(initial=0)) < (1 << 32) // pages:
-            key = key * np.uint32(pages) + lod0.lightmap_pages
+            key = key * np.uint32(pages) + lod0.lightmap_blocks
         else:
-            key = np.unique(np.stack([key, lod0.lightmap_pages], 1), axis=0, return_inverse=True)[1]
+            key = np.unique(np.stack([key, lod0.lightmap_blocks], 1), axis=0, return_inverse=True)[1]
     return np.ascontiguousarray(key, dtype=np.uint32).ravel()
 
 

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import re
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
-from asset_pipeline.cache import Hasher, StageCache, process_running, write_atomic
+from asset_pipeline.cache import Hasher, StageCache, library_version, process_running, write_atomic
 from asset_pipeline.gltf_import import import_gltf, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
@@ -38,6 +38,9 @@ class CookSettings:
     bake: "object | None" = None  # asset_pipeline.bake.BakeSettings; None = defaults
     lods: bool = True
     lightmap_uvs: bool = True
+    # Lightmap density of static surfaces, texels per metre: overrides the level's; a glTF scene
+    # without it gets Uv2Settings' default, lowered to fit AUTO_LIGHTMAP_TEXELS.
+    texels_per_metre: float | None = None
     baking: bool = True  # bake lightmaps and probes (when the scene has lightmap UVs)
     mips: bool = True  # mip chains for material textures (lightmaps keep one level)
     mip_filter: str | None = None  # box|tent|bspline|mitchell|catmull-rom|lanczos3; None = per usage (mitchell, tent for hdr)
@@ -51,6 +54,12 @@ class CookSettings:
     # its counters (tasks submitted, cancelled).
     executor: "str | object" = "local"
     ray_address: str | None = None
+    # The uniform sky a glTF scene is baked under, in nits (an overcast day); 0: none, so only
+    # its lights and emissive surfaces light it. Levels bring their own sky.
+    sky_nits: float = 1000.0
+    # Read buffers, images, textures and props outside the source's folder tree (absolute paths,
+    # file: URIs, `..` that leads out); off, such a path is an error.
+    allow_external_uris: bool = False
 
 
 @dataclass
@@ -68,6 +77,9 @@ class CookResult:
     stages: list[StageRecord] = field(default_factory=list)
     report: Path | None = None
     tasks_submitted: int = 0  # tasks the executor submitted (0 for local, and for a fully cached cook)
+    uv2: dict = field(default_factory=dict)  # the uv2 stage's measurements (instances, pages, utilisation)
+    bake: dict = field(default_factory=dict)  # the bake's (texels, rays, seconds per page and instance)
+    scene: "ir.Scene | None" = None  # the scene as written (None when up to date)
 
 
 def _settings_doc(obj) -> object:
@@ -77,60 +89,48 @@ def _settings_doc(obj) -> object:
 # ---- the source stage: glTF import or CSG level -----------------------------------------------
 
 
-def _source_files(source: Path) -> list[Path]:
-    """Every file the source depends on: itself plus files it names (level textures and props,
-    glTF external buffers and images)."""
-    files = [source]
-    base = source.parent
-    names: list[str] = []
-    try:
-        if source.suffix.lower() == ".toml":
-            def walk(v):
-                if isinstance(v, str):
-                    names.append(v)
-                elif isinstance(v, dict):
-                    for x in v.values():
-                        walk(x)
-                elif isinstance(v, list):
-                    for x in v:
-                        walk(x)
-
-            walk(tomllib.loads(source.read_text()))
-        elif source.suffix.lower() == ".gltf":
-            doc = json.loads(source.read_text())
-            names = [x["uri"] for k in ("buffers", "images") for x in doc.get(k, []) if isinstance(x.get("uri"), str) and not x["uri"].startswith("data:")]
-    except (OSError, ValueError, UnicodeDecodeError):
-        pass  # the stage itself reports a malformed source, with the reason
-    for n in names:
-        p = base / n
-        if len(n) < 512 and p.is_file() and p != source:
-            files.append(p)
-    return files
-
-
-def _load_source(source: Path) -> ir.Scene:
+def _load_source(source: Path, settings: CookSettings) -> ir.Scene:
     if source.suffix.lower() == ".toml":
         from asset_pipeline.csg import build_level
         from asset_pipeline.level import load_level
 
-        return build_level(load_level(source), source.parent)
-    return import_gltf(source)
+        return build_level(load_level(source, settings.allow_external_uris))
+    return import_gltf(source, allow_external_uris=settings.allow_external_uris)
 
 
-def _world_scales(scene: ir.Scene) -> list[float]:
-    """Per mesh, the uniform scale of the first node placing it (lightmap density is in world
-    metres; a mesh scaled by 2 needs twice the texels per object-space metre)."""
-    world: list[np.ndarray] = []
-    scale = [1.0] * len(scene.meshes)
-    seen = set()
-    for n in scene.nodes:
-        local = np.array(n.local, dtype=np.float64).reshape(4, 4).T  # column-major -> row-major
-        w = world[n.parent] @ local if n.parent is not None else local
-        world.append(w)
-        if n.mesh is not None and n.mesh not in seen:
-            seen.add(n.mesh)
-            scale[n.mesh] = float(abs(np.linalg.det(w[:3, :3])) ** (1.0 / 3.0)) or 1.0
-    return scale
+def _files_key(files: list[str]) -> str | None:
+    """A key of the files' paths and bytes; None when one cannot be read (gone, renamed)."""
+    h = Hasher("files")
+    try:
+        for f in files:
+            h.file(Path(f))
+    except OSError:
+        return None
+    return h.key()
+
+
+def _source_key(source: Path, files: list[str] | None) -> str | None:
+    """The source stage's key: every file the last import of `source` read, by content, and
+    the libraries it ran (manifold3d builds levels). None when that is not known."""
+    files_key = _files_key(files) if files else None
+    if files_key is None:
+        return None
+    libraries = {"manifold3d": library_version("manifold3d")} if source.suffix.lower() == ".toml" else {}
+    return Hasher("source").text(files_key).settings(libraries).key()
+
+
+def _read_files(source: Path, scene: ir.Scene) -> list[str]:
+    """The source and every file its import read, each once (resolved paths, first-read order)."""
+    seen: dict[str, None] = {}
+    for f in [source, *scene.files]:
+        seen.setdefault(os.fspath(Path(f).resolve()), None)
+    return list(seen)
+
+
+def uniform_scale(world: np.ndarray) -> float:
+    """The uniform scale of a transform (the cube root of its 3x3 determinant's size): how much
+    a lightmap density in world metres is worth per object-space metre."""
+    return float(abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)) or 1.0
 
 
 def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None, progress: Progress | None = None) -> CookResult:
@@ -166,18 +166,21 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     if isinstance(settings_doc.get("bake"), dict):
         for k in SCHEDULING:
             settings_doc["bake"].pop(k, None)
-    source_key = Hasher("source")
-    for f in _source_files(source):
-        source_key.file(f)
-    source_key = source_key.key()
-    cook_key = Hasher("cook").text(source_key).settings(settings_doc).key()
+    # What a cook reads is known only once it has read it (a level names textures and props, a
+    # prop its buffers and images), so the files the last import of this source read are kept
+    # (stage "source-deps"); the source stage's key covers all of their bytes. An edit to any of
+    # them, or a new file the edit names, changes the key.
+    deps_key = Hasher("source-deps").text(os.fspath(source.resolve())).settings(settings.allow_external_uris).key()
+    deps = cache.load("source-deps", deps_key)
+    files = deps[0]["files"] if deps is not None else None
+    source_key = _source_key(source, files)
     stamp = cache.root / "outputs" / (Hasher("output").text(os.fspath(out.resolve())).key()[:24] + ".json")
 
     # Up to date: the output exists, is the file this key produced, and nothing is forced.
-    if not settings.force and out.exists() and stamp.exists():
+    if not settings.force and source_key is not None and out.exists() and stamp.exists():
         try:
             recorded = json.loads(stamp.read_text())
-            if recorded["key"] == cook_key and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
+            if recorded["key"] == _cook_key(source_key, settings_doc, settings) and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
                 return CookResult(summary=recorded["summary"], up_to_date=True)
         except (OSError, ValueError, KeyError):
             pass
@@ -190,22 +193,31 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     rec = StageRecord("import" if source.suffix.lower() != ".toml" else "level")
     t0 = time.perf_counter()
     with progress.stage(rec.name, 1) as bar:
-        hit = cache.load("source", source_key)
+        hit = cache.load("source", source_key) if source_key is not None else None
         if hit is not None:
             scene = ir.from_wire(hit[0]["scene"], hit[1])
+            scene.files = list(files)
             rec.cached = 1
         else:
-            scene = _load_source(source)
-            text, arrays = ir.to_wire(scene)
-            cache.store("source", source_key, {"scene": text}, arrays)
+            scene = _load_source(source, settings)
+            scene.files = files = _read_files(source, scene)
+            cache.store("source-deps", deps_key, {"files": files}, [])
+            source_key = _source_key(source, files)
+            if source_key is not None:
+                text, arrays = ir.to_wire(scene)
+                cache.store("source", source_key, {"scene": text}, arrays)
         bar.advance()
     rec.items, rec.seconds = 1, time.perf_counter() - t0
     stages.append(rec)
     for w in scene.warnings:
         progress.warning(w)
+    if source.suffix.lower() != ".toml" and settings.sky_nits > 0:
+        # glTF has no sky: a scene is baked under a uniform white one, as a viewer shows a model
+        # under its environment; without any, a model with no lights would bake black.
+        scene = dataclasses.replace(scene, sky=ir.Sky(color=(1.0, 1.0, 1.0), intensity=float(settings.sky_nits)))
 
     uv2_stats: dict = {}
-    if settings.lightmap_uvs and any(m.static for m in scene.meshes):
+    if settings.lightmap_uvs and scene.static_nodes():
         scene, uv2_stats, rec = _uv2_stage(scene, settings, cache, progress)
         stages.append(rec)
     if settings.lods:
@@ -235,12 +247,12 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     report = None
     if settings.report:
         report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs)
-    files = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
+    outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
-    record = json.dumps({"key": cook_key, "files": files, "summary": summary}).encode()
+    record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
     write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
-                      tasks_submitted=executor.submitted if executor is not None else 0)
+                      tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene)
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
@@ -265,6 +277,21 @@ def _remove_stale_temporaries(out: Path) -> None:
             f.unlink()
         except OSError:
             pass
+
+
+# Libraries whose code shapes a stage's output (each stage's key holds its own; the whole cook's
+# key holds them all, so an upgrade is never "up to date").
+STAGE_LIBRARIES = ("manifold3d", "xatlas", "fast-simplification", "pyoidn")
+
+
+def _cook_key(source_key: str | None, settings_doc: dict, settings: CookSettings) -> str:
+    from asset_pipeline.bake import BakeSettings
+    from asset_pipeline.lightmap_post import denoiser
+
+    # Whether the denoiser would run (pyoidn installed and loading) changes the bake's result.
+    denoise = settings.baking and (settings.bake or BakeSettings()).post.denoise
+    return (Hasher("cook").text(str(source_key)).settings(settings_doc).settings([library_version(n) for n in STAGE_LIBRARIES])
+            .text(denoiser() if denoise else "no denoising").key())
 
 
 def _unchanged(path: Path, size: int, mtime_ns: int) -> bool:
@@ -294,44 +321,122 @@ def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
 # ---- lightmap UVs -------------------------------------------------------------------------------
 
 
-def _uv2_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+# The most lightmap texels a scene without a density of its own (a glTF scene cooked without
+# --texels-per-metre) gets: a 2048^2 page. Its density is lowered to fit, so any model cooks;
+# levels and explicit densities keep theirs (and the uv2 stage's hard limit).
+AUTO_LIGHTMAP_TEXELS = 1 << 22
+
+
+def _uv2_settings(scene: ir.Scene, settings: CookSettings, instances) -> tuple[object, str | None]:
+    """The uv2 settings of this cook and a warning when the density was lowered: --texels-per-metre,
+    else the level's density, else the default lowered to AUTO_LIGHTMAP_TEXELS."""
+    from asset_pipeline.uv2 import Uv2Settings
+
+    uv2 = settings.uv2 or Uv2Settings()
+    if settings.texels_per_metre is not None:
+        return dataclasses.replace(uv2, texels_per_metre=float(settings.texels_per_metre)), None
+    if settings.uv2 is not None:
+        return uv2, None
+    if scene.lightmap is not None:
+        return dataclasses.replace(uv2, texels_per_metre=float(scene.lightmap.texels_per_metre)), None
+    from asset_pipeline.uv2 import _world_areas
+
+    area_texels = sum(float(_world_areas(scene.meshes[i.mesh_index].base, 1.0).sum()) * ((i.texels_per_metre or uv2.texels_per_metre) * i.scale) ** 2
+                      for i in instances)
+    if area_texels <= AUTO_LIGHTMAP_TEXELS:
+        return uv2, None
+    tpm = uv2.texels_per_metre * math.sqrt(AUTO_LIGHTMAP_TEXELS / area_texels)
+    return (dataclasses.replace(uv2, texels_per_metre=tpm),
+            f"lightmap density lowered from {uv2.texels_per_metre:g} to {tpm:.3g} texels per metre to keep the scene's static "
+            f"surfaces within {AUTO_LIGHTMAP_TEXELS} texels (--texels-per-metre sets it)")
+
+
+@dataclass
+class _Placement:
+    node: int
+    mesh_index: int  # into scene.meshes
+    scale: float
+    texels_per_metre: float | None
+
+
+def _placements(scene: ir.Scene) -> list[_Placement]:
+    """Every static instance: its node, mesh, world scale and the mesh's density override."""
+    world = scene.world_matrices()
+    return [_Placement(n, scene.nodes[n].mesh, uniform_scale(world[n]), scene.meshes[scene.nodes[n].mesh].texels_per_metre)
+            for n in scene.static_nodes()]
+
+
+def _lightmap_inputs(scene: ir.Scene, placements: list[_Placement]):
+    """lightmap_uvs's arguments for the scene: (static mesh indices, their LOD 0s, instances, names, instance names)."""
+    from asset_pipeline.uv2 import Instance
+
+    static_meshes = scene.static_meshes()
+    local = {m: k for k, m in enumerate(static_meshes)}
+    instances = [Instance(local[p.mesh_index], p.scale, p.texels_per_metre) for p in placements]
+    return (static_meshes, [scene.meshes[m].base for m in static_meshes], instances, [scene.meshes[m].name for m in static_meshes],
+            [scene.nodes[p.node].name for p in placements])
+
+
+def _with_lightmaps(scene: ir.Scene, static_meshes: list[int], placements: list[_Placement], lods, regions, layout) -> ir.Scene:
+    meshes = list(scene.meshes)
+    for m, lod in zip(static_meshes, lods):
+        meshes[m] = dataclasses.replace(meshes[m], lods=[lod])
+    nodes = list(scene.nodes)
+    for p, region in zip(placements, regions):
+        nodes[p.node] = dataclasses.replace(nodes[p.node], lightmap=region)
+    return dataclasses.replace(scene, meshes=meshes, nodes=nodes, lightmap=layout)
+
+
+def with_lightmap_uvs(scene: ir.Scene, uv2=None) -> tuple[ir.Scene, dict]:
+    """The uv2 stage without its cache (for tools and tests): the scene with lightmap UVs on its
+    static meshes and a region on every static instance, and the stage's measurements. `uv2`:
+    Uv2Settings (default: at the scene's density)."""
     from asset_pipeline.uv2 import Uv2Settings, lightmap_uvs
 
-    uv2 = settings.uv2 or Uv2Settings(**({"texels_per_metre": scene.lightmap.texels_per_metre} if scene.lightmap else {}))
-    static = [i for i, m in enumerate(scene.meshes) if m.static]
-    scales = _world_scales(scene)
-    key = Hasher("uv2").settings(_settings_doc(uv2))
-    for i in static:
-        m = scene.meshes[i]
-        key.text(f"{scales[i]}:{m.texels_per_metre}")
-        for name in sorted(m.base.attributes):
-            key.text(name).array(m.base.attributes[name])
-        key.array(m.base.triangles).array(m.base.materials)
+    placements = _placements(scene)
+    uv2 = uv2 or Uv2Settings(**({"texels_per_metre": scene.lightmap.texels_per_metre} if scene.lightmap else {}))
+    static_meshes, lods, instances, names, instance_names = _lightmap_inputs(scene, placements)
+    r = lightmap_uvs(lods, uv2, instances=instances, names=names, instance_names=instance_names)
+    return _with_lightmaps(scene, static_meshes, placements, r.lods, r.regions, r.layout), r.stats
+
+
+def _uv2_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    from asset_pipeline.uv2 import lightmap_uvs
+
+    placements = _placements(scene)
+    uv2, lowered = _uv2_settings(scene, settings, placements)
+    static_meshes, lods, instances, names, instance_names = _lightmap_inputs(scene, placements)
+    key = Hasher("uv2").settings(_settings_doc(uv2)).settings([dataclasses.asdict(i) for i in instances]).text(library_version("xatlas"))
+    for base in lods:
+        for name in sorted(base.attributes):
+            key.text(name).array(base.attributes[name])
+        key.array(base.triangles).array(base.materials)
     key = key.key()
 
-    rec = StageRecord("uv2", items=len(static))
+    rec = StageRecord("uv2", items=len(instances))
     t0 = time.perf_counter()
-    with progress.stage("uv2", len(static)) as bar:
+    with progress.stage("uv2", len(instances)) as bar:
         hit = cache.load("uv2", key)
         if hit is not None:
             meta, arrays = hit
             new_lods = ir.lods_from_wire(meta["lods"], arrays)
+            regions = meta["regions"]
             layout = ir.LightmapLayout(meta["layout"]["texels_per_metre"], [tuple(p) for p in meta["layout"]["pages"]], meta["layout"]["padding"])
             stats = meta["stats"]
-            rec.cached = len(static)
+            rec.cached = len(instances)
         else:
-            inputs = [(scene.meshes[i].base, scales[i], scene.meshes[i].texels_per_metre) for i in static]
-            names = [scene.meshes[i].name for i in static]
             # The per-mesh chart cache lets an edit to one mesh re-chart only that mesh.
-            new_lods, layout, stats = lightmap_uvs(inputs, uv2, names=names, cache=cache)
+            r = lightmap_uvs(lods, uv2, instances=instances, names=names, instance_names=instance_names, cache=cache)
+            new_lods, regions, layout, stats = r.lods, r.regions, r.layout, r.stats
             docs, arrays = ir.lods_to_wire(new_lods)
-            cache.store("uv2", key, {"lods": docs, "layout": dataclasses.asdict(layout), "stats": stats}, arrays)
-        bar.advance(len(static))
-    meshes = list(scene.meshes)
-    for i, lod in zip(static, new_lods):
-        meshes[i] = dataclasses.replace(meshes[i], lods=[lod])
+            cache.store("uv2", key, {"lods": docs, "regions": regions, "layout": dataclasses.asdict(layout), "stats": stats}, arrays)
+        bar.advance(len(instances))
+    scene = _with_lightmaps(scene, static_meshes, placements, new_lods, regions, layout)
+    new = ([lowered] if lowered else []) + list(stats.get("warnings", []))
+    for w in new:
+        progress.warning(w)
     rec.seconds = time.perf_counter() - t0
-    return dataclasses.replace(scene, meshes=meshes, lightmap=layout), stats, rec
+    return dataclasses.replace(scene, warnings=[*scene.warnings, *new]), stats, rec
 
 
 # ---- LOD chains ---------------------------------------------------------------------------------
@@ -342,7 +447,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
     from asset_pipeline.lod import LodSettings, build_lods
 
     lod_settings = settings.lod or LodSettings()
-    doc = _settings_doc(lod_settings)
+    doc = {"settings": _settings_doc(lod_settings), "fast-simplification": library_version("fast-simplification")}
     rec = StageRecord("lod", items=len(scene.meshes))
     t0 = time.perf_counter()
     # Per mesh: its LODs below LOD 0, and its cache key.
@@ -362,7 +467,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             key = Hasher("lod").settings(doc)
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])
-            key = key.array(base.triangles).array(base.materials).array(base.lightmap_pages).key()
+            key = key.array(base.triangles).array(base.materials).array(base.lightmap_blocks).key()
             keys[i] = key
             hit = cache.load("lod", key)
             if hit is not None:
@@ -395,23 +500,19 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
 
 
 def _bake_key(scene: ir.Scene, bake_settings) -> str:
-    """Everything the bake reads: static meshes (LOD 0) and where nodes place them, materials and
-    their base colour textures, lights, sky, the atlas layout, the settings."""
-    key = Hasher("bake").settings(bake_settings.key_doc())
-    key.settings([dataclasses.asdict(n) for n in scene.nodes])
-    key.settings([dataclasses.asdict(m) for m in scene.materials])
-    key.settings([dataclasses.asdict(l) for l in scene.lights])
-    key.settings(None if scene.sky is None else dataclasses.asdict(scene.sky))
-    key.settings(dataclasses.asdict(scene.lightmap))
-    for m in scene.meshes:
-        key.text(f"{m.name}:{m.static}")
-        if m.static:
-            base = m.lods[0]
-            for name in sorted(base.attributes):
-                key.text(name).array(base.attributes[name])
-            key.array(base.triangles).array(base.materials).array(base.lightmap_pages)
-    for t in sorted({m.base_color_texture for m in scene.materials if m.base_color_texture is not None}):
-        key.text(f"texture {t}").array(scene.textures[t].mips[0])
+    """Everything the bake reads (bake.key_inputs: the static instances where they stand, their
+    regions, the materials' baked fields and the textures they read, lights, sky, the atlas),
+    the settings and the denoiser."""
+    from asset_pipeline.bake import key_inputs
+    from asset_pipeline.lightmap_post import denoiser
+
+    # The denoiser that will run (its version), or none: a bake made without it is not the one
+    # made with it, and installing it must not leave the cache serving the noisy one.
+    key = Hasher("bake").settings(bake_settings.key_doc()).text(denoiser() if bake_settings.post.denoise else "denoise off")
+    doc, arrays = key_inputs(scene)
+    key.settings(doc)
+    for a in arrays:
+        key.array(a)
     return key.key()
 
 
@@ -460,19 +561,26 @@ def _alpha_cutoffs(scene: ir.Scene) -> dict[int, float]:
     return cutoffs
 
 
+# pack::Wrap -> cook_core::mips::Edge.
+_EDGE_OF_WRAP = {"repeat": "wrap", "clamp": "clamp", "mirror": "mirror"}
+
+
 def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None):
     """Every material texture gets its full mip chain by its usage (cook_core::mips): colour in
     linear light with premultiplied alpha, data per channel, normals renormalised and stored
     16-bit at every level (level 0 re-encoded: 8 bits cannot hold a unit vector), HDR with a
-    non-negative kernel; alpha-tested base colours keep their coverage. Levels wrap at the edges,
-    as the runtime's sampler repeats. Lightmap pages are left at one level: they are magnified,
+    non-negative kernel; alpha-tested base colours keep their coverage. Levels filter across the
+    edges as the texture's sampler reads past them (repeat, clamp, mirror); a texture read
+    without mipmaps keeps one level. Lightmap pages are left at one level: they are magnified,
     and their 2-texel chart gutters would bleed neighbouring charts into level 1 and below.
     Textures that arrive with more than one level keep theirs."""
     from asset_pipeline.executor import texture_levels
 
     skip = set(scene.lightmap.textures) if scene.lightmap is not None else set()
     cutoffs = _alpha_cutoffs(scene)
-    todo = [i for i, t in enumerate(scene.textures) if i not in skip and len(t.mips) == 1 and max(t.width, t.height) > 1]
+    # A texture its sampler reads without mipmaps (glTF's NEAREST or LINEAR minification) keeps one level.
+    todo = [i for i, t in enumerate(scene.textures)
+            if i not in skip and len(t.mips) == 1 and max(t.width, t.height) > 1 and t.sampling["mipmap_filter"] is not None]
     rec = StageRecord("textures", items=len(todo))
     t0 = time.perf_counter()
     textures = list(scene.textures)
@@ -496,7 +604,9 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
         remote = []  # (texture, key, args) not in the cache, for the Ray executor
         for i in todo:
             t = textures[i]
-            job = {"usage": t.usage, "filter": settings.mip_filter, "edge": "wrap", "alpha_cutoff": cutoffs.get(i)}
+            # Levels filter across the edges the way the sampler reads past them.
+            edge = ",".join(_EDGE_OF_WRAP[t.sampling[axis]] for axis in ("wrap_s", "wrap_t"))
+            job = {"usage": t.usage, "filter": settings.mip_filter, "edge": edge, "alpha_cutoff": cutoffs.get(i)}
             key = Hasher("textures").settings(job).array(t.mips[0]).key()
             hit = cache.load("textures", key)
             if hit is not None:

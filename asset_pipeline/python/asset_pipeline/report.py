@@ -30,9 +30,10 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
     lines += [_row(s.name, s.items, s.cached, f"{s.seconds:.3f}") for s in stages]
     lines += ["", "## Meshes and LODs", "", "Error: upper bound of the two-sided Hausdorff distance to LOD 0, metres, object space.", ""]
     lines += [_row("mesh", "static", "LOD", "triangles", "vertices", "error (m)"), _row("---", "---", "---:", "---:", "---:", "---:")]
-    for m in scene.meshes:
+    static = set(scene.static_meshes())
+    for k, m in enumerate(scene.meshes):
         for i, lod in enumerate(m.lods):
-            lines.append(_row(m.name if i == 0 else "", "yes" if m.static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
+            lines.append(_row(m.name if i == 0 else "", "yes" if k in static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
     if scene.skins or scene.clips:
         lines += ["", "## Animation", "", f"{len(scene.skins)} skin(s): " + ", ".join(f"{s.name} ({len(s.joints)} joints)" for s in scene.skins), ""]
         lines += [_row("clip", "channels", "seconds"), _row("---", "---:", "---:")]
@@ -45,6 +46,12 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
         for k, v in sorted(uv2_stats.items()):
             if not isinstance(v, (list, dict)):
                 lines.append(f"- {k}: {v:.4g}" if isinstance(v, float) else f"- {k}: {v}")
+        instances = uv2_stats.get("instances", [])
+        if instances:
+            lines += ["", f"{len(instances)} static instance(s), each with texels of its own:", "",
+                      _row("instance", "mesh", "page", "texels baked", "texels/m"), _row("---", "---", "---:", "---:", "---:")]
+            lines += [_row(i["name"], i["mesh"], ", ".join(map(str, i["pages"])), i.get("texels", ""), f"{i['measured_texels_per_metre']:.3g}")
+                      for i in instances]
         previews = _previews(out, scene)
         for i, (w, h) in enumerate(lm.pages):
             lines += ["", f"Page {i}: {w} x {h}"]

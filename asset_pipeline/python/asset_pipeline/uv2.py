@@ -1,12 +1,22 @@
-"""Lightmap UVs (UV2): xatlas charts at a texel density, packed into padded atlas pages.
+"""Lightmap UVs (UV2): xatlas charts at a texel density, packed into blocks per mesh, and an
+atlas region for every static placement of a mesh.
 
-    lods, layout, stats = lightmap_uvs([(lod, world_scale, texels_per_metre_or_None), ...], Uv2Settings())
+    r = lightmap_uvs(lods, Uv2Settings(), instances=[Instance(mesh, world_scale, texels_per_metre_or_None), ...])
+    r.lods      # per mesh: LOD 0 with uv1 (its own lightmap space) and lightmap_blocks
+    r.regions   # per instance: {"page", "scale", "offset"} (pack::LightmapRegion)
+    r.layout    # ir.LightmapLayout: pages, all of one size
+    r.placed    # per instance: its mesh's Lod moved onto the atlas (place_on_atlas)
 
-Every input is a static mesh's LOD 0 in object space, the uniform scale that places it in the
-world (density is in world metres) and an optional per-object density override. Each output Lod
-is the input with its vertices split at chart seams (every attribute carried through xatlas's
-vertex mapping; triangles keep their order and materials), a ``uv1`` attribute in [0, 1] of the
-triangle's page, and ``lightmap_pages`` per triangle.
+Every mesh input is a static mesh's LOD 0 in object space; every instance names its mesh, the
+uniform scale that places it in the world (density is in world metres) and an optional density
+override. Each output Lod is the input with its vertices split at chart seams (every attribute
+carried through xatlas's vertex mapping; triangles keep their order and materials), a ``uv1``
+attribute in [0, 1] of its lightmap space (the page, for a mesh placed once: its region is the
+identity; its largest block, for a mesh placed several times), and ``lightmap_blocks`` per
+triangle. A mesh
+placed several times keeps one set of vertices: each placement maps them onto its own texels
+with a scale and an offset (Unity's lightmapScaleOffset, Godot's per-instance lightmap slice),
+so every placement is baked with its own light.
 
 How, and why this way:
 
@@ -16,15 +26,21 @@ How, and why this way:
    alone, so it can be cached by content hash (``cache=``) and computed in parallel. xatlas's
    Python module holds the GIL and charts on one core (~5k triangles 0.2 s, 20k 1.6 s, 100k
    18 s), so big jobs run in worker processes.
-2. **Packing, all meshes together** (:func:`pack_charts`): the charts go back into xatlas as UV
-   meshes (``add_uv_mesh``), which packs them unscaled (texels_per_unit 1) with padding. One page
-   if the level fits in ``max_page_size``, else as many pages of at most that size as needed;
-   each page is then cropped to what it uses (a multiple of 4 texels, for block compression).
+2. **Blocks, per mesh** (:func:`pack_charts`): the mesh's charts go back into xatlas as UV
+   meshes (``add_uv_mesh``), which packs them unscaled (texels_per_unit 1) with padding, at the
+   density of the mesh's least dense placement. One block if it fits in ``max_page_size``, else
+   as many as needed, each cropped to what it uses.
    xatlas's packer stretches every chart to whole-texel extents (rounding up, so up to a texel
    more: +37% density on a 2-texel chart); the stage measures each chart's true size and has it
    land on the nearest whole number instead, so density is off by at most half a texel per chart
    side (level: +0.02% on the demo level).
-3. **Verification** (``verify=True``): every page is rasterised in Rust (``_core.rasterize_uv``)
+3. **The atlas** (:func:`lightmap_uvs`): meshes placed once go onto the pages chart by chart,
+   as charts of their own (their region is the identity); every placement of a mesh placed
+   several times is a rectangle (its block scaled by its density over the mesh's, so at least
+   1) packed among those charts without turning; a placement of a mesh of several blocks takes
+   that many pages. Every page is then cropped to the largest extent used (a multiple of 4
+   texels, for block compression): pages share one size, the runtime's array texture.
+4. **Verification** (``verify=True``): every page is rasterised in Rust (``_core.rasterize_uv``)
    at its resolution: no texel centre may be claimed by two charts, and no chart's conservative
    coverage (every texel it touches: what the baker bakes) may come within ``padding`` texels of
    another's. The same rasters give utilisation; densities are measured per triangle.
@@ -38,12 +54,13 @@ given half of it (rounded up), measured to give exactly that gap.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
@@ -119,6 +136,7 @@ class Packing:
 
     pages: list[tuple[int, int]]
     uv1: list[np.ndarray]  # per mesh (k, 2) float32 in [0, 1] of the vertex's page
+    texel_uv: list[np.ndarray]  # per mesh (k, 2) float64: the same in texels of the page
     vmapping: list[np.ndarray]  # per mesh (k,) uint32 into the MeshCharts vertices
     triangles: list[np.ndarray]  # per mesh (m, 3) uint32
     page: list[np.ndarray]  # per mesh (m,) uint32 page per triangle
@@ -300,42 +318,50 @@ def _local_charts(c: MeshCharts, tol: float) -> tuple[np.ndarray, np.ndarray]:
     return out.astype(np.float32), final
 
 
-def _pack_once(charts: Sequence[MeshCharts], settings: Uv2Settings, resolution: int):
+def _pack_once(charts: Sequence[MeshCharts], settings: Uv2Settings, resolution: int, rotate: bool = True):
     atlas = xatlas.Atlas()
     present = [i for i, c in enumerate(charts) if len(c.triangles)]
     scales = {}
+    # The xatlas module keeps pointers to the arrays it is given until generate(), without a
+    # reference: they must outlive it, or a freed array's memory becomes another mesh's UVs.
+    alive = []
     for i in present:
         c = charts[i]
         # Chart UVs are f32 in charting's atlas: allow a few ulps of its largest coordinate.
         tol = max(1e-3, 4 * float(np.spacing(np.float32(max(1.0, float(np.abs(c.uv).max(initial=1.0)))))))
         uv, scales[i] = _local_charts(c, tol)
-        atlas.add_uv_mesh(np.ascontiguousarray(uv), np.ascontiguousarray(c.triangles))
+        alive.append((np.ascontiguousarray(uv), np.ascontiguousarray(c.triangles)))
+        atlas.add_uv_mesh(*alive[-1])
     po = xatlas.PackOptions()
     po.texels_per_unit = 1.0  # UVs are already texels: pack without rescaling
     po.padding = settings.xatlas_padding
     po.bilinear = True
     po.bruteForce = bool(settings.brute_force)
     po.blockAlign = False
-    po.rotate_charts = True  # quarter turns while placing
+    po.rotate_charts = rotate  # quarter turns while placing
     po.rotate_charts_to_axis = False  # charting already did; a new axis would change the extents
     po.resolution = resolution
     atlas.generate(xatlas.ChartOptions(), po)
+    del alive
     return atlas, present, scales
 
 
-def pack_charts(charts: Sequence[MeshCharts], settings: Uv2Settings, names: Sequence[str] | None = None) -> Packing:
-    """Pack every mesh's charts into pages (one if they fit in max_page_size)."""
+def pack_charts(charts: Sequence[MeshCharts], settings: Uv2Settings, names: Sequence[str] | None = None, align: int = 4,
+                rotate: bool = True) -> Packing:
+    """Pack every mesh's charts into pages (one if they fit in max_page_size), each cropped to
+    the texels it uses rounded up to a multiple of `align`; `rotate` allows quarter turns."""
     names = list(names) if names is not None else [f"static mesh {i}" for i in range(len(charts))]
     expected = sum(c.count for c in charts)
     if expected == 0:
         # Nothing with area: every triangle on one minimal page at UV (0, 0).
         pages = [(4, 4)] if any(len(c.triangles) for c in charts) else []
-        return Packing(pages, [np.zeros((len(c.uv), 2), np.float32) for c in charts], [np.arange(len(c.uv), dtype=np.uint32) for c in charts],
+        return Packing(pages, [np.zeros((len(c.uv), 2), np.float32) for c in charts], [np.zeros((len(c.uv), 2)) for c in charts],
+                       [np.arange(len(c.uv), dtype=np.uint32) for c in charts],
                        [c.triangles for c in charts], [np.zeros(len(c.triangles), np.uint32) for c in charts],
                        [np.full(len(c.triangles), NONE, np.uint32) for c in charts])
     # Pages of max_page_size, each cropped afterwards to what it uses. (Packing into one page of
     # unbounded size gives the same layout when it fits, more slowly: xatlas grows it as it goes.)
-    atlas, present, scales = _pack_once(charts, settings, settings.max_page_size)
+    atlas, present, scales = _pack_once(charts, settings, settings.max_page_size, rotate)
     if atlas.chart_count != expected:
         raise CookError(f"uv2: packing found {atlas.chart_count} charts where charting made {expected} (xatlas)")
     size = np.array([atlas.width, atlas.height], np.float64)
@@ -379,20 +405,21 @@ def pack_charts(charts: Sequence[MeshCharts], settings: Uv2Settings, names: Sequ
         tris.append(ix)
         pages.append(pg)
         chart_ids.append(ch)
-    # Crop every page to the texels its charts touch, rounded up to a multiple of 4.
+    # Crop every page to the texels its charts touch, rounded up to a multiple of `align`.
     n_pages = max(1, int(atlas.atlas_count))
     extent = np.ones((n_pages, 2))
     for t, ix, pg in zip(texel_uv, tris, pages):
         if len(ix):
             corners = t[ix].reshape(-1, 2)
             np.maximum.at(extent, np.repeat(pg, 3), np.floor(corners) + 1)
-    sizes = [(int(min(settings.max_page_size, 4 * math.ceil(w / 4))), int(min(settings.max_page_size, 4 * math.ceil(h / 4)))) for w, h in extent]
+    up = lambda x: int(min(settings.max_page_size, align * math.ceil(x / align)))
+    sizes = [(up(w), up(h)) for w, h in extent]
     uv1 = []
     for t, vm, ix, pg in zip(texel_uv, vmaps, tris, pages):
         vertex_page = np.zeros(len(t), np.uint32)
         vertex_page[ix.ravel()] = np.repeat(pg, 3)
         uv1.append((t / np.array(sizes, np.float64)[vertex_page]).astype(np.float32) if len(t) else np.zeros((0, 2), np.float32))
-    return Packing(sizes, uv1, vmaps, tris, pages, chart_ids)
+    return Packing(sizes, uv1, texel_uv, vmaps, tris, pages, chart_ids)
 
 
 # ---- the stage ---------------------------------------------------------------------------------
@@ -405,9 +432,10 @@ def _world_areas(lod: ir.Lod, scale: float) -> np.ndarray:
 
 
 def triangle_densities(lod: ir.Lod, scale: float, pages: Sequence[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
-    """Per triangle: measured texels per metre sqrt(UV area in texels^2 / world area in m^2), and
-    the world area (the weight). Triangles without world area get density 0 and weight 0."""
-    size = np.array(pages, np.float64).reshape(-1, 2)[lod.lightmap_pages]
+    """Per triangle of a placed Lod (``place_on_atlas``: uv1 on its page, ``lightmap_blocks`` the
+    pages): measured texels per metre sqrt(UV area in texels^2 / world area in m^2), and the
+    world area (the weight). Triangles without world area get density 0 and weight 0."""
+    size = np.array(pages, np.float64).reshape(-1, 2)[lod.lightmap_blocks]
     uv = lod.attributes["uv1"].astype(np.float64)
     t = lod.triangles
     a, b, c = (uv[t[:, k]] * size for k in range(3))
@@ -418,100 +446,263 @@ def triangle_densities(lod: ir.Lod, scale: float, pages: Sequence[tuple[int, int
     return d, np.where(tiny, 0.0, world)
 
 
-def _inputs(meshes) -> list[tuple[ir.Lod, float, float | None]]:
-    out = []
-    for i, m in enumerate(meshes):
-        if len(m) == 2:
-            lod, scale, tpm = m[0], m[1], None
-        else:
-            lod, scale, tpm = m
-        if not (math.isfinite(scale) and scale > 0):
-            raise CookError(f"uv2: static mesh {i}: world scale must be positive, not {scale}")
+@dataclass
+class Instance:
+    """One static placement of a mesh: which mesh, the uniform scale that places it in the world
+    (density is in world metres) and an optional density override (texels per metre)."""
+
+    mesh: int
+    scale: float = 1.0
+    texels_per_metre: float | None = None
+
+
+@dataclass
+class Uv2Result:
+    lods: list[ir.Lod]  # per mesh: LOD 0 with uv1 in its own lightmap space and lightmap_blocks
+    regions: list[dict]  # per instance: pack::LightmapRegion {"page", "scale", "offset"}
+    layout: ir.LightmapLayout
+    stats: dict
+    instances: list[Instance] = field(default_factory=list)
+
+    @property
+    def placed(self) -> list[ir.Lod]:
+        """Per instance: its mesh's Lod on the atlas (``place_on_atlas``)."""
+        return [place_on_atlas(self.lods[i.mesh], r) for i, r in zip(self.instances, self.regions)]
+
+
+def _instances(meshes, instances) -> tuple[list[ir.Lod], list[Instance]]:
+    """(lods, instances) from lightmap_uvs's arguments: without `instances`, `meshes` holds
+    ``(lod, world_scale)`` or ``(lod, world_scale, texels_per_metre)``, each placed once."""
+    if instances is None:
+        lods, instances = [], []
+        for i, m in enumerate(meshes):
+            lods.append(m[0])
+            instances.append(Instance(i, *m[1:]))
+    else:
+        lods, instances = list(meshes), [i if isinstance(i, Instance) else Instance(*i) for i in instances]
+    for k, inst in enumerate(instances):
+        if not 0 <= inst.mesh < len(lods):
+            raise CookError(f"uv2: instance {k}: mesh {inst.mesh} does not exist")
+        if not (math.isfinite(inst.scale) and inst.scale > 0):
+            raise CookError(f"uv2: instance {k}: world scale must be positive, not {inst.scale}")
+        tpm = inst.texels_per_metre
         if tpm is not None and not (math.isfinite(tpm) and tpm > 0):
-            raise CookError(f"uv2: static mesh {i}: texels_per_metre must be positive, not {tpm}")
-        out.append((lod, float(scale), None if tpm is None else float(tpm)))
-    return out
+            raise CookError(f"uv2: instance {k}: texels_per_metre must be positive, not {tpm}")
+    return lods, instances
 
 
-def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, names: Sequence[str] | None = None, cache=None):
-    """Lightmap UVs for static meshes: ``meshes`` is a list of ``(lod, world_scale)`` or
-    ``(lod, world_scale, texels_per_metre or None)``. Returns ``(lods, layout, stats)``: the new
-    Lods in input order, the ``ir.LightmapLayout`` and a JSON-ready dict of measurements.
-    ``names`` label meshes in error messages; ``cache`` (StageCache-like) keeps charts per mesh."""
+# Two scales within this of each other are the same density (float noise from transforms).
+_SAME_SCALE = 1e-6
+
+
+def _rectangle(w: int, h: int) -> MeshCharts:
+    """A w x h texel rectangle as one chart for the packer: a placement's block of charts, which
+    must move as one piece."""
+    uv = np.array([[0, 0], [w, 0], [w, h], [0, h]], np.float32)
+    return MeshCharts(np.arange(4, dtype=np.uint32), np.array([[0, 1, 2], [0, 2, 3]], np.uint32), uv,
+                      np.zeros(2, np.uint32), np.array([[w, h]], np.float64), 1)
+
+
+def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, instances=None, names: Sequence[str] | None = None,
+                 instance_names: Sequence[str] | None = None, cache=None) -> Uv2Result:
+    """Lightmap UVs for static meshes and an atlas region for every static placement of them.
+
+    ``meshes``: the static meshes' LOD 0 (object space); ``instances``: ``Instance``s (or
+    ``(mesh, world_scale, texels_per_metre or None)`` tuples) placing them. Without
+    ``instances``, ``meshes`` holds ``(lod, world_scale[, texels_per_metre])``, each placed once.
+
+    A mesh placed once has its charts packed with every other such mesh's, straight onto the
+    atlas pages (its region is the identity, its blocks are the pages it lands on): the tightest
+    packing. A mesh placed several times has its charts packed into blocks of its own once, at
+    the density of its least dense placement, and each placement gets a rectangle of atlas
+    texels per block, scaled by its density over that one (>= 1: a placement twice as large
+    gets twice the texels per side), so one set of vertices serves every placement through a
+    scale and an offset (pack::LightmapRegion). Those rectangles are packed together with the
+    single meshes' charts as charts that do not turn. Blocks drawn at more than one scale keep
+    2 more texels of padding between their charts: scaled by a non-integer factor, a chart's
+    edges land inside texels, and conservative coverage can grow by a texel on each side. A
+    placement of a mesh with several blocks takes whole pages of its own (block b on page + b).
+    Every page is finally cropped to one size (the runtime's array texture).
+
+    ``names`` / ``instance_names`` label meshes and instances in messages; ``cache``
+    (StageCache-like) keeps charts per mesh."""
     settings = settings or Uv2Settings()
     settings.validate()
-    inputs = _inputs(meshes)
-    names = list(names) if names is not None else [f"static mesh {i}" for i in range(len(inputs))]
-    jobs = []
+    lods, instances = _instances(meshes, instances)
+    names = list(names) if names is not None else [f"static mesh {i}" for i in range(len(lods))]
+    instance_names = list(instance_names) if instance_names is not None else [names[i.mesh] for i in instances]
+    density = [(i.texels_per_metre or settings.texels_per_metre) * i.scale for i in instances]  # texels per object unit
+    placements = {m: [k for k, i in enumerate(instances) if i.mesh == m] for m in range(len(lods))}
+    reference = {m: min(density[k] for k in ks) for m, ks in placements.items() if ks}
     texels = 0.0
-    for i, (lod, scale, tpm) in enumerate(inputs):
-        lod.validate(names[i])
-        if not np.isfinite(lod.attributes["position"]).all():
-            raise CookError(f"uv2: {names[i]}: a vertex position is not finite")
-        density = (tpm or settings.texels_per_metre) * scale
-        texels += float(_world_areas(lod, 1.0).sum()) * density * density
+    for k, inst in enumerate(instances):
+        texels += float(_world_areas(lods[inst.mesh], 1.0).sum()) * density[k] ** 2
         if texels > settings.max_texels:
-            raise CookError(f"uv2: {names[i]}: the static meshes so far need about {texels:.3g} lightmap texels at "
-                            f"{tpm or settings.texels_per_metre:g} texels per metre, more than the cooker's limit of "
+            raise CookError(f"uv2: {instance_names[k]}: the static meshes so far need about {texels:.3g} lightmap texels at "
+                            f"{inst.texels_per_metre or settings.texels_per_metre:g} texels per metre, more than the cooker's limit of "
                             f"{settings.max_texels}; lower texels_per_metre")
-        normals = lod.attributes.get("normal")
-        jobs.append((_texel_positions(lod, density), np.ascontiguousarray(lod.triangles, np.uint32),
+    used = sorted(reference)
+    jobs = []
+    for m in used:
+        lods[m].validate(names[m])
+        if not np.isfinite(lods[m].attributes["position"]).all():
+            raise CookError(f"uv2: {names[m]}: a vertex position is not finite")
+        normals = lods[m].attributes.get("normal")
+        jobs.append((_texel_positions(lods[m], reference[m]), np.ascontiguousarray(lods[m].triangles, np.uint32),
                      None if normals is None else np.ascontiguousarray(normals, np.float32)))
-    charts = chart_meshes(jobs, settings, cache)
-    packing = pack_charts(charts, settings, names)
+    charts = dict(zip(used, chart_meshes(jobs, settings, cache)))
+    single = [m for m in used if len(placements[m]) == 1]
+    shared = [m for m in used if len(placements[m]) > 1]
 
-    lods = []
-    for i, (lod, _, _) in enumerate(inputs):
-        c = charts[i]
-        vm = c.vmapping[packing.vmapping[i]] if len(c.vmapping) else np.zeros(0, np.uint32)
-        attrs = {k: np.ascontiguousarray(v[vm]) for k, v in lod.attributes.items() if k != "uv1"}
-        attrs["uv1"] = packing.uv1[i]
-        new = ir.Lod(attributes=attrs, triangles=packing.triangles[i], materials=lod.materials.copy(),
-                     lightmap_pages=packing.page[i], error=lod.error)
-        new.validate(names[i])
-        lods.append(new)
-    layout = ir.LightmapLayout(texels_per_metre=float(settings.texels_per_metre), pages=list(packing.pages), padding=int(settings.padding))
-    stats = _stats(inputs, lods, layout, packing, charts, settings, names)
-    return lods, layout, stats
+    out_lods: list[ir.Lod] = list(lods)
+    mesh_charts: dict[int, np.ndarray] = {}
+
+    def finish(m: int, vmapping: np.ndarray, uv1: np.ndarray, triangles: np.ndarray, blocks: np.ndarray, chart: np.ndarray) -> None:
+        c = charts[m]
+        vm = c.vmapping[vmapping] if len(c.vmapping) else np.zeros(0, np.uint32)
+        attrs = {k: np.ascontiguousarray(v[vm]) for k, v in lods[m].attributes.items() if k != "uv1"}
+        attrs["uv1"] = uv1.astype(np.float32) if len(uv1) else np.zeros((0, 2), np.float32)
+        out_lods[m] = ir.Lod(attributes=attrs, triangles=triangles, materials=lods[m].materials.copy(), lightmap_blocks=blocks, error=lods[m].error)
+        out_lods[m].validate(names[m])
+        mesh_charts[m] = chart
+
+    # Meshes placed several times: their blocks, at their reference density.
+    blocks: dict[int, Packing] = {}
+    for m in shared:
+        scaled = any(density[k] > reference[m] * (1 + _SAME_SCALE) for k in placements[m])
+        # Small enough that a block fits a page as a rectangle among charts, with the packer's
+        # padding around it (as a chart does, _chart_options).
+        room = 4 * ((settings.max_page_size - 2 * settings.xatlas_padding - 2) // 4)
+        mesh_settings = dataclasses.replace(settings, padding=settings.padding + 2 if scaled else settings.padding, max_page_size=room)
+        blocks[m] = pack_charts([charts[m]], mesh_settings, [names[m]], align=1)
+    norm = {m: np.array([max(w for w, _ in b.pages), max(h for _, h in b.pages)], np.float64) for m, b in blocks.items()}
+    for m, b in blocks.items():
+        finish(m, b.vmapping[0], b.texel_uv[0] / norm[m], b.triangles[0], b.page[0], b.chart[0])
+
+    # Every placement of a shared mesh: the scale of its blocks (lowered to fit a page if need be).
+    warnings: list[str] = []
+    factor = [1.0] * len(instances)
+    for m in shared:
+        biggest = max(max(w, h) for w, h in blocks[m].pages)
+        room = settings.max_page_size if len(blocks[m].pages) > 1 else settings.max_page_size - 2 * settings.xatlas_padding - 2
+        for k in placements[m]:
+            f = density[k] / reference[m]
+            f = 1.0 if f <= 1 + _SAME_SCALE else f
+            if math.ceil(f * biggest - 1e-9) > room:
+                fit = max(1.0, room / biggest)
+                warnings.append(f"{instance_names[k]}: lightmap density lowered from {density[k] / instances[k].scale:g} to "
+                                f"{fit * reference[m] / instances[k].scale:.3g} texels per metre to fit a {settings.max_page_size}-texel page")
+                f = fit
+            factor[k] = f
+    size = lambda k, w, h: (math.ceil(factor[k] * w - 1e-9), math.ceil(factor[k] * h - 1e-9))
+
+    # One packing of the single meshes' charts and the rectangles of single-block placements.
+    rects = [k for m in shared if len(blocks[m].pages) == 1 for k in placements[m]]
+    entries = [charts[m] for m in single] + [_rectangle(*size(k, *blocks[instances[k].mesh].pages[0])) for k in rects]
+    region: list[dict | None] = [None] * len(instances)
+    extent = np.ones(2)
+    n_pages = 0
+    if entries:
+        entry_names = [names[m] for m in single] + [instance_names[k] for k in rects]
+        pk = pack_charts(entries, settings, entry_names, rotate=not rects)
+        n_pages = len(pk.pages)
+        for e, t in enumerate(pk.texel_uv):
+            if len(t):
+                extent = np.maximum(extent, np.floor(t[pk.triangles[e]].reshape(-1, 2).max(axis=0)) + 1)
+        for e, m in enumerate(single):
+            finish(m, pk.vmapping[e], pk.texel_uv[e], pk.triangles[e], pk.page[e], pk.chart[e])
+            region[placements[m][0]] = {"page": 0, "scale": None, "offset": [0.0, 0.0]}  # uv1 in page texels until the size is known
+        for e, k in enumerate(rects, start=len(single)):
+            t = pk.texel_uv[e]
+            # The packer places a chart's corner half a texel in (its bilinear border); the block's
+            # texels start on the texel boundary below, inside what the packer reserved.
+            lo = np.floor(t.min(axis=0))
+            if not (np.allclose(t[0], t.min(axis=0)) and np.allclose(t[2], t.max(axis=0))):
+                raise CookError(f"uv2: {instance_names[k]}: the packer turned its lightmap block (xatlas)")
+            region[k] = {"page": int(pk.page[e][0]), "scale": factor[k] * norm[instances[k].mesh], "offset": lo}
+    # Placements of meshes of several blocks: whole pages of their own.
+    for m in shared:
+        if len(blocks[m].pages) > 1:
+            for k in placements[m]:
+                region[k] = {"page": n_pages, "scale": factor[k] * norm[m], "offset": np.zeros(2)}
+                for w, h in blocks[m].pages:
+                    extent = np.maximum(extent, size(k, w, h))
+                n_pages += len(blocks[m].pages)
+    page_size = tuple(int(min(settings.max_page_size, 4 * math.ceil(e / 4))) for e in extent)
+    for m in single:  # now in [0, 1] of the page, under the identity region
+        uv1 = out_lods[m].attributes["uv1"].astype(np.float64) / page_size
+        out_lods[m] = dataclasses.replace(out_lods[m], attributes={**out_lods[m].attributes, "uv1": uv1.astype(np.float32)})
+    regions = []
+    for k, r in enumerate(region):
+        if r["scale"] is None:
+            regions.append({"page": 0, "scale": [1.0, 1.0], "offset": [0.0, 0.0]})
+            continue
+        regions.append({"page": int(r["page"]), "scale": [float(x) for x in np.asarray(r["scale"], np.float64) / page_size],
+                        "offset": [float(x) for x in np.asarray(r["offset"], np.float64) / page_size]})
+    layout = ir.LightmapLayout(texels_per_metre=float(settings.texels_per_metre), pages=[page_size] * n_pages, padding=int(settings.padding))
+    result = Uv2Result(out_lods, regions, layout, {}, instances)
+    result.stats = _stats(result, charts, mesh_charts, settings, names, instance_names, warnings)
+    return result
 
 
-def _stats(inputs, lods, layout, packing: Packing, charts, settings: Uv2Settings, names) -> dict:
-    per_mesh = []
+def _stats(r: Uv2Result, charts, mesh_charts, settings: Uv2Settings, names, instance_names, warnings) -> dict:
+    per_instance = []
     sum_w = sum_wd = sum_wr = 0.0
-    for i, ((lod_in, scale, tpm), lod) in enumerate(zip(inputs, lods)):
-        want = tpm or settings.texels_per_metre
-        d, w = triangle_densities(lod, scale, layout.pages)
+    chart_ids, base = [], 0
+    placed = r.placed
+    for k, (inst, lod) in enumerate(zip(r.instances, placed)):
+        want = inst.texels_per_metre or settings.texels_per_metre
+        d, w = triangle_densities(lod, inst.scale, r.layout.pages)
         mw = float(w.sum())
         measured = float((w * d).sum() / mw) if mw > 0 else 0.0
         sum_w += mw
         sum_wd += float((w * d).sum())
         sum_wr += float((w * d).sum()) / want
-        per_mesh.append({
-            "name": names[i],
-            "charts": int(charts[i].count),
+        ids = mesh_charts[inst.mesh]
+        chart_ids.append(np.where(ids == NONE, NONE, ids + np.uint32(base)).astype(np.uint32))
+        base += charts[inst.mesh].count
+        region = r.regions[k]
+        per_instance.append({
+            "name": instance_names[k],
+            "mesh": names[inst.mesh],
+            "charts": int(charts[inst.mesh].count),
             "texels_per_metre": float(want),
             "measured_texels_per_metre": round(measured, 4),
             "density_ratio": round(measured / want, 4) if mw > 0 else None,
-            "vertices_in": int(lod_in.vertex_count),
-            "vertices_out": int(lod.vertex_count),
-            "pages": sorted({int(p) for p in np.unique(lod.lightmap_pages)}),
+            "pages": sorted({int(p) for p in np.unique(lod.lightmap_blocks)}),
+            "region": region,
         })
     stats = {
         "texels_per_metre": float(settings.texels_per_metre),
         "measured_texels_per_metre": round(sum_wd / sum_w, 4) if sum_w else 0.0,
         "density_ratio": round(sum_wr / sum_w, 4) if sum_w else 0.0,
         "padding": int(settings.padding),
-        "pages": len(layout.pages),
-        "page_sizes": [list(p) for p in layout.pages],
-        "charts": int(sum(c.count for c in charts)),
-        "meshes": per_mesh,
+        "pages": len(r.layout.pages),
+        "page_sizes": [list(p) for p in r.layout.pages],
+        "charts": int(base),
+        "meshes": len({i.mesh for i in r.instances}),
+        "instances": per_instance,
+        "warnings": warnings,
     }
     if settings.verify:
-        stats.update(verify_layout(lods, layout, chart_ids=packing.chart, names=names))
+        stats.update(verify_layout(placed, r.layout, chart_ids=chart_ids, names=instance_names))
+        for inst, texels in zip(per_instance, stats.pop("lod_texels_baked")):
+            inst["texels"] = texels
     return stats
 
 
 # ---- rasterising pages (verification, previews, the baker) ---------------------------------------
+
+
+def place_on_atlas(lod: ir.Lod, region: dict) -> ir.Lod:
+    """A static instance's view of its mesh's lightmap: ``lod`` (with ``uv1`` in the mesh's own
+    lightmap space and ``lightmap_blocks``) with ``uv1`` moved into its atlas region
+    (``uv1 * scale + offset``, pack::LightmapRegion) and ``lightmap_blocks`` replaced by the pages
+    they land on (``region["page"] + block``). What rasterising, verifying and baking a page read."""
+    uv = lod.attributes["uv1"].astype(np.float64) * np.asarray(region["scale"], np.float64) + np.asarray(region["offset"], np.float64)
+    pages = (lod.lightmap_blocks + np.uint32(region["page"])).astype(np.uint32)
+    return ir.Lod(attributes={**lod.attributes, "uv1": uv.astype(np.float32)}, triangles=lod.triangles, materials=lod.materials,
+                  lightmap_blocks=pages, error=lod.error)
 
 
 def _charts_from_uv(uv: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -535,7 +726,7 @@ def page_mesh(lods: Sequence[ir.Lod], page: int, chart_ids: Sequence[np.ndarray]
     base = 0
     chart_base = 0
     for i, lod in enumerate(lods):
-        sel = np.flatnonzero(lod.lightmap_pages == page)
+        sel = np.flatnonzero(lod.lightmap_blocks == page)
         if len(sel) == 0:
             continue
         t = lod.triangles[sel]
@@ -595,6 +786,7 @@ def verify_layout(lods: Sequence[ir.Lod], layout: ir.LightmapLayout, *, chart_id
     limit = min(pad + 2, 250)
     centre_total = baked_total = area_total = 0
     overlapping = too_close = 0
+    per_lod = np.zeros(len(lods), np.int64)
     min_gap = None
     page_util, page_baked = [], []
     for p, (w, h) in enumerate(layout.pages):
@@ -603,6 +795,8 @@ def verify_layout(lods: Sequence[ir.Lod], layout: ir.LightmapLayout, *, chart_id
         baked = _core.rasterize_uv(m["uv"], m["triangles"], m["chart"], int(w), int(h), True)
         sep = _core.chart_separation(baked["chart"], baked["charts_here"], limit)
         covered = sep != 255
+        tri = baked["triangle"][baked["charts_here"] > 0]
+        per_lod += np.bincount(m["mesh"][tri], minlength=len(lods))
         n_centre = int((centre["charts_here"] > 0).sum())
         n_baked = int(covered.sum())
         overlapping += int((centre["charts_here"] > 1).sum())
@@ -629,6 +823,7 @@ def verify_layout(lods: Sequence[ir.Lod], layout: ir.LightmapLayout, *, chart_id
         "overlapping_texels": int(overlapping),
         "texels_within_padding": int(too_close),
         "min_chart_gap_texels": min_gap,
+        "lod_texels_baked": [int(x) for x in per_lod],  # texels the baker bakes, per Lod given
     }
 
 
@@ -668,14 +863,20 @@ def preview_image(lods: Sequence[ir.Lod], layout: ir.LightmapLayout, page: int, 
     return img
 
 
+def placed_lods(scene: ir.Scene) -> list[ir.Lod]:
+    """Every static instance with a lightmap region: its mesh's LOD 0 on the atlas, node order."""
+    return [place_on_atlas(scene.meshes[n.mesh].lods[0], n.lightmap) for n in scene.nodes
+            if n.lightmap is not None and n.mesh is not None]
+
+
 def write_previews(scene: ir.Scene, folder: str | os.PathLike, min_size: int = 512) -> list[Path]:
-    """One PNG per lightmap page of `scene` (static meshes' LOD 0) in `folder`; small pages are
+    """One PNG per lightmap page of `scene` (static instances' LOD 0) in `folder`; small pages are
     enlarged by a whole factor (nearest texel) to at least `min_size` pixels. Returns the paths."""
     if scene.lightmap is None:
         return []
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    lods = [m.base for m in scene.meshes if m.static and m.base.lightmap_pages is not None and "uv1" in m.base.attributes]
+    lods = placed_lods(scene)
     paths = []
     for p, (w, h) in enumerate(scene.lightmap.pages):
         img = preview_image(lods, scene.lightmap, p)
@@ -689,6 +890,6 @@ def write_previews(scene: ir.Scene, folder: str | os.PathLike, min_size: int = 5
 
 
 __all__ = [
-    "Uv2Settings", "MeshCharts", "Packing", "lightmap_uvs", "chart_mesh", "chart_meshes", "pack_charts",
+    "Uv2Settings", "MeshCharts", "Packing", "Instance", "Uv2Result", "lightmap_uvs", "place_on_atlas", "placed_lods", "chart_mesh", "chart_meshes", "pack_charts",
     "triangle_densities", "page_mesh", "rasterize_page", "verify_layout", "preview_image", "write_previews",
 ]

@@ -96,7 +96,8 @@ fn sinc(x: f64) -> f64 {
     }
 }
 
-/// What to do with taps that fall outside the image.
+/// What to do with taps that fall outside the image: what the runtime's sampler does there, so
+/// a level filters across the edge the way the texture is read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Edge {
     /// Wrap around: the texture repeats (the runtime's REPEAT sampler), so its levels tile too
@@ -105,6 +106,9 @@ pub enum Edge {
     /// Drop outside taps and renormalise what is left (the book's best option, L5758): the
     /// border keeps its intensity. For atlases and clamped textures.
     Clamp,
+    /// Reflect at the edge (MIRRORED_REPEAT): the texture repeats mirrored, so the level does
+    /// too.
+    Mirror,
 }
 
 impl Edge {
@@ -112,7 +116,17 @@ impl Edge {
         match name {
             "wrap" => Ok(Edge::Wrap),
             "clamp" => Ok(Edge::Clamp),
-            _ => Err(format!("unknown edge mode '{name}' (expected wrap or clamp)")),
+            "mirror" => Ok(Edge::Mirror),
+            _ => Err(format!("unknown edge mode '{name}' (expected wrap, clamp or mirror)")),
+        }
+    }
+
+    /// One mode for both axes ("wrap") or one per axis, along the width then the height
+    /// ("wrap,clamp": glTF's wrapS and wrapT).
+    pub fn parse_axes(text: &str) -> Result<[Edge; 2], String> {
+        match text.split_once(',') {
+            Some((s, t)) => Ok([Edge::parse(s.trim())?, Edge::parse(t.trim())?]),
+            None => Edge::parse(text).map(|e| [e; 2]),
         }
     }
 }
@@ -171,11 +185,17 @@ impl Taps {
         self.first.len()
     }
 
-    /// The source index of position `j` (wrapped, or clamped where the weight is 0 anyway).
+    /// The source index of position `j` (wrapped, mirrored, or clamped where the weight is 0
+    /// anyway).
     pub fn source(&self, j: isize) -> usize {
+        let n = self.n_in as isize;
         match self.edge {
-            Edge::Wrap => j.rem_euclid(self.n_in as isize) as usize,
-            Edge::Clamp => j.clamp(0, self.n_in as isize - 1) as usize,
+            Edge::Wrap => j.rem_euclid(n) as usize,
+            Edge::Clamp => j.clamp(0, n - 1) as usize,
+            Edge::Mirror => {
+                let m = j.rem_euclid(2 * n);
+                (if m < n { m } else { 2 * n - 1 - m }) as usize
+            }
         }
     }
 

@@ -101,7 +101,8 @@ impl Usage {
 pub struct MipSettings {
     pub usage: Usage,
     pub filter: Filter,
-    pub edge: Edge,
+    /// Along the width, then the height (glTF's wrapS, wrapT).
+    pub edges: [Edge; 2],
     /// Alpha-tested colour: keep the fraction of texels with alpha >= cutoff at every level
     /// equal to level 0's (the shader discards below the cutoff).
     pub alpha_cutoff: Option<f32>,
@@ -109,7 +110,7 @@ pub struct MipSettings {
 
 impl MipSettings {
     pub fn new(usage: Usage) -> MipSettings {
-        MipSettings { usage, filter: usage.default_filter(), edge: Edge::Wrap, alpha_cutoff: None }
+        MipSettings { usage, filter: usage.default_filter(), edges: [Edge::Wrap; 2], alpha_cutoff: None }
     }
 
     pub fn check(&self) -> Result<(), String> {
@@ -273,14 +274,14 @@ where
         return;
     }
     let (w1, h1) = level_size(width, height, 1);
-    let mut img = downsample(width as usize, height as usize, level0, w1 as usize, h1 as usize, s.filter, s.edge);
+    let mut img = downsample(width as usize, height as usize, level0, w1 as usize, h1 as usize, s.filter, s.edges);
     emit(&img);
     for level in 2..levels {
         let (w, h) = level_size(width, height, level);
         let prev = &img;
         // From the previous level's unclamped f32 texels: the chain stays one linear filter of
         // level 0, and nothing is rounded until the encode.
-        let next = downsample(prev.width, prev.height, |y, row| row.copy_from_slice(prev.row(y)), w as usize, h as usize, s.filter, s.edge);
+        let next = downsample(prev.width, prev.height, |y, row| row.copy_from_slice(prev.row(y)), w as usize, h as usize, s.filter, s.edges);
         img = next;
         emit(&img);
     }

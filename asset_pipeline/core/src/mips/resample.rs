@@ -30,12 +30,13 @@ const BAND: usize = 16;
 
 /// Downsample a `width` x `height` image whose rows `load_row(y, row)` fills, to
 /// `out_w` x `out_h`. Deterministic: every sum runs in a fixed order whatever the thread count.
-pub fn downsample<L>(width: usize, height: usize, load_row: L, out_w: usize, out_h: usize, filter: Filter, edge: Edge) -> Image
+/// `edges`: along the width, then the height.
+pub fn downsample<L>(width: usize, height: usize, load_row: L, out_w: usize, out_h: usize, filter: Filter, edges: [Edge; 2]) -> Image
 where
     L: Fn(usize, &mut [Texel]) + Sync,
 {
-    let xt = Taps::downsample(width, out_w, filter, edge);
-    let yt = Taps::downsample(height, out_h, filter, edge);
+    let xt = Taps::downsample(width, out_w, filter, edges[0]);
+    let yt = Taps::downsample(height, out_h, filter, edges[1]);
     let (pad_lo, pad_hi) = xt.padding();
     let (xt, yt) = (&xt, &yt);
     let mut texels = vec![[0.0f32; 4]; out_w * out_h];
@@ -52,7 +53,7 @@ where
         let mut filtered = vec![[0.0f32; 4]; needed.len() * out_w];
         for (k, &y) in needed.iter().enumerate() {
             load_row(y, &mut padded[pad_lo..pad_lo + width]);
-            if edge == Edge::Wrap {
+            if xt.edge != Edge::Clamp {
                 for p in 0..pad_lo {
                     padded[p] = padded[pad_lo + xt.source(p as isize - pad_lo as isize)];
                 }

@@ -33,7 +33,7 @@ impl Lcg {
 }
 
 fn settings(usage: Usage, filter: Filter, edge: Edge) -> MipSettings {
-    MipSettings { usage, filter, edge, alpha_cutoff: None }
+    MipSettings { usage, filter, edges: [edge; 2], alpha_cutoff: None }
 }
 
 #[test]
@@ -67,7 +67,7 @@ fn level_sizes_halve_down_to_one_by_one() {
 fn a_constant_image_stays_constant_at_every_level() {
     for (w, h) in [(64, 64), (5, 3), (7, 1), (1, 9), (33, 17)] {
         for filter in Filter::ALL {
-            for edge in [Edge::Wrap, Edge::Clamp] {
+            for edge in [Edge::Wrap, Edge::Clamp, Edge::Mirror] {
                 let c = [200, 37, 90, 255];
                 let px = rgba8(w, h, |_, _| c);
                 for usage in [Usage::Color, Usage::Data] {
@@ -401,3 +401,26 @@ fn bad_input_is_a_one_line_error() {
 }
 
 
+
+#[test]
+fn each_axis_filters_across_its_edge_as_the_sampler_reads_it() {
+    // A ramp along x, constant along y: level 1 at the left edge reads past texel 0, where a
+    // repeating texture continues with the right end, a mirrored one with texel 0 again and a
+    // clamped one nothing (renormalised).
+    let (w, h) = (8, 8);
+    let img = image(w, h, |x, _| [x as f32, 0.0, 0.0, 1.0]);
+    let left = |edges: [Edge; 2]| {
+        let s = MipSettings { usage: Usage::Data, filter: Filter::Tent, edges, alpha_cutoff: None };
+        levels_f32(&img, &s)[0].row(0)[0][0]
+    };
+    let (wrap, clamp, mirror) = (left([Edge::Wrap, Edge::Clamp]), left([Edge::Clamp, Edge::Wrap]), left([Edge::Mirror, Edge::Clamp]));
+    // Tent at 2:1 centred on x = 0.5 reads x = -1..2 with weights 1/8, 3/8, 3/8, 1/8.
+    assert!((wrap - (7.0 / 8.0 + 0.0 + 3.0 / 8.0 + 2.0 / 8.0)).abs() < 1e-5, "{wrap}");
+    assert!((mirror - (0.0 + 0.0 + 3.0 / 8.0 + 2.0 / 8.0)).abs() < 1e-5, "{mirror}");
+    assert!((clamp - (3.0 / 7.0 + 2.0 / 7.0)).abs() < 1e-5, "{clamp}");
+    // The other axis is constant whatever its edge.
+    assert!(levels_f32(&img, &settings(Usage::Data, Filter::Tent, Edge::Mirror))[0].row(3)[1][0] > 0.0);
+    assert_eq!(Edge::parse_axes("wrap,mirror"), Ok([Edge::Wrap, Edge::Mirror]));
+    assert_eq!(Edge::parse_axes("clamp"), Ok([Edge::Clamp; 2]));
+    assert!(Edge::parse_axes("wrap,bounce").unwrap_err().contains("unknown edge mode 'bounce'"));
+}
