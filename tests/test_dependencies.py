@@ -7,7 +7,6 @@ source's folder tree unless told to (--allow-external-uris).
 from __future__ import annotations
 
 import json
-import sys
 import textwrap
 from pathlib import Path
 
@@ -16,10 +15,7 @@ import pytest
 
 from asset_pipeline import bake, cache
 from asset_pipeline.pipeline import CookSettings, cook
-from conftest import REPO
-
-sys.path.insert(0, str(REPO / "content"))
-from gltf_writer import GltfWriter, png_bytes  # noqa: E402
+from gltf_scenes import Scene, png_bytes
 
 LEVEL = """
 [level]
@@ -57,31 +53,11 @@ intensity = 50000
 """
 
 
-def cube(w: GltfWriter, material: int) -> int:
-    """A unit cube mesh (24 vertices, hard edges)."""
-    pos, nrm, uv, idx = [], [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            u = np.zeros(3)
-            u[(axis + 1) % 3] = 1
-            v = np.cross(n, u)
-            base = len(pos)
-            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                pos.append(0.5 * (n + a * u + b * v))
-                nrm.append(n)
-                uv.append([(a + 1) / 2, (b + 1) / 2])
-            idx += [base, base + 1, base + 2, base, base + 2, base + 3]
-    f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
-    return w.mesh("cube", f32(pos), f32(nrm), f32(uv), np.asarray(idx, np.uint32), material)
-
-
 def write_prop(path: Path) -> None:
     """A textured cube with its buffer and image in files beside it (statue.bin, statue.image0.png)."""
-    w = GltfWriter("test_dependencies")
+    w = Scene()
     tex = w.texture("marble", np.full((8, 8, 4), (200, 120, 80, 255), np.uint8))
-    w.node("statue", mesh=cube(w, w.material("marble", texture=tex)))
+    w.node("statue", mesh=w.box_mesh("cube", material=w.material("marble", texture=tex)))
     w.write(path, external=True)
 
 

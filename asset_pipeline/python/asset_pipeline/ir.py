@@ -25,9 +25,9 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
     "normal": (np.dtype(np.float32), 3),
     "tangent": (np.dtype(np.float32), 4),
     "uv0": (np.dtype(np.float32), 2),  # glTF TEXCOORD_0
-    # Lightmap UVs (the uv2 stage's), in the mesh's own lightmap space, [0, 1]: of the page for a
-    # mesh placed once (its region is the identity), of its largest block for a mesh placed
-    # several times; a static instance's Node.lightmap region maps them onto its atlas page.
+    # Lightmap UVs (the uv2 stage's), in the mesh's own lightmap space: texels of the page for a
+    # mesh placed once, [0, 1] over its largest block for a mesh placed several times; a static
+    # instance's Node.lightmap region maps them onto its atlas page.
     "uv1": (np.dtype(np.float32), 2),
     "texcoord1": (np.dtype(np.float32), 2),  # glTF TEXCOORD_1 (texture slots with tex_coord 1)
     "color": (np.dtype(np.uint8), 4),

@@ -11,9 +11,9 @@ Every mesh input is a static mesh's LOD 0 in object space; every instance names 
 uniform scale that places it in the world (density is in world metres) and an optional density
 override. Each output Lod is the input with its vertices split at chart seams (every attribute
 carried through xatlas's vertex mapping; triangles keep their order and materials), a ``uv1``
-attribute in [0, 1] of its lightmap space (the page, for a mesh placed once: its region is the
-identity; its largest block, for a mesh placed several times), and ``lightmap_blocks`` per
-triangle. A mesh
+attribute in its own lightmap space (texels of the page for a mesh placed once, whose region
+scales by one over the page size; [0, 1] over its largest block for a mesh placed several
+times), and ``lightmap_blocks`` per triangle. A mesh
 placed several times keeps one set of vertices: each placement maps them onto its own texels
 with a scale and an offset (Unity's lightmapScaleOffset, Godot's per-instance lightmap slice),
 so every placement is baked with its own light.
@@ -35,7 +35,7 @@ How, and why this way:
    land on the nearest whole number instead, so density is off by at most half a texel per chart
    side (level: +0.02% on the demo level).
 3. **The atlas** (:func:`lightmap_uvs`): meshes placed once go onto the pages chart by chart,
-   as charts of their own (their region is the identity); every placement of a mesh placed
+   as charts of their own (their region only scales texels to the page); every placement of a mesh placed
    several times is a rectangle (its block scaled by its density over the mesh's, so at least
    1) packed among those charts without turning; a placement of a mesh of several blocks takes
    that many pages. Every page is then cropped to the largest extent used (a multiple of 4
@@ -512,7 +512,8 @@ def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, instances=None,
     ``instances``, ``meshes`` holds ``(lod, world_scale[, texels_per_metre])``, each placed once.
 
     A mesh placed once has its charts packed with every other such mesh's, straight onto the
-    atlas pages (its region is the identity, its blocks are the pages it lands on): the tightest
+    atlas pages (its uv1 in page texels, its region scaling them to the page, its blocks the pages
+    it lands on): the tightest
     packing. A mesh placed several times has its charts packed into blocks of its own once, at
     the density of its least dense placement, and each placement gets a rectangle of atlas
     texels per block, scaled by its density over that one (>= 1: a placement twice as large
@@ -611,7 +612,7 @@ def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, instances=None,
                 extent = np.maximum(extent, np.floor(t[pk.triangles[e]].reshape(-1, 2).max(axis=0)) + 1)
         for e, m in enumerate(single):
             finish(m, pk.vmapping[e], pk.texel_uv[e], pk.triangles[e], pk.page[e], pk.chart[e])
-            region[placements[m][0]] = {"page": 0, "scale": None, "offset": [0.0, 0.0]}  # uv1 in page texels until the size is known
+            region[placements[m][0]] = {"page": 0, "scale": None, "offset": [0.0, 0.0]}  # uv1 in page texels
         for e, k in enumerate(rects, start=len(single)):
             t = pk.texel_uv[e]
             # The packer places a chart's corner half a texel in (its bilinear border); the block's
@@ -629,15 +630,13 @@ def lightmap_uvs(meshes, settings: Uv2Settings | None = None, *, instances=None,
                     extent = np.maximum(extent, size(k, w, h))
                 n_pages += len(blocks[m].pages)
     page_size = tuple(int(min(settings.max_page_size, 4 * math.ceil(e / 4))) for e in extent)
-    for m in single:  # now in [0, 1] of the page, under the identity region
-        uv1 = out_lods[m].attributes["uv1"].astype(np.float64) / page_size
-        out_lods[m] = dataclasses.replace(out_lods[m], attributes={**out_lods[m].attributes, "uv1": uv1.astype(np.float32)})
     regions = []
     for k, r in enumerate(region):
-        if r["scale"] is None:
-            regions.append({"page": 0, "scale": [1.0, 1.0], "offset": [0.0, 0.0]})
-            continue
-        regions.append({"page": int(r["page"]), "scale": [float(x) for x in np.asarray(r["scale"], np.float64) / page_size],
+        # A mesh placed once keeps its uv1 in page texels and gets scale 1 / page size: the page's
+        # crop (which any mesh's edit can change) then leaves its uv1, and its LOD chain that
+        # carries them, as they were.
+        scale = np.ones(2) if r["scale"] is None else np.asarray(r["scale"], np.float64)
+        regions.append({"page": int(r["page"]), "scale": [float(x) for x in scale / page_size],
                         "offset": [float(x) for x in np.asarray(r["offset"], np.float64) / page_size]})
     layout = ir.LightmapLayout(texels_per_metre=float(settings.texels_per_metre), pages=[page_size] * n_pages, padding=int(settings.padding))
     result = Uv2Result(out_lods, regions, layout, {}, instances)

@@ -22,10 +22,10 @@ pub struct Vertex {
     pub tangent: [f32; 4],
     /// glTF TEXCOORD_0.
     pub uv0: [f32; 2],
-    /// Lightmap UVs in the mesh's own lightmap space, `[0, 1]`: of the page for a mesh placed
-    /// once (its region is the identity), of its largest block for a mesh placed several times;
-    /// a static instance maps them onto its atlas page with its `Node::lightmap` region. Zero
-    /// until the uv2 stage has run.
+    /// Lightmap UVs in the mesh's own lightmap space (the cooker's: texels of the page for a
+    /// mesh placed once, `[0, 1]` over its largest block for one placed several times); a static
+    /// instance maps them onto its atlas page with its `Node::lightmap` region. Zero until the
+    /// uv2 stage has run.
     pub uv1: [f32; 2],
     /// glTF TEXCOORD_1, for texture slots whose `tex_coord` is 1 (zero when absent).
     pub texcoord1: [f32; 2],
