@@ -282,7 +282,8 @@ impl AnimatedScene {
 
     /// Record this frame's skinning: write the joint matrices and morph weights of every
     /// (instance, LOD) that `draws` or `casters` use into frame slot `slot`'s buffers, dispatch
-    /// each once, then one barrier making the outputs readable as vertex attributes.
+    /// each once (the frame graph makes the outputs readable as vertex attributes: the skinning
+    /// pass writes `render::frame::SKINNED`).
     pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, draws: &[Draw], casters: &[Draw]) {
         for a in &mut self.instances {
             a.wanted.fill(false);
@@ -309,14 +310,6 @@ impl AnimatedScene {
                 self.dispatches += 1;
                 self.skinned_vertices += job.output(slot).size / pack::VERTEX_STRIDE as u64;
             }
-        }
-        if self.dispatches > 0 {
-            let barrier = [vk::MemoryBarrier2::default()
-                .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-                .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
-                .dst_stage_mask(vk::PipelineStageFlags2::VERTEX_ATTRIBUTE_INPUT)
-                .dst_access_mask(vk::AccessFlags2::VERTEX_ATTRIBUTE_READ)];
-            unsafe { dev.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&barrier)) };
         }
     }
 

@@ -8,7 +8,9 @@
 //! pre-pass would save nothing, and a dove's shadow on the temple floor is a few pixels.
 
 use crate::cull::{Class, CullCounts, Frustum};
-use crate::gpu::{barrier, full_range, opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers, Transition};
+use crate::gpu::{opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers};
+use crate::render::graph::{ImageRef, Rec};
+use crate::render::mesh_draw::depth_attachment;
 use crate::shaders;
 use crate::sim::boids::{boid_rotation, Flock};
 use crate::tonemap::HDR_FORMAT;
@@ -32,26 +34,6 @@ pub struct BoidsDraw {
     /// Uniform scale of the bird mesh (1: a 0.55 m long dove with a 0.9 m span).
     pub scale: f32,
 }
-
-/// The shading pass's colour writes and depth (tested, or written without a pre-pass) made
-/// visible to this pass, which blends nothing but reads and writes both. Layouts stay.
-const COLOR_WRITE_TO_WRITE: Transition = Transition {
-    old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-    new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-    src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
-    src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
-    dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
-    dst_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
-};
-const DEPTH_TESTS: vk::PipelineStageFlags2 = vk::PipelineStageFlags2::from_raw(vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw());
-const DEPTH_TO_TEST_AND_WRITE: Transition = Transition {
-    old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-    new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-    src_stage: DEPTH_TESTS,
-    src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
-    dst_stage: DEPTH_TESTS,
-    dst_access: vk::AccessFlags2::from_raw(vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw()),
-};
 
 /// The bird, facing +Z with up +Y (what `boid_rotation` expects): a flat-shaded diamond body,
 /// two swept wings raised a little at the tips, and a tail fan. Non-indexed (position, normal).
@@ -153,46 +135,20 @@ impl BoidsDraw {
 
     /// Draw the uploaded visible boids into `hdr` over `depth` (loaded and stored). Call only
     /// with boids in view: lavapipe 22.3 crashes on a depth-writing rendering without draws.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, frame_set: vk::DescriptorSet, hdr: (vk::Image, vk::ImageView), depth: (vk::Image, vk::ImageView), extent: vk::Extent2D) {
-        let d = &gpu.device;
-        let Some(buffer) = self.instances.get(slot) else { return };
-        barrier(gpu, cb, hdr.0, full_range(vk::ImageAspectFlags::COLOR, 1), COLOR_WRITE_TO_WRITE);
-        barrier(gpu, cb, depth.0, full_range(vk::ImageAspectFlags::DEPTH, 1), DEPTH_TO_TEST_AND_WRITE);
-        let area = vk::Rect2D {
-            offset: vk::Offset2D::default(),
-            extent,
-        };
+    pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
+        let (d, cb) = (&rec.gpu.device, rec.cb);
+        let Some(buffer) = self.instances.get(rec.slot) else { return };
         let color_attachment = [vk::RenderingAttachmentInfo::default()
-            .image_view(hdr.1)
+            .image_view(hdr.view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::LOAD)
             .store_op(vk::AttachmentStoreOp::STORE)];
-        let depth_attachment = vk::RenderingAttachmentInfo::default()
-            .image_view(depth.1)
-            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::STORE);
-        let rendering = vk::RenderingInfo::default()
-            .render_area(area)
-            .layer_count(1)
-            .color_attachments(&color_attachment)
-            .depth_attachment(&depth_attachment);
+        let depth_attachment = depth_attachment(depth, None, vk::AttachmentStoreOp::STORE);
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
+        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
         unsafe {
             d.cmd_begin_rendering(cb, &rendering);
-            d.cmd_set_viewport(
-                cb,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: extent.width as f32,
-                    height: extent.height as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cb, 0, &[area]);
+            rec.set_viewport(hdr.extent);
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[self.mesh.buffer, buffer.buffer], &[0, 0]);

@@ -1,8 +1,11 @@
-//! Rendering without a window: an offscreen colour + depth target, one frame at a time, with
+//! Rendering without a window: an offscreen colour target, one frame at a time, with
 //! read-back to RGBA8 and PNG, and per-frame CPU and GPU timings.
 
 use crate::camera::Camera;
-use crate::gpu::{barrier, full_range, Buffer, Gpu, Image, Transition};
+use crate::gpu::{Buffer, Gpu, Image};
+use crate::overlay::Overlay;
+use crate::render::frame::FrameCx;
+use crate::render::graph::{Access, Io, Pass, Rec, ResourceId, OUTPUT};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::scene::GpuScene;
 use anyhow::{Context, Result};
@@ -26,7 +29,6 @@ pub struct FrameTiming {
 pub struct Offscreen {
     pub extent: vk::Extent2D,
     color: Image,
-    depth: Image,
     readback: Buffer,
     pool: vk::CommandPool,
     cb: vk::CommandBuffer,
@@ -46,15 +48,6 @@ impl Offscreen {
             1,
             vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
             vk::ImageAspectFlags::COLOR,
-        )?;
-        let depth = Image::new(
-            gpu,
-            "offscreen depth",
-            gpu.caps.depth_format,
-            extent,
-            1,
-            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-            vk::ImageAspectFlags::DEPTH,
         )?;
         let readback = Buffer::new(gpu, "readback", width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
         let pool = unsafe {
@@ -76,26 +69,17 @@ impl Offscreen {
         } else {
             None
         };
-        Ok(Offscreen { extent, color, depth, readback, pool, cb, fence, timestamps })
+        Ok(Offscreen { extent, color, readback, pool, cb, fence, timestamps })
     }
 
     /// Render one frame and wait for it. With `capture`, the image is copied to the read-back
     /// buffer, ready for `pixels()`.
-    pub fn render(
-        &mut self,
-        gpu: &Gpu,
-        renderer: &mut Renderer,
-        scene: &GpuScene,
-        camera: &Camera,
-        lighting: &Lighting,
-        capture: bool,
-    ) -> Result<FrameTiming> {
-        self.render_with(gpu, renderer, scene, camera, lighting, capture, |_, _, _| Ok(()))
+    pub fn render(&mut self, gpu: &Gpu, renderer: &mut Renderer, scene: &GpuScene, camera: &Camera, lighting: &Lighting, capture: bool) -> Result<FrameTiming> {
+        self.frame(gpu, renderer, scene, camera, lighting, capture, None, |_, _| {})
     }
 
-    /// `render`, with `after` recording more drawing onto the finished image (the overlay)
-    /// before it is captured. It gets the command buffer, the target (colour image in
-    /// COLOR_ATTACHMENT_OPTIMAL, to be left so) and the renderer that just recorded.
+    /// `render` with the overlay drawn over the finished image before it is captured: `build`
+    /// lays it out once the renderer has prepared the frame (its counters are this frame's).
     #[allow(clippy::too_many_arguments)]
     pub fn render_with(
         &mut self,
@@ -105,18 +89,28 @@ impl Offscreen {
         camera: &Camera,
         lighting: &Lighting,
         capture: bool,
-        after: impl FnOnce(vk::CommandBuffer, &FrameTarget, &mut Renderer) -> Result<()>,
+        overlay: &mut Overlay,
+        build: impl FnOnce(&mut Overlay, &mut Renderer),
+    ) -> Result<FrameTiming> {
+        self.frame(gpu, renderer, scene, camera, lighting, capture, Some(overlay), build)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn frame(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        scene: &GpuScene,
+        camera: &Camera,
+        lighting: &Lighting,
+        capture: bool,
+        mut overlay: Option<&mut Overlay>,
+        build: impl FnOnce(&mut Overlay, &mut Renderer),
     ) -> Result<FrameTiming> {
         gpu.alive("a frame")?;
         let d = &gpu.device;
         let start = Instant::now();
-        let target = FrameTarget {
-            color_image: self.color.image,
-            color_view: self.color.view,
-            depth_image: self.depth.image,
-            depth_view: self.depth.view,
-            extent: self.extent,
-        };
+        let target = FrameTarget { color_image: self.color.image, color_view: self.color.view, extent: self.extent };
         unsafe {
             d.reset_command_buffer(self.cb, vk::CommandBufferResetFlags::empty())?;
             d.begin_command_buffer(self.cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
@@ -125,29 +119,23 @@ impl Offscreen {
                 d.cmd_write_timestamp2(self.cb, vk::PipelineStageFlags2::TOP_OF_PIPE, q, 0);
             }
         }
-        renderer.record(gpu, self.cb, 0, scene, camera, lighting, &target)?;
-        after(self.cb, &target, renderer)?;
+        renderer.prepare(gpu, 0, scene, camera, lighting, self.extent)?;
+        if let Some(o) = overlay.as_deref_mut() {
+            build(o, renderer);
+        }
+        let mut readback = Readback { buffer: self.readback.buffer, extent: self.extent };
+        let mut extra: Vec<&mut dyn Pass> = Vec::new();
+        if let Some(o) = overlay {
+            extra.push(o);
+        }
+        let finals: &[(ResourceId, Access)] = if capture {
+            extra.push(&mut readback);
+            &[(READBACK, Access::HostRead)]
+        } else {
+            &[]
+        };
+        renderer.record_prepared(gpu, self.cb, 0, scene, &target, &mut extra, finals)?;
         unsafe {
-            if capture {
-                barrier(gpu, self.cb, self.color.image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_TRANSFER_SRC);
-                let region = vk::BufferImageCopy::default()
-                    .image_subresource(vk::ImageSubresourceLayers {
-                        aspect_mask: vk::ImageAspectFlags::COLOR,
-                        mip_level: 0,
-                        base_array_layer: 0,
-                        layer_count: 1,
-                    })
-                    .image_extent(vk::Extent3D { width: self.extent.width, height: self.extent.height, depth: 1 });
-                d.cmd_copy_image_to_buffer(self.cb, self.color.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, self.readback.buffer, &[region]);
-                let to_host = [vk::BufferMemoryBarrier2::default()
-                    .buffer(self.readback.buffer)
-                    .size(vk::WHOLE_SIZE)
-                    .src_stage_mask(vk::PipelineStageFlags2::COPY)
-                    .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
-                    .dst_stage_mask(vk::PipelineStageFlags2::HOST)
-                    .dst_access_mask(vk::AccessFlags2::HOST_READ)];
-                d.cmd_pipeline_barrier2(self.cb, &vk::DependencyInfo::default().buffer_memory_barriers(&to_host));
-            }
             if let Some(q) = self.timestamps {
                 d.cmd_write_timestamp2(self.cb, vk::PipelineStageFlags2::BOTTOM_OF_PIPE, q, 1);
             }
@@ -189,7 +177,6 @@ impl Offscreen {
             d.destroy_command_pool(self.pool, None);
         }
         self.readback.destroy(gpu);
-        self.depth.destroy(gpu);
         self.color.destroy(gpu);
     }
 }
@@ -204,4 +191,30 @@ pub fn save_rgba_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Resul
         .with_context(|| format!("writing {}", path.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// The read-back buffer, as the frame graph sees it.
+const READBACK: ResourceId = ResourceId("readback");
+
+/// The last pass of a captured frame: the output copied into the read-back buffer.
+struct Readback {
+    buffer: vk::Buffer,
+    extent: vk::Extent2D,
+}
+
+impl Pass for Readback {
+    fn name(&self) -> &'static str {
+        "readback"
+    }
+
+    fn declare(&mut self, _cx: &FrameCx, io: &mut Io) {
+        io.uses(OUTPUT, Access::TransferSrc).uses(READBACK, Access::BufferTransferDst);
+    }
+
+    fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
+        let layers = vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: 0, base_array_layer: 0, layer_count: 1 };
+        let region = vk::BufferImageCopy::default().image_subresource(layers).image_extent(vk::Extent3D { width: self.extent.width, height: self.extent.height, depth: 1 });
+        unsafe { rec.gpu.device.cmd_copy_image_to_buffer(rec.cb, rec.image(OUTPUT).image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, self.buffer, &[region]) };
+        Ok(())
+    }
 }

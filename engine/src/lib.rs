@@ -12,6 +12,7 @@ pub mod headless;
 pub mod lod_select;
 pub mod overlay;
 pub mod particles_pass;
+pub mod render;
 pub mod renderer;
 pub mod samplers;
 pub mod scene;

@@ -13,7 +13,9 @@
 //!   comes out brighter than over a surface; accepted for now (it would need the depth as a
 //!   texture to tell the two apart).
 
-use crate::gpu::{barrier, full_range, Gpu, GraphicsPipeline, SlotBuffers, Transition};
+use crate::gpu::{Gpu, GraphicsPipeline, SlotBuffers};
+use crate::render::graph::{ImageRef, Rec};
+use crate::render::mesh_draw::depth_attachment;
 use crate::shaders;
 use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
 use crate::tonemap::HDR_FORMAT;
@@ -23,7 +25,7 @@ use glam::{Vec3, Vec4};
 
 /// Mirrors the push-constant block of shaders/particle.vert.
 #[repr(C)]
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ParticlePush {
     right: Vec4,
     up: Vec4,
@@ -49,26 +51,6 @@ pub struct ParticlePass {
     scratch: BillboardScratch,
     one_emitter: Vec<Billboard>,
 }
-
-/// The shading pass's colour writes and depth tests, made visible to this pass's blending
-/// (a read-modify-write of the same attachment) and depth tests. Layouts stay as they are.
-const COLOR_WRITE_TO_BLEND: Transition = Transition {
-    old: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-    new: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-    src_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
-    src_access: vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
-    dst_stage: vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
-    dst_access: vk::AccessFlags2::from_raw(vk::AccessFlags2::COLOR_ATTACHMENT_READ.as_raw() | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE.as_raw()),
-};
-const DEPTH_TESTS: vk::PipelineStageFlags2 = vk::PipelineStageFlags2::from_raw(vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw() | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw());
-const DEPTH_TO_TEST: Transition = Transition {
-    old: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-    new: vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
-    src_stage: DEPTH_TESTS,
-    src_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
-    dst_stage: DEPTH_TESTS,
-    dst_access: vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ,
-};
 
 impl ParticlePass {
     /// `frame_layout` is the renderer's set 0 (the particle shader reads view_proj and exposure).
@@ -149,67 +131,26 @@ impl ParticlePass {
         self.buffers.write(gpu, slot, bytes)
     }
 
-    /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass stored.
-    /// Call only with a non-empty queue uploaded to `slot` (an empty pass is skipped by the caller).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(
-        &self,
-        gpu: &Gpu,
-        cb: vk::CommandBuffer,
-        slot: usize,
-        frame_set: vk::DescriptorSet,
-        hdr: (vk::Image, vk::ImageView),
-        depth: (vk::Image, vk::ImageView),
-        extent: vk::Extent2D,
-        camera_right: Vec3,
-        camera_up: Vec3,
-    ) {
-        let d = &gpu.device;
-        let Some(buffer) = self.buffers.get(slot) else { return };
-        barrier(gpu, cb, hdr.0, full_range(vk::ImageAspectFlags::COLOR, 1), COLOR_WRITE_TO_BLEND);
-        barrier(gpu, cb, depth.0, full_range(vk::ImageAspectFlags::DEPTH, 1), DEPTH_TO_TEST);
-        let area = vk::Rect2D {
-            offset: vk::Offset2D::default(),
-            extent,
-        };
+    /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass left.
+    /// Call only with a non-empty queue uploaded to the slot (an empty pass is skipped).
+    pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef, camera_right: Vec3, camera_up: Vec3) {
+        let (d, cb) = (&rec.gpu.device, rec.cb);
+        let Some(buffer) = self.buffers.get(rec.slot) else { return };
         let color_attachment = [vk::RenderingAttachmentInfo::default()
-            .image_view(hdr.1)
+            .image_view(hdr.view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::LOAD)
             .store_op(vk::AttachmentStoreOp::STORE)];
-        let depth_attachment = vk::RenderingAttachmentInfo::default()
-            .image_view(depth.1)
-            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::DONT_CARE);
-        let rendering = vk::RenderingInfo::default()
-            .render_area(area)
-            .layer_count(1)
-            .color_attachments(&color_attachment)
-            .depth_attachment(&depth_attachment);
-        let push = ParticlePush {
-            right: camera_right.extend(0.0),
-            up: camera_up.extend(0.0),
-        };
-        // SAFETY: ParticlePush is repr(C) plain floats.
-        let push_bytes = unsafe { std::slice::from_raw_parts(&push as *const _ as *const u8, std::mem::size_of::<ParticlePush>()) };
+        // Tested, not written: kept as it is (store NONE).
+        let depth_attachment = depth_attachment(depth, None, vk::AttachmentStoreOp::NONE);
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
+        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
+        let push = ParticlePush { right: camera_right.extend(0.0), up: camera_up.extend(0.0) };
         unsafe {
             d.cmd_begin_rendering(cb, &rendering);
-            d.cmd_set_viewport(
-                cb,
-                0,
-                &[vk::Viewport {
-                    x: 0.0,
-                    y: 0.0,
-                    width: extent.width as f32,
-                    height: extent.height as f32,
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }],
-            );
-            d.cmd_set_scissor(cb, 0, &[area]);
+            rec.set_viewport(hdr.extent);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
-            d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::VERTEX, 0, push_bytes);
+            d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::VERTEX, 0, bytemuck::bytes_of(&push));
             d.cmd_bind_vertex_buffers(cb, 0, &[buffer.buffer], &[0]);
             let mut bound = vk::Pipeline::null();
             for b in &self.batches {

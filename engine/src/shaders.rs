@@ -14,6 +14,7 @@ pub const PARTICLE_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/parti
 pub const BOID_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/boid.vert.spv"));
 pub const BOID_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/boid.frag.spv"));
 pub const SKIN_COMP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/skin.comp.spv"));
+pub const DEPTH_VIEW_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/depth_view.frag.spv"));
 
 pub fn module(device: &ash::Device, spv: &[u8]) -> Result<vk::ShaderModule> {
     let words = ash::util::read_spv(&mut std::io::Cursor::new(spv))?;

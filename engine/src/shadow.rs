@@ -2,7 +2,7 @@
 //! lightmaps (shadows included); dynamic objects need to know whether the sun reaches them at
 //! their current place, which the probes' sun visibility only approximates on a coarse grid.
 //!
-//! One depth-only pass from the sun: an orthographic projection fitted to the bounding sphere of
+//! Drawn by the shadow passes (`render/passes/shadow_*.rs`). One depth-only rendering from the sun: an orthographic projection fitted to the bounding sphere of
 //! the scene (a sphere does not change size as the sun turns), with the window snapped to whole
 //! texels in a light basis that depends on the sun direction only, so that a moving object does
 //! not make the shadow edges of everything else crawl. It draws every opaque instance, static and
@@ -14,7 +14,8 @@
 //! on top. It is drawn again only when something it depends on changes: the scene, the map's
 //! window or size, or a static caster's transform or LOD (`prepare` hashes them all).
 
-use crate::gpu::{barrier, full_range, Buffer, Gpu, Image, Transition};
+use crate::gpu::{Buffer, Gpu, Image};
+use crate::render::graph::ImageRef;
 use crate::scene::GpuScene;
 use crate::visibility::Draw;
 use anyhow::Result;
@@ -182,6 +183,11 @@ impl SunShadow {
         })
     }
 
+    /// The depth format maps are made in on this device.
+    pub fn format_for(gpu: &Gpu) -> Result<vk::Format> {
+        pick_format(gpu).map(|(format, _)| format)
+    }
+
     pub fn view(&self) -> vk::ImageView {
         self.image.view
     }
@@ -244,39 +250,14 @@ impl SunShadow {
         }
     }
 
-    /// Record this frame's map (after `prepare`), leaving it readable by the shading pass.
-    /// `draw(view, load_op, casters)` records one depth-only rendering of `casters` into `view`
-    /// (an image of the map's size), cleared or on top of what is there.
-    pub fn record(&self, gpu: &Gpu, cb: vk::CommandBuffer, mut draw: impl FnMut(vk::ImageView, vk::AttachmentLoadOp, &[Draw])) {
-        let range = full_range(vk::ImageAspectFlags::DEPTH, 1);
-        let (map, cache) = (&self.image, &self.static_image);
-        if self.static_casters.is_empty() {
-            barrier(gpu, cb, map.image, range, Transition::SAMPLED_TO_DEPTH_ATTACHMENT_DISCARD);
-            draw(map.view, vk::AttachmentLoadOp::CLEAR, &self.casters);
-            barrier(gpu, cb, map.image, range, Transition::DEPTH_ATTACHMENT_TO_SAMPLED);
-            return;
-        }
-        if self.redraw_static {
-            barrier(gpu, cb, cache.image, range, Transition::TRANSFER_SRC_TO_DEPTH_ATTACHMENT_DISCARD);
-            draw(cache.view, vk::AttachmentLoadOp::CLEAR, &self.static_casters);
-            barrier(gpu, cb, cache.image, range, Transition::DEPTH_ATTACHMENT_TO_TRANSFER_SRC);
-        }
-        barrier(gpu, cb, map.image, range, Transition::SAMPLED_TO_TRANSFER_DST_DISCARD);
-        let layers = vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::DEPTH, mip_level: 0, base_array_layer: 0, layer_count: 1 };
-        let region = vk::ImageCopy {
-            src_subresource: layers,
-            dst_subresource: layers,
-            extent: vk::Extent3D { width: self.size, height: self.size, depth: 1 },
-            ..Default::default()
-        };
-        unsafe { gpu.device.cmd_copy_image(cb, cache.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, map.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &[region]) };
-        if self.dynamic_casters.is_empty() {
-            barrier(gpu, cb, map.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
-        } else {
-            barrier(gpu, cb, map.image, range, Transition::TRANSFER_DST_TO_DEPTH_ATTACHMENT);
-            draw(map.view, vk::AttachmentLoadOp::LOAD, &self.dynamic_casters);
-            barrier(gpu, cb, map.image, range, Transition::DEPTH_ATTACHMENT_TO_SAMPLED);
-        }
+    /// The map, as the frame graph imports it (the shadow passes draw it, the shading pass samples it).
+    pub fn map_ref(&self) -> ImageRef {
+        image_ref(&self.image)
+    }
+
+    /// The static casters' cached depth, as the frame graph imports it.
+    pub fn cache_ref(&self) -> ImageRef {
+        image_ref(&self.static_image)
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
@@ -309,10 +290,10 @@ fn pick_format(gpu: &Gpu) -> Result<(vk::Format, bool)> {
     anyhow::bail!("the device has no depth format that can be sampled (for the shadow map)")
 }
 
-/// The map image, left in SHADER_READ_ONLY_OPTIMAL: the shading pass's descriptor points at it
-/// in every frame, also in frames that do not draw it (the shader then does not read it).
+/// The map image. The shading pass's descriptor points at it in every frame, also in frames that
+/// do not draw it (the shader then does not read it): the graph keeps it readable.
 fn create_map(gpu: &Gpu, format: vk::Format, size: u32) -> Result<Image> {
-    let image = Image::new(
+    Image::new(
         gpu,
         "sun shadow map",
         format,
@@ -320,13 +301,14 @@ fn create_map(gpu: &Gpu, format: vk::Format, size: u32) -> Result<Image> {
         1,
         vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
         vk::ImageAspectFlags::DEPTH,
-    )?;
-    gpu.one_shot(|cb| barrier(gpu, cb, image.image, full_range(vk::ImageAspectFlags::DEPTH, 1), Transition::UNDEFINED_TO_SAMPLED))?;
-    Ok(image)
+    )
 }
 
-/// The static casters' map: rendered, then copied from; never sampled (its layout is set by the
-/// first `record`).
+fn image_ref(i: &Image) -> ImageRef {
+    ImageRef { image: i.image, view: i.view, format: i.format, extent: i.extent }
+}
+
+/// The static casters' map: rendered, then copied from; never sampled.
 fn create_static_map(gpu: &Gpu, format: vk::Format, size: u32) -> Result<Image> {
     Image::new(
         gpu,

@@ -3,7 +3,8 @@
 //! (egui-winit feeds it input; F1 shows or hides it).
 
 use crate::camera::Camera;
-use crate::gpu::{barrier, full_range, Gpu, GpuOptions, Image, Transition};
+use crate::gpu::{full_range, Gpu, GpuOptions};
+use crate::render::graph::{Access, Pass, OUTPUT};
 use crate::overlay::{FrameStats, Overlay, SimPanel};
 use crate::renderer::{FrameTarget, Lighting, Renderer};
 use crate::sim::World;
@@ -115,6 +116,9 @@ struct State {
     /// The level's particles and flocks, stepped on the fixed clock by each frame's duration.
     world: World,
     presented: u64,
+    /// The last switch (`toggle`, a scene change) and the first frame recorded with it, until the
+    /// frames in flight after it have been presented (then it is logged as shown).
+    announcing: Option<(String, u64)>,
     needs_resize: bool,
     /// Frames skipped because no swapchain image came back in time (reported once).
     skipped_acquires: u64,
@@ -159,6 +163,7 @@ impl ApplicationHandler for App<'_> {
                         if !event.repeat {
                             if let Some(what) = s.toggle(code) {
                                 println!("window: {what}");
+                                s.announce(what);
                             }
                         }
                         if code == KeyCode::Tab && !event.repeat && self.packs.len() > 1 {
@@ -168,7 +173,9 @@ impl ApplicationHandler for App<'_> {
                                 el.exit();
                                 return;
                             }
-                            println!("window: scene {} of {}", self.current + 1, self.packs.len());
+                            let what = format!("scene {} of {}", self.current + 1, self.packs.len());
+                            println!("window: {what}");
+                            s.announce(what);
                         }
                         if !consumed {
                             s.keys.insert(code);
@@ -204,6 +211,12 @@ impl ApplicationHandler for App<'_> {
                 }
                 if s.presented == 10 {
                     println!("window: presented 10 frames");
+                }
+                // A switch is on screen once the frame after the first one recorded with it has
+                // been presented too (frames in flight are presented in order): scripts wait for
+                // this line, not for a time, before they look at the screen.
+                if let Some((what, frame)) = s.announcing.take_if(|(_, f)| s.presented >= *f + FRAMES_IN_FLIGHT as u64) {
+                    println!("window: {what} shown (frame {frame})");
                 }
                 if self.opts.max_frames.is_some_and(|m| s.presented >= m) {
                     el.exit();
@@ -304,6 +317,7 @@ impl State {
             last_frame: Instant::now(),
             world,
             presented: 0,
+            announcing: None,
             needs_resize: false,
             skipped_acquires: 0,
         })
@@ -327,6 +341,12 @@ impl State {
             }
             None => self.camera.translate_local(local * speed * dt),
         }
+    }
+
+    /// Log `what` as shown once it has reached the screen (see `announcing`): the next frame
+    /// recorded is the first with it.
+    fn announce(&mut self, what: String) {
+        self.announcing = Some((what, self.presented));
     }
 
     /// Flip the switch on function key `code`; what it is now, for the log.
@@ -445,8 +465,6 @@ impl State {
         let target = FrameTarget {
             color_image: self.swapchain.images[i],
             color_view: self.swapchain.views[i],
-            depth_image: self.swapchain.depth.image,
-            depth_view: self.swapchain.depth.view,
             extent: self.swapchain.extent,
         };
         unsafe {
@@ -455,16 +473,17 @@ impl State {
             d.begin_command_buffer(cb, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
         }
         sim_level::prepare_frame(&self.world, &mut self.renderer, &self.camera);
-        self.renderer.record(&self.gpu, cb, slot, &self.scene, &self.camera, &self.lighting, &target)?;
+        self.renderer.prepare(&self.gpu, slot, &self.scene, &self.camera, &self.lighting, target.extent)?;
         // Taken every frame, shown or not, so input does not pile up while the overlay is hidden.
         let input = self.egui.take_egui_input(&self.window);
+        let mut extra: Vec<&mut dyn Pass> = Vec::new();
         if let Some(o) = self.overlay.as_mut().filter(|o| o.visible) {
             // Slider edits land in the world now and take effect from its next step.
             let platform = o.build(input, &mut self.renderer, &mut [&mut SimPanel::new(&mut self.world)]);
             self.egui.handle_platform_output(&self.window, platform);
-            o.record(&self.gpu, cb, &target)?;
+            extra.push(o);
         }
-        barrier(&self.gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_PRESENT);
+        self.renderer.record_prepared(&self.gpu, cb, slot, &self.scene, &target, &mut extra, &[(OUTPUT, Access::Present)])?;
         let rendered = self.swapchain.rendered[i];
         unsafe {
             d.end_command_buffer(cb)?;
@@ -556,7 +575,6 @@ struct Swapchain {
     /// One "rendering finished" semaphore per swapchain image: presentation holds it until that
     /// image is acquired again, so it cannot be shared across frames in flight.
     rendered: Vec<vk::Semaphore>,
-    depth: Image,
 }
 
 impl Swapchain {
@@ -588,7 +606,6 @@ impl Swapchain {
             images: vec![],
             views: vec![],
             rendered: vec![],
-            depth: Image::new(gpu, "placeholder depth", gpu.caps.depth_format, vk::Extent2D { width: 1, height: 1 }, 1, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?,
         };
         sc.build(gpu, size)?;
         Ok(sc)
@@ -646,8 +663,6 @@ impl Swapchain {
             self.views.push(view);
             self.rendered.push(unsafe { gpu.device.create_semaphore(&vk::SemaphoreCreateInfo::default(), None)? });
         }
-        self.depth.destroy(gpu);
-        self.depth = Image::new(gpu, "window depth", gpu.caps.depth_format, self.extent, 1, vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?;
         Ok(())
     }
 
@@ -670,7 +685,6 @@ impl Swapchain {
 
     fn destroy(&mut self, gpu: &Gpu) {
         self.destroy_images(gpu);
-        self.depth.destroy(gpu);
         unsafe {
             self.loader.destroy_swapchain(self.swapchain, None);
             self.surface_loader.destroy_surface(self.surface, None);

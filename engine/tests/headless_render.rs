@@ -400,7 +400,7 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
     let mut run = |prepass: bool| {
         rig.renderer.prepass = prepass;
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
-        (rig.target.pixels().to_vec(), rig.renderer.fragment_count(0).expect("lavapipe can count"), rig.renderer.pass_stats(&gpu, 0))
+        (rig.target.pixels().to_vec(), rig.renderer.fragment_count(0).expect("lavapipe can count"), rig.renderer.profile(&gpu, 0))
     };
     let (without, f0, s0) = run(false);
     let (with, f1, s1) = run(true);
@@ -409,8 +409,9 @@ fn depth_prepass_shades_each_pixel_once_and_changes_nothing() {
     assert!(with == without, "the pre-pass changed the image");
     // The pre-pass costs a second transform of every vertex (T4.5): 8 layers x 3 vertices.
     if let (Some(s0), Some(s1)) = (s0, s1) {
-        assert_eq!((s0.prepass, s0.shading.vertex), (None, 24));
-        assert_eq!((s1.prepass.map(|p| p.vertex), s1.shading.vertex), (Some(24), 24));
+        let vertices = |p: &engine::render::graph::FrameProfile, name| p.invocations(name).map(|i| i.vertex);
+        assert_eq!((vertices(&s0, "prepass"), vertices(&s0, "shading")), (None, Some(24)));
+        assert_eq!((vertices(&s1, "prepass"), vertices(&s1, "shading")), (Some(24), Some(24)));
     }
     rig.destroy(&gpu);
     assert_clean(&gpu);
@@ -835,7 +836,7 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
         let p = pixel(rig.target.pixels(), 64, 32, 32);
         let casters = rig.renderer.shadow_casters;
-        eprintln!("cube at x = {cube_x}, {map_size}^2 map: {:?}", rig.renderer.pass_times_ms(&gpu, 0));
+        eprintln!("cube at x = {cube_x}, {map_size}^2 map: {:?}", rig.renderer.profile(&gpu, 0));
         // The face's corners are 0.5 m from its centre: a 3x3 block of pixels around the centre
         // must agree (no acne speckles on a face that is fully lit or fully shadowed).
         let block: Vec<[u8; 4]> = (28..=36).step_by(4).flat_map(|y| (28..=36).step_by(4).map(move |x| (x, y))).map(|(x, y)| pixel(rig.target.pixels(), 64, x, y)).collect();
@@ -994,8 +995,8 @@ fn one_renderer_draws_targets_of_different_sizes() {
     let mut small = Offscreen::new(&gpu, 40, 24).unwrap();
     small.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
     assert_eq!(pixel(small.pixels(), 40, 20, 12), big);
-    let times = rig.renderer.pass_times_ms(&gpu, 0).expect("lavapipe has timestamps");
-    assert!(times.shading_ms > 0.0 && times.tonemap_ms > 0.0, "{times:?}");
+    let times = rig.renderer.profile(&gpu, 0).expect("lavapipe has timestamps");
+    assert!(times.ms("shading") > 0.0 && times.ms("tonemap") > 0.0, "{times:?}");
     small.destroy(&gpu);
     rig.destroy(&gpu);
     assert_clean(&gpu);
@@ -1053,9 +1054,8 @@ fn render_with_overlay(gpu: &Gpu, rig: &mut Rig, overlay: &mut Overlay, camera: 
     let (w, h) = (rig.target.extent.width, rig.target.extent.height);
     let t = rig
         .target
-        .render_with(gpu, &mut rig.renderer, &rig.scene, camera, &Lighting::default(), true, |cb, target, renderer| {
+        .render_with(gpu, &mut rig.renderer, &rig.scene, camera, &Lighting::default(), true, overlay, |overlay, renderer| {
             overlay.build(headless_input(w, h, frame as f64 / 60.0, events), renderer, &mut []);
-            overlay.record(gpu, cb, target)
         })
         .unwrap();
     overlay.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(gpu, &rig.renderer, 0));
@@ -1142,7 +1142,7 @@ fn the_overlays_prepass_switch_changes_the_shaded_fragment_count() {
         assert_eq!(rig.renderer.prepass, expect_prepass);
         let shaded = run(&mut overlay, &mut rig, vec![egui::Event::PointerGone]);
         assert_eq!(shaded, if expect_prepass { pixels } else { 8 * pixels });
-        assert_eq!(overlay.last.pass_stats.map(|s| s.prepass.is_some()), Some(expect_prepass));
+        assert_eq!(overlay.last.passes.as_ref().map(|p| p.invocations("prepass").is_some()), Some(expect_prepass));
     }
     overlay.destroy(&gpu);
     rig.destroy(&gpu);

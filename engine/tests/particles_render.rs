@@ -118,10 +118,10 @@ fn alpha_and_additive_blending_give_the_closed_form_pixels() {
     );
     assert_near(two, [0, 1, 2].map(|i| c2[i] * a2 + (c[i] * a + bg[i] * (1.0 - a)) * (1.0 - a2)), "two alpha layers");
     assert_eq!(rig.renderer.visibility.counts.particles, 2);
-    let t = rig.renderer.pass_times_ms(&gpu, 0);
+    let t = rig.renderer.profile(&gpu, 0);
     println!("pass times with 2 particles: {t:?}");
     if let Some(t) = t {
-        assert!(t.particles_ms > 0.0, "the particle pass ran between its timestamps: {t:?}");
+        assert!(t.ms("particles") > 0.0, "the particle pass ran between its timestamps: {t:?}");
     }
     rig.destroy(&gpu);
     assert_clean(&gpu);

@@ -155,12 +155,11 @@ fn the_overlay_renders_the_open_simulation_panel_with_validation_clean() {
         engine::sim_level::prepare_frame(&w, &mut renderer, &camera);
         let mut drawn = 0;
         let t = target
-            .render_with(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true, |cb, frame, renderer| {
+            .render_with(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true, &mut overlay, |overlay, renderer| {
                 let mut panel = SimPanel::new(&mut w);
                 panel.open = true;
                 overlay.build(headless_input(width, height, f as f64 / 60.0, vec![]), renderer, &mut [&mut panel]);
                 drawn = panel.controls.len();
-                overlay.record(&gpu, cb, frame)
             })
             .unwrap();
         overlay.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(&gpu, &renderer, 0));

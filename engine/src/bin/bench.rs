@@ -143,8 +143,8 @@ fn run(args: &Args) -> anyhow::Result<usize> {
             renderer.prepass = prepass;
             let t = target.render(&gpu, &mut renderer, &scene, &camera, &lighting, false)?;
             gpu_ms[k].push(t.gpu_ms.unwrap_or(t.frame_ms));
-            if let (0, Some(p)) = (k, renderer.pass_times_ms(&gpu, 0)) {
-                for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.tonemap_ms]) {
+            if let (0, Some(p)) = (k, renderer.profile(&gpu, 0)) {
+                for (v, ms) in pass_ms.iter_mut().zip([p.ms_prefixed("shadow"), p.ms("prepass"), p.ms("shading"), p.ms("tonemap")]) {
                     v.push(ms);
                 }
             }
@@ -502,8 +502,8 @@ mod skinned_bench {
         for _ in 0..args.frames {
             renderer.animate(&mut scene, 1.0 / 60.0);
             target.render(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), false)?;
-            if let Some(t) = renderer.pass_times_ms(&gpu, 0) {
-                gpu_ms.push(t.skinning_ms);
+            if let Some(t) = renderer.profile(&gpu, 0) {
+                gpu_ms.push(t.ms("skinning"));
             }
             cpu_ms.push(renderer.animation.as_ref().unwrap().cpu_ms);
         }

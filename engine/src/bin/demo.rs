@@ -326,11 +326,10 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         engine::sim_level::prepare_frame(&world, &mut renderer, &camera);
         let capture = last || every || screen.is_some();
         let t = match overlay.as_mut() {
-            Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, |cb, frame, renderer| {
+            Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, o, |o, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
                 let mut sim = overlay::SimPanel::new(&mut world);
                 o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
-                o.record(&gpu, cb, frame)
             })?,
             None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
         };
@@ -339,11 +338,11 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         }
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
-        if let Some(p) = renderer.pass_times_ms(&gpu, 0) {
-            for (v, ms) in pass_ms.iter_mut().zip([p.shadow_ms, p.prepass_ms, p.shading_ms, p.particles_ms, p.tonemap_ms]) {
+        if let Some(p) = renderer.profile(&gpu, 0) {
+            for (v, ms) in pass_ms.iter_mut().zip([p.ms_prefixed("shadow"), p.ms("prepass"), p.ms("shading"), p.ms("particles"), p.ms("tonemap")]) {
                 v.push(ms);
             }
-            skin_ms.push(p.skinning_ms);
+            skin_ms.push(p.ms("skinning"));
         }
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));

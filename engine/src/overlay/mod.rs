@@ -1,8 +1,8 @@
-//! The debug overlay: egui drawn by egui-ash-renderer onto the final display image, after
-//! `Renderer::record` and before present or read-back. It shows the frame-time graph and the
+//! The debug overlay: egui drawn by egui-ash-renderer onto the final display image, as the
+//! frame graph's last drawing pass (before present or read-back). It shows the frame-time graph and the
 //! renderer's counters and flips its switches (`panels`); callers add their own panels per frame.
 //!
-//! Per frame: `build` (egui layout for this frame's input), `record` (texture uploads, then one
+//! Per frame: `build` (egui layout for this frame's input), the pass (texture uploads, then one
 //! dynamic-rendering pass that loads the image and draws the UI over it), and once the frame's
 //! fence has signalled, `push_frame` with what the GPU measured.
 
@@ -11,22 +11,23 @@ pub mod panels;
 pub mod sim_panel;
 
 pub use history::{FrameHistory, Ring, HISTORY_FRAMES};
-pub use panels::{ControlRects, Panel, RendererPanel};
+pub use panels::{ControlRects, Panel, PassesPanel, RendererPanel};
 pub use sim_panel::SimPanel;
 
-use crate::gpu::{barrier, full_range, Gpu, Transition};
-use crate::renderer::{FrameTarget, PassStats, PassTimes, Renderer};
+use crate::gpu::Gpu;
+use crate::render::frame::FrameCx;
+use crate::render::graph::{Access, FrameProfile, Io, Pass, Rec, OUTPUT};
+use crate::renderer::Renderer;
 use anyhow::{anyhow, Result};
 use ash::vk;
 use egui_ash_renderer::allocator::GpuAllocator;
 use egui_ash_renderer::{DynamicRendering, Options, RenderMode};
 
 /// What the GPU measured for one finished frame (read after its fence).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameStats {
-    /// GPU ms of each of the renderer's passes.
-    pub pass_ms: Option<PassTimes>,
-    pub pass_stats: Option<PassStats>,
+    /// GPU ms and shader invocations of each pass the frame ran.
+    pub passes: Option<FrameProfile>,
     /// Fragments the shading pass shaded, when `Renderer::count_fragments` was on.
     pub fragments_shaded: Option<u32>,
 }
@@ -35,15 +36,14 @@ impl FrameStats {
     /// Read what the frame last recorded in `slot` measured; its fence must have signalled.
     pub fn read(gpu: &Gpu, renderer: &Renderer, slot: usize) -> FrameStats {
         FrameStats {
-            pass_ms: renderer.pass_times_ms(gpu, slot),
-            pass_stats: renderer.pass_stats(gpu, slot),
+            passes: renderer.profile(gpu, slot),
             fragments_shaded: renderer.fragment_count(slot),
         }
     }
 
     /// GPU time of the renderer's passes, when timestamps exist.
     pub fn gpu_ms(&self) -> Option<f64> {
-        self.pass_ms.map(|t| t.total())
+        self.passes.as_ref().filter(|p| p.passes.iter().any(|p| p.gpu_ms.is_some())).map(FrameProfile::total_ms)
     }
 }
 
@@ -158,6 +158,7 @@ impl Overlay {
                     controls: &mut *controls,
                 };
                 show_panel(ui, &mut own, true);
+                show_panel(ui, &mut PassesPanel { renderer: &*renderer, last }, false);
                 for panel in extra.iter_mut() {
                     show_panel(ui, &mut **panel, false);
                 }
@@ -177,43 +178,22 @@ impl Overlay {
         output.platform_output
     }
 
-    /// Record the built UI over `target`'s colour image, which `Renderer::record` left in
-    /// COLOR_ATTACHMENT_OPTIMAL (and this leaves it there). Texture changes are uploaded first,
-    /// with the device idle: egui-ash-renderer writes them without waiting for frames in flight.
-    pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, target: &FrameTarget) -> Result<()> {
-        let Some(mut p) = self.prepared.take() else { return Ok(()) };
-        if !p.textures.set.is_empty() || !self.pending_free.is_empty() {
+    /// Upload texture changes, with the device idle: egui-ash-renderer writes them without
+    /// waiting for frames in flight.
+    fn upload_textures(&mut self, gpu: &Gpu, textures: &mut egui::TexturesDelta) -> Result<()> {
+        if !textures.set.is_empty() || !self.pending_free.is_empty() {
             gpu.wait_idle();
             for id in self.pending_free.drain(..) {
                 self.painter.free_texture(id).map_err(|e| anyhow!("overlay: freeing a texture: {e}"))?;
             }
-            for (id, deltas) in p.textures.set.drain() {
+            for (id, deltas) in textures.set.drain() {
                 for delta in deltas {
-                    self.painter
-                        .set_texture(gpu.queue, self.upload_pool, id, &delta)
-                        .map_err(|e| anyhow!("overlay: uploading a texture: {e}"))?;
+                    self.painter.set_texture(gpu.queue, self.upload_pool, id, &delta).map_err(|e| anyhow!("overlay: uploading a texture: {e}"))?;
                 }
             }
         }
-        self.pending_free.extend(p.textures.free.drain());
-        if p.primitives.is_empty() {
-            return Ok(());
-        }
-        let d = &gpu.device;
-        barrier(gpu, cb, target.color_image, full_range(vk::ImageAspectFlags::COLOR, 1), Transition::COLOR_ATTACHMENT_TO_OVERLAY);
-        let color = [vk::RenderingAttachmentInfo::default()
-            .image_view(target.color_view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::STORE)];
-        let area = vk::Rect2D {
-            offset: vk::Offset2D::default(),
-            extent: target.extent,
-        };
-        unsafe { d.cmd_begin_rendering(cb, &vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color)) };
-        let drawn = self.painter.cmd_draw(cb, target.extent, p.pixels_per_point, &p.primitives);
-        unsafe { d.cmd_end_rendering(cb) };
-        drawn.map_err(|e| anyhow!("overlay: recording the UI: {e}"))
+        self.pending_free.extend(textures.free.drain());
+        Ok(())
     }
 
     /// The overlay window's rectangle in pixels (left, top, right, bottom; may reach past the
@@ -266,4 +246,42 @@ fn overlay_visuals() -> egui::Visuals {
     // An unchecked box must stand out from the fill.
     v.widgets.inactive.bg_stroke = egui::Stroke::new(1.0, egui::Color32::from_gray(150));
     v
+}
+
+/// The overlay is the frame's last drawing pass (the caller adds it to `Renderer::record_prepared`):
+/// it loads the output and draws the built UI over it.
+impl Pass for Overlay {
+    fn name(&self) -> &'static str {
+        "overlay"
+    }
+
+    fn declare(&mut self, _cx: &FrameCx, io: &mut Io) {
+        if let Some(p) = &self.prepared {
+            // Texture uploads happen even in a frame with nothing to draw.
+            io.side_effects();
+            if !p.primitives.is_empty() {
+                io.uses(OUTPUT, Access::ColorBlend);
+            }
+        }
+    }
+
+    fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
+        let Some(mut p) = self.prepared.take() else { return Ok(()) };
+        self.upload_textures(rec.gpu, &mut p.textures)?;
+        if p.primitives.is_empty() {
+            return Ok(());
+        }
+        let (d, cb) = (&rec.gpu.device, rec.cb);
+        let target = rec.image(OUTPUT);
+        let color = [vk::RenderingAttachmentInfo::default()
+            .image_view(target.view)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::LOAD)
+            .store_op(vk::AttachmentStoreOp::STORE)];
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
+        unsafe { d.cmd_begin_rendering(cb, &vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color)) };
+        let drawn = self.painter.cmd_draw(cb, target.extent, p.pixels_per_point, &p.primitives);
+        unsafe { d.cmd_end_rendering(cb) };
+        drawn.map_err(|e| anyhow!("overlay: recording the UI: {e}"))
+    }
 }

@@ -4,7 +4,7 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
-use crate::renderer::{Renderer, ShaderInvocations};
+use crate::renderer::Renderer;
 use crate::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 
@@ -58,6 +58,7 @@ impl RendererPanel<'_> {
         control("LOD selection", ui.checkbox(&mut r.visibility.lod_selection, "LOD selection (off: LOD 0 everywhere)"));
         control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
+        control("depth view", ui.checkbox(&mut r.depth_view, "depth view (the depth buffer instead of the frame)"));
         let policy = &mut r.visibility.policy;
         control(
             "LOD threshold",
@@ -129,15 +130,40 @@ fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
             .map(|(i, n)| if i + 1 == LOD_BUCKETS { format!("{i}+:{n}") } else { format!("{i}:{n}") })
             .collect();
         row("LOD histogram", buckets.join(" "));
-        // A fixed set of rows, so the layout (and where the switches are) does not move when
-        // the first measurements arrive.
-        let na = || "n/a".to_string();
-        row("GPU ms pre-pass / shading", last.pass_ms.map_or_else(na, |t| format!("{:.3} / {:.3}", t.prepass_ms, t.shading_ms)));
-        row("GPU ms shadow / tone map", last.pass_ms.map_or_else(na, |t| format!("{:.3} / {:.3}", t.shadow_ms, t.tonemap_ms)));
-        let invocations = |s: ShaderInvocations| format!("{} / {}", s.vertex, s.fragment);
-        let prepass = last.pass_stats.map_or_else(na, |s| s.prepass.map_or_else(|| "off".to_string(), invocations));
-        row("pre-pass VS / FS invocations", prepass);
-        row("shading VS / FS invocations", last.pass_stats.map_or_else(na, |s| invocations(s.shading)));
         row("fragments shaded (counter)", last.fragments_shaded.map_or_else(|| "off".to_string(), |n| n.to_string()));
     });
+}
+
+/// Every pass of the renderer's frame graph (a fixed list, so rows do not come and go): the
+/// last finished frame's GPU ms and vertex / fragment shader invocations; "off" for a pass that
+/// frame did not run. The graph measures every pass, so a new one shows up here by itself.
+pub struct PassesPanel<'a> {
+    pub renderer: &'a Renderer,
+    pub last: &'a FrameStats,
+}
+
+impl Panel for PassesPanel<'_> {
+    fn title(&self) -> &str {
+        "passes"
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui) {
+        egui::Grid::new("passes").num_columns(3).striped(true).show(ui, |ui| {
+            for name in self.renderer.pass_names() {
+                ui.label(name);
+                let p = self.last.passes.as_ref().map(|p| p.get(name));
+                let (ms, inv) = match p {
+                    None => ("n/a".to_string(), String::new()),
+                    Some(None) => ("off".to_string(), String::new()),
+                    Some(Some(p)) => (
+                        p.gpu_ms.map_or_else(|| "n/a".to_string(), |ms| format!("{ms:.3} ms")),
+                        p.invocations.map_or_else(String::new, |s| format!("VS {} / FS {}", s.vertex, s.fragment)),
+                    ),
+                };
+                ui.monospace(ms);
+                ui.monospace(inv);
+                ui.end_row();
+            }
+        });
+    }
 }

@@ -19,7 +19,8 @@ use engine::camera::Camera;
 use engine::flight::{self, Flight};
 use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, PassTimes, Renderer};
+use engine::render::graph::FrameProfile;
+use engine::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::sim::boids::{Aabb, BoidParams, Flock, FlockState};
 use engine::sim::clock::{ClockParams, FixedClock};
@@ -207,7 +208,7 @@ impl Switch {
 struct Series {
     cpu_ms: Vec<f64>,
     gpu_ms: Vec<f64>,
-    passes: Vec<PassTimes>,
+    passes: Vec<FrameProfile>,
     counters: Map<String, Value>,
 }
 
@@ -283,6 +284,7 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
         s.scene.destroy(gpu);
         r.map(|series| (series, s.content, s.alternate))
     });
+    let pass_names: Vec<&'static str> = renderer.pass_names().collect();
     renderer.destroy(gpu);
     target.destroy(gpu);
     let (series, content, alternated) = result?;
@@ -302,7 +304,7 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
         "cpu_frame_ms": summary(&main.cpu_ms),
         "floor_ratio": ratios(&main.cpu_ms, floor),
         "gpu_frame_ms": summary(&main.gpu_ms),
-        "pass_gpu_ms": pass_summary(&main.passes),
+        "pass_gpu_ms": pass_summary(&main.passes, &pass_names),
         "counters": main.counters,
         "samples": { "cpu_frame_ms": main.cpu_ms, "gpu_frame_ms": main.gpu_ms },
         "note": "cpu_frame_ms is the wall time of a whole frame including the wait for the GPU fence; GPU timestamps on lavapipe do not capture compute work reliably (skinning_ms understates the skinning pass)",
@@ -313,7 +315,7 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
             "cpu_frame_ms": summary(&off.cpu_ms),
             "floor_ratio": ratios(&off.cpu_ms, floor),
             "gpu_frame_ms": summary(&off.gpu_ms),
-            "pass_gpu_ms": pass_summary(&off.passes),
+            "pass_gpu_ms": pass_summary(&off.passes, &pass_names),
             "counters": off.counters,
             "samples": { "cpu_frame_ms": off.cpu_ms, "gpu_frame_ms": off.gpu_ms },
         }});
@@ -379,7 +381,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         let out = &mut series[variant];
         out.cpu_ms.push(cpu_ms);
         out.gpu_ms.extend(timing.gpu_ms);
-        out.passes.extend(renderer.pass_times_ms(gpu, 0));
+        out.passes.extend(renderer.profile(gpu, 0));
         out.counters = counters(gpu, renderer, &s.scene, &s.world);
     }
     for (variant, out) in series.iter_mut().enumerate() {
@@ -436,10 +438,10 @@ fn counters(gpu: &Gpu, r: &Renderer, scene: &GpuScene, world: &World) -> Map<Str
         put("skinning_dispatches", json!(a.dispatches));
         put("skinned_vertices", json!(a.skinned_vertices));
     }
-    if let Some(st) = r.pass_stats(gpu, 0) {
-        put("prepass_fragment_invocations", json!(st.prepass.map(|p| p.fragment)));
-        put("shading_vertex_invocations", json!(st.shading.vertex));
-        put("shading_fragment_invocations", json!(st.shading.fragment));
+    if let Some(p) = r.profile(gpu, 0) {
+        put("prepass_fragment_invocations", json!(p.invocations("prepass").map(|p| p.fragment)));
+        put("shading_vertex_invocations", json!(p.invocations("shading").map(|s| s.vertex)));
+        put("shading_fragment_invocations", json!(p.invocations("shading").map(|s| s.fragment)));
     }
     m
 }
@@ -462,16 +464,20 @@ fn ratios(v: &[f64], floor: &Value) -> Value {
     json!({ "p50": r("p50"), "p95": r("p95"), "p99": r("p99") })
 }
 
-fn pass_summary(p: &[PassTimes]) -> Value {
-    let col = |f: fn(&PassTimes) -> f64| summary(&p.iter().map(f).collect::<Vec<_>>());
-    json!({
-        "skinning": col(|t| t.skinning_ms),
-        "shadow": col(|t| t.shadow_ms),
-        "prepass": col(|t| t.prepass_ms),
-        "shading": col(|t| t.shading_ms),
-        "particles": col(|t| t.particles_ms),
-        "tonemap": col(|t| t.tonemap_ms),
-    })
+/// Percentiles of every pass's GPU ms (0 in frames it did not run), by pass name: each of the
+/// renderer's `names` (whether or not it ran) and any other pass a frame ran. The graph times
+/// every pass, so a new one appears here without code.
+fn pass_summary(p: &[FrameProfile], names: &[&'static str]) -> Value {
+    let mut names = names.to_vec();
+    for f in p {
+        for pass in &f.passes {
+            if !names.contains(&pass.name) {
+                names.push(pass.name);
+            }
+        }
+    }
+    let m: Map<String, Value> = names.iter().map(|&n| (n.to_string(), summary(&p.iter().map(|f| f.ms(n)).collect::<Vec<_>>()))).collect();
+    Value::Object(m)
 }
 
 fn setup(gpu: &Gpu, o: &Options, name: &str, renderer: &mut Renderer) -> anyhow::Result<Setup> {

@@ -1,0 +1,91 @@
+//! What a frame gives its passes: the scene, the renderer's parts they draw with, and this
+//! frame's prepared data (culled draws as batches, the instance stream, which passes have work).
+//! Prepared on the CPU by `Renderer::prepare` before the graph runs; passes only record.
+
+use crate::animated::AnimatedScene;
+use crate::batches::Batch;
+use crate::boids_draw::BoidsDraw;
+use crate::gpu::Gpu;
+use crate::particles_pass::ParticlePass;
+use crate::render::graph::ResourceId;
+use crate::render::mesh_draw::MeshKit;
+use crate::scene::GpuScene;
+use crate::shadow::SunShadow;
+use crate::tonemap::ToneMap;
+use crate::visibility::Draw;
+use ash::vk;
+use glam::Vec3;
+
+/// The HDR colour target the shading pass renders (transient, the output's size).
+pub const HDR: ResourceId = ResourceId("hdr");
+/// The camera's depth buffer (transient, the output's size).
+pub const DEPTH: ResourceId = ResourceId("depth");
+/// The sun's shadow map (owned by `SunShadow`, imported).
+pub const SHADOW_MAP: ResourceId = ResourceId("shadow map");
+/// The static casters' part of the shadow map, kept across frames (owned by `SunShadow`).
+pub const SHADOW_CACHE: ResourceId = ResourceId("shadow cache");
+/// Every skinned vertex buffer (one logical buffer: a memory barrier covers them all).
+pub const SKINNED: ResourceId = ResourceId("skinned vertices");
+/// The shading pass's fragment counter, read by the host after the frame.
+pub const FRAGMENT_COUNTER: ResourceId = ResourceId("fragment counter");
+
+/// The renderer's switches, as this frame uses them.
+#[derive(Debug, Clone, Copy)]
+pub struct Settings {
+    /// Depth pre-pass, then shading with depth EQUAL (only when there is something to draw).
+    pub prepass: bool,
+    /// Count the fragments the shading pass shades.
+    pub count_fragments: bool,
+    /// Depth testing in the shading pass without a pre-pass.
+    pub depth_test: bool,
+    /// Show the depth buffer instead of the shaded frame (a debug view).
+    pub depth_view: bool,
+}
+
+/// The shadow map's draw lists as batches.
+#[derive(Default)]
+pub struct ShadowBatches {
+    /// Every caster (when there are no static casters to cache).
+    pub all: Vec<Batch>,
+    pub statics: Vec<Batch>,
+    pub dynamics: Vec<Batch>,
+}
+
+/// This frame's prepared data.
+#[derive(Default)]
+pub struct FrameData {
+    /// The camera's uniforms and the fragment counter (set 0 of the mesh passes).
+    pub frame_set: vk::DescriptorSet,
+    /// The slot's instance stream every batch indexes.
+    pub instances: vk::Buffer,
+    pub view_batches: Vec<Batch>,
+    pub shadow: ShadowBatches,
+    /// The shadow map is drawn this frame (dynamic objects in view under a physical sun).
+    pub draw_shadow: bool,
+    pub draw_particles: bool,
+    pub draw_boids: bool,
+    /// The tone map's exposure, and whether it tone-maps (physical lighting) or passes through.
+    pub exposure: f32,
+    pub tone_map: bool,
+    pub camera_right: Vec3,
+    pub camera_up: Vec3,
+}
+
+/// What every pass records with.
+pub struct FrameCx<'a> {
+    pub gpu: &'a Gpu,
+    pub scene: &'a GpuScene,
+    pub slot: usize,
+    pub settings: Settings,
+    pub frame: &'a FrameData,
+    /// The camera's culled draw list (what the batches came from).
+    pub draws: &'a [Draw],
+    pub mesh: &'a MeshKit,
+    pub shadow: &'a SunShadow,
+    pub particles: &'a ParticlePass,
+    pub boids: &'a BoidsDraw,
+    pub tonemap: &'a mut ToneMap,
+    pub animation: Option<&'a mut AnimatedScene>,
+    /// Draw calls the mesh passes made (passes add theirs).
+    pub draw_calls: u32,
+}

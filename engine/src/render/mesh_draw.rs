@@ -1,0 +1,302 @@
+//! What the mesh passes (shadow, pre-pass, shading) share: the descriptor set layouts, one
+//! pipeline layout, the pipelines (all with mesh.vert), and the draw loop over batches.
+
+use crate::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
+use crate::gpu::{opaque, Gpu, GraphicsPipeline};
+use crate::render::graph::{ImageRef, Rec};
+use crate::scene::{GpuMaterial, GpuScene};
+use crate::shaders;
+use crate::shadow::{DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
+use crate::tonemap::HDR_FORMAT;
+use anyhow::Result;
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec4;
+
+/// Mirrors the push-constant block of shaders/mesh_draw.glsl: what a submesh gives its
+/// vertices and fragments (the transforms and lightmap regions are per instance, in the
+/// instance stream).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct DrawPush {
+    /// x: alpha-test cutoff (or -1); y: material index (its constants); z: the submesh's
+    /// lightmap block (added to the instance's page).
+    material: Vec4,
+    base_color: Vec4,
+}
+const _: () = assert!(std::mem::size_of::<DrawPush>() == 32);
+
+/// The stages that read the mesh passes' push constants and material constants: the vertex
+/// shader transforms the texture coordinates and picks the lightmap layer.
+const MESH_STAGES: vk::ShaderStageFlags = vk::ShaderStageFlags::from_raw(vk::ShaderStageFlags::VERTEX.as_raw() | vk::ShaderStageFlags::FRAGMENT.as_raw());
+
+/// Reversed-Z: nearer is greater.
+const NEARER: vk::CompareOp = vk::CompareOp::GREATER_OR_EQUAL;
+
+/// The shading pass's pipelines for one lighting path.
+pub struct Shading {
+    /// Without a pre-pass: depth test and write, alpha test in the shader.
+    plain: vk::Pipeline,
+    /// After the pre-pass: depth EQUAL, no writes, early fragment tests.
+    equal: vk::Pipeline,
+    /// Both again, counting fragments (when the device lets fragment shaders write buffers).
+    counting: Option<(vk::Pipeline, vk::Pipeline)>,
+}
+
+impl Shading {
+    fn new(make: impl Fn(bool, bool) -> Result<vk::Pipeline>, counting: bool) -> Result<Shading> {
+        Ok(Shading { plain: make(false, false)?, equal: make(true, false)?, counting: if counting { Some((make(false, true)?, make(true, true)?)) } else { None } })
+    }
+
+    pub fn pick(&self, prepass: bool, count: bool) -> vk::Pipeline {
+        match (count, self.counting) {
+            (true, Some((plain, equal))) => if prepass { equal } else { plain },
+            _ => if prepass { self.equal } else { self.plain },
+        }
+    }
+
+    pub fn can_count(&self) -> bool {
+        self.counting.is_some()
+    }
+
+    fn all(&self) -> impl Iterator<Item = vk::Pipeline> {
+        [self.plain, self.equal].into_iter().chain(self.counting.into_iter().flat_map(|(a, b)| [a, b]))
+    }
+}
+
+/// Specialisation constants of the mesh fragment shaders (mesh_shading.glsl).
+#[derive(Debug, Clone, Copy, Default)]
+struct Variant {
+    /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
+    count_fragments: bool,
+    /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
+    lightmapped: bool,
+}
+
+/// Layouts and pipelines of the mesh passes.
+pub struct MeshKit {
+    pub frame_layout: vk::DescriptorSetLayout,
+    pub material_layout: vk::DescriptorSetLayout,
+    pub scene_layout: vk::DescriptorSetLayout,
+    pub pipeline_layout: vk::PipelineLayout,
+    /// The shading pipelines of dynamic objects (probes and sun) and of lightmapped static
+    /// geometry: two variants of one shader (LIGHTMAPPED, mesh_shading.glsl), so neither runs
+    /// the other's lighting code.
+    pub shade: [Shading; 2],
+    /// Pre-pass: depth only, no fragment shader; and with the alpha-test discard.
+    pub depth: vk::Pipeline,
+    pub depth_masked: vk::Pipeline,
+    /// The shadow pass: the same two into the shadow map's format, standard depth (0 nearest the
+    /// sun), no culling, with depth bias.
+    pub shadow: vk::Pipeline,
+    pub shadow_masked: vk::Pipeline,
+}
+
+impl MeshKit {
+    pub fn new(gpu: &Gpu, shadow_format: vk::Format) -> Result<MeshKit> {
+        let d = &gpu.device;
+        let depth_format = gpu.caps.depth_format;
+        let binding = |binding: u32, ty, stages| vk::DescriptorSetLayoutBinding::default().binding(binding).descriptor_type(ty).descriptor_count(1).stage_flags(stages);
+        let (ubo, storage, sampled) = (vk::DescriptorType::UNIFORM_BUFFER, vk::DescriptorType::STORAGE_BUFFER, vk::DescriptorType::COMBINED_IMAGE_SAMPLER);
+        let frag = vk::ShaderStageFlags::FRAGMENT;
+        // Set 0: the frame's uniforms, the fragment counter and the sun's shadow map.
+        let frame_binding = [binding(0, ubo, MESH_STAGES), binding(1, storage, frag), binding(2, sampled, frag)];
+        // Set 1: the material's base colour (0) and emissive (1) textures.
+        let material_binding = [binding(0, sampled, frag), binding(1, sampled, frag)];
+        // Set 2: the lightmap array, the probes, and the material constants (their UV
+        // transforms are applied per vertex).
+        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES)];
+        let layout = |b: &[vk::DescriptorSetLayoutBinding]| unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(b), None) };
+        let frame_layout = layout(&frame_binding)?;
+        let material_layout = layout(&material_binding)?;
+        let scene_layout = layout(&scene_bindings)?;
+        let set_layouts = [frame_layout, material_layout, scene_layout];
+        let push = [vk::PushConstantRange::default().stage_flags(MESH_STAGES).size(std::mem::size_of::<DrawPush>() as u32)];
+        let pipeline_layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
+        let pl = pipeline_layout;
+        let shading = |lightmapped| {
+            let make = |equal: bool, count_fragments| {
+                let variant = Variant { count_fragments, lightmapped };
+                match equal {
+                    false => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None),
+                    true => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
+                }
+            };
+            Shading::new(make, gpu.caps.fragment_atomics)
+        };
+        let plain = Variant::default();
+        let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
+        Ok(MeshKit {
+            frame_layout,
+            material_layout,
+            scene_layout,
+            pipeline_layout,
+            shade: [shading(false)?, shading(true)?],
+            depth: create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, plain, None)?,
+            depth_masked: create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, plain, None)?,
+            shadow: create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
+            shadow_masked: create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
+        })
+    }
+
+    /// The depth-only pipeline for a material: with the alpha-test discard when it is masked.
+    pub fn depth_for(&self, mat: &GpuMaterial, shadow: bool) -> vk::Pipeline {
+        match (shadow, mat.alpha_cutoff >= 0.0) {
+            (false, false) => self.depth,
+            (false, true) => self.depth_masked,
+            (true, false) => self.shadow,
+            (true, true) => self.shadow_masked,
+        }
+    }
+
+    /// One rendering instance drawing `setup.batches`, each submesh with the pipeline
+    /// `pipeline_for(material, lightmapped)` gives. Returns the draw calls it made.
+    pub fn draw(&self, rec: &Rec, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &DrawSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> vk::Pipeline) -> u32 {
+        let (d, cb) = (&rec.gpu.device, rec.cb);
+        let mut calls = 0;
+        unsafe {
+            d.cmd_begin_rendering(cb, rendering);
+            rec.set_viewport(rendering.render_area.extent);
+            d.cmd_set_depth_test_enable(cb, setup.depth_test);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
+            d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 2, &[scene.scene_set], &[]);
+            d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, setup.instances], &[0, 0]);
+            d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
+            let mut bound = vk::Pipeline::null();
+            let mut bound_vertices = scene.vertex_buffer.buffer;
+            for batch in setup.batches {
+                let mesh = &scene.meshes[scene.instances[batch.instance as usize].mesh as usize];
+                let lod = &mesh.lods[batch.lod as usize];
+                // An animated instance draws its skinned vertices: already in world space, from
+                // vertex 0 of its own buffer; every pass reads the same buffer, so the pre-pass
+                // and the EQUAL shading pass see identical positions.
+                if batch.vertices != bound_vertices {
+                    d.cmd_bind_vertex_buffers(cb, 0, &[batch.vertices], &[0]);
+                    bound_vertices = batch.vertices;
+                }
+                d.cmd_set_front_face(cb, batch.front);
+                for sm in &lod.submeshes {
+                    let mat = &scene.materials[sm.material as usize];
+                    // Instances with a lightmap region read it where the submesh has a block;
+                    // the rest the probes and the sun.
+                    let pipeline = pipeline_for(mat, batch.lightmapped && sm.lightmap_block.is_some());
+                    if pipeline != bound {
+                        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
+                        bound = pipeline;
+                    }
+                    let push = DrawPush {
+                        material: Vec4::new(mat.alpha_cutoff, sm.material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
+                        base_color: Vec4::from(mat.base_color),
+                    };
+                    d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, bytemuck::bytes_of(&push));
+                    let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
+                    d.cmd_set_cull_mode(cb, cull);
+                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
+                    d.cmd_draw_indexed(cb, sm.index_count, batch.count, lod.first_index + sm.first_index, batch.base_vertex, batch.first_instance);
+                    calls += 1;
+                }
+            }
+            d.cmd_end_rendering(cb);
+        }
+        calls
+    }
+
+    pub fn destroy(&mut self, gpu: &Gpu) {
+        let d = &gpu.device;
+        unsafe {
+            for pipeline in [self.depth, self.depth_masked, self.shadow, self.shadow_masked].into_iter().chain(self.shade.iter().flat_map(Shading::all)) {
+                d.destroy_pipeline(pipeline, None);
+            }
+            d.destroy_pipeline_layout(self.pipeline_layout, None);
+            for l in [self.frame_layout, self.material_layout, self.scene_layout] {
+                d.destroy_descriptor_set_layout(l, None);
+            }
+        }
+    }
+}
+
+/// What one mesh pass draws and how: the set 0 it binds (the camera's or the sun's uniforms),
+/// the draw list, depth testing, and back-face culling (off for shadow casters: a single-sided
+/// occluder blocks the sun whichever side faces it).
+pub struct DrawSetup<'a> {
+    pub frame_set: vk::DescriptorSet,
+    pub batches: &'a [Batch],
+    /// The frame slot's instance stream the batches index.
+    pub instances: vk::Buffer,
+    pub depth_test: bool,
+    pub cull: bool,
+}
+
+/// A depth attachment of `image`: cleared to `clear` or loaded, then `store`d. A pass that only
+/// tests (`Access::DepthTest`) stores with NONE: DONT_CARE and STORE are writes to Vulkan.
+pub fn depth_attachment(image: ImageRef, clear: Option<f32>, store: vk::AttachmentStoreOp) -> vk::RenderingAttachmentInfo<'static> {
+    vk::RenderingAttachmentInfo::default()
+        .image_view(image.view)
+        .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+        .load_op(if clear.is_some() { vk::AttachmentLoadOp::CLEAR } else { vk::AttachmentLoadOp::LOAD })
+        .store_op(store)
+        .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: clear.unwrap_or(0.0), stencil: 0 } })
+}
+
+fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
+    match f {
+        pack::AttributeFormat::F32x2 => vk::Format::R32G32_SFLOAT,
+        pack::AttributeFormat::F32x3 => vk::Format::R32G32B32_SFLOAT,
+        pack::AttributeFormat::F32x4 => vk::Format::R32G32B32A32_SFLOAT,
+        pack::AttributeFormat::Unorm8x4 => vk::Format::R8G8B8A8_UNORM,
+    }
+}
+
+/// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
+/// (None: no colour attachment) and `depth_format` with the given depth write and compare, and
+/// a rasteriser depth bias (constant, slope factor) when given; `variant` specialises the
+/// fragment shader.
+#[allow(clippy::too_many_arguments)]
+fn create_mesh_pipeline(
+    gpu: &Gpu,
+    layout: vk::PipelineLayout,
+    color_format: Option<vk::Format>,
+    depth_format: vk::Format,
+    frag: Option<&[u8]>,
+    depth_write: bool,
+    compare: vk::CompareOp,
+    variant: Variant,
+    depth_bias: Option<(f32, f32)>,
+) -> Result<vk::Pipeline> {
+    // Specialisation constants 0 and 1: COUNT_FRAGMENTS and LIGHTMAPPED (mesh_shading.glsl).
+    let values = [variant.count_fragments, variant.lightmapped].map(|b| vk::Bool32::from(b).to_le_bytes());
+    let bytes = values.concat();
+    let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }, vk::SpecializationMapEntry { constant_id: 1, offset: 4, size: 4 }];
+    let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
+    // The vertex layout comes from the pack crate: one definition of the format. Only the
+    // attributes this shader reads are declared (tangent arrives with normal mapping).
+    const MESH_SHADER_INPUTS: [u32; 6] = [0, 1, 3, 4, 5, 13];
+    // Binding 1: the instance stream (batches.rs).
+    let bindings = [
+        vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX },
+        vk::VertexInputBindingDescription { binding: 1, stride: INSTANCE_STRIDE, input_rate: vk::VertexInputRate::INSTANCE },
+    ];
+    let attributes: Vec<_> = pack::VERTEX_ATTRIBUTES
+        .iter()
+        .filter(|a| MESH_SHADER_INPUTS.contains(&a.0))
+        .map(|&(location, offset, f)| vk::VertexInputAttributeDescription { location, binding: 0, format: attribute_format(f), offset })
+        .chain(instance_attributes())
+        .collect();
+    // Cull mode, front face and depth testing are dynamic (core 1.3): double-sided materials,
+    // mirrored instances and the raw fragment count (`depth_test` off) change them per draw or
+    // pass without a second pipeline.
+    let dynamic = [vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE, vk::DynamicState::DEPTH_TEST_ENABLE];
+    let mut pipeline = GraphicsPipeline::new("mesh", shaders::MESH_VERT)
+        .vertex_input(&bindings, &attributes)
+        .cull_back()
+        .depth_bias(depth_bias)
+        .depth(depth_format, depth_write, compare)
+        .dynamic(&dynamic);
+    if let Some(f) = frag {
+        pipeline = pipeline.fragment(f, Some(spec));
+    }
+    if let Some(format) = color_format {
+        pipeline = pipeline.color(format, opaque());
+    }
+    pipeline.build(&gpu.device, layout)
+}

@@ -1,0 +1,36 @@
+//! The renderer's passes, one type per file. A new pass is a file here plus one line in
+//! `register`: its place in the list is its place in the frame (see `graph::plan`).
+
+mod boids;
+mod depth_view;
+mod particles;
+mod prepass;
+mod shading;
+mod shadow_copy;
+mod shadow_dynamic;
+mod shadow_static;
+mod skinning;
+mod tonemap;
+
+pub use depth_view::DepthView;
+
+use crate::gpu::Gpu;
+use crate::render::graph::Pass;
+use anyhow::Result;
+use ash::vk;
+
+/// Every pass of a frame, in order, for a renderer drawing into `color_format` images.
+pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Vec<Box<dyn Pass>>> {
+    Ok(vec![
+        Box::new(skinning::Skinning),
+        Box::new(shadow_static::ShadowStatic),
+        Box::new(shadow_copy::ShadowCopy),
+        Box::new(shadow_dynamic::ShadowDynamic),
+        Box::new(prepass::Prepass),
+        Box::new(shading::Shading),
+        Box::new(boids::Boids),
+        Box::new(particles::Particles),
+        Box::new(tonemap::ToneMapPass),
+        Box::new(DepthView::new(gpu, color_format, frames_in_flight)?),
+    ])
+}

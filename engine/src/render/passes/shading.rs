@@ -1,0 +1,67 @@
+//! The shading pass: the camera's draw list into the HDR target, lit by lightmaps or by the
+//! probes and the sun (reading the shadow map), after the pre-pass with depth EQUAL or alone
+//! with a depth test of its own.
+
+use crate::render::frame::{FrameCx, DEPTH, FRAGMENT_COUNTER, HDR, SHADOW_MAP, SKINNED};
+use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Size};
+use crate::render::mesh_draw::{depth_attachment, DrawSetup};
+use crate::renderer::CLEAR_COLOR;
+use crate::tonemap::HDR_FORMAT;
+use anyhow::Result;
+use ash::vk;
+
+pub struct Shading;
+
+impl Pass for Shading {
+    fn name(&self) -> &'static str {
+        "shading"
+    }
+
+    fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
+        io.create(HDR, ImageDesc { format: HDR_FORMAT, size: Size::Output }).uses(HDR, Access::ColorWrite);
+        io.create(DEPTH, ImageDesc { format: cx.gpu.caps.depth_format, size: Size::Output });
+        io.uses(DEPTH, if cx.settings.prepass { Access::DepthTest } else { Access::DepthWrite });
+        // Bound in set 0 whether or not this frame drew it.
+        io.import(SHADOW_MAP, cx.shadow.map_ref()).uses(SHADOW_MAP, Access::SampledFragment);
+        if cx.animation.is_some() {
+            io.uses(SKINNED, Access::VertexInput);
+        }
+        if counts(cx) {
+            io.uses(FRAGMENT_COUNTER, Access::StorageWriteFragment);
+        }
+    }
+
+    fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
+        let (hdr, depth) = (rec.image(HDR), rec.image(DEPTH));
+        let f = cx.frame;
+        let prepass = cx.settings.prepass;
+        // Alpha 0 marks the clear colour as "no surface" for the tone map, which leaves it as it
+        // is: it is display-referred, not radiance.
+        let [r, g, b, _] = CLEAR_COLOR;
+        let color = [vk::RenderingAttachmentInfo::default()
+            .image_view(hdr.view)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: [r, g, b, 0.0] } })];
+        // After a pre-pass depth is only tested (and kept as it is); alone, the pass clears and
+        // writes it, and stores it when boids or particles test against it next.
+        let later = f.draw_particles || f.draw_boids;
+        let attachment = match prepass {
+            true => depth_attachment(depth, None, vk::AttachmentStoreOp::NONE),
+            false => depth_attachment(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
+        };
+        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
+        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color).depth_attachment(&attachment);
+        let count = counts(cx);
+        let shade = [0, 1].map(|lightmapped| cx.mesh.shade[lightmapped].pick(prepass, count));
+        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };
+        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |_, lightmapped| shade[lightmapped as usize]);
+        Ok(())
+    }
+}
+
+/// Whether this frame counts the fragments it shades.
+fn counts(cx: &FrameCx) -> bool {
+    cx.settings.count_fragments && cx.mesh.shade[0].can_count()
+}
