@@ -238,7 +238,7 @@ impl AnimatedScene {
     }
 
     /// Advance every animator by `dt` seconds, evaluate its pose and joint matrices, and move its
-    /// culling sphere in `scene.spheres`. Allocates nothing.
+    /// culling sphere in `scene.instances`. Allocates nothing.
     pub fn advance(&mut self, scene: &mut GpuScene, dt: f32) {
         let start = Instant::now();
         let rig = &self.rig;
@@ -273,9 +273,7 @@ impl AnimatedScene {
                 a.joints[0] = global;
                 world_sphere(global, a.bind_sphere.0, a.bind_sphere.1 + morph)
             };
-            let s = &mut scene.spheres;
-            let i = a.instance as usize;
-            (s.x[i], s.y[i], s.z[i], s.r[i]) = (centre.x, centre.y, centre.z, radius);
+            scene.instances.set_sphere(a.instance as usize, centre, radius);
         }
         self.cpu_ms = start.elapsed().as_secs_f64() * 1e3;
     }

@@ -9,6 +9,7 @@ pub mod cull;
 pub mod flight;
 pub mod gpu;
 pub mod headless;
+pub mod instances;
 pub mod lod_select;
 pub mod overlay;
 pub mod particles_pass;

@@ -2,7 +2,7 @@
 //! descriptor sets, the baked lightmap pages as one array texture, and instances (mesh, world
 //! transform, lightmap region) from the node hierarchy.
 
-use crate::cull::{world_sphere, Spheres};
+pub use crate::instances::{Instance, InstanceError, InstanceId, Instances, LocalBounds};
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::samplers::SamplerCache;
 use anyhow::{Context, Result};
@@ -32,6 +32,13 @@ pub struct GpuMesh {
     pub errors: Vec<f32>,
 }
 
+impl GpuMesh {
+    /// The mesh's box in its own space.
+    pub fn local_bounds(&self) -> LocalBounds {
+        LocalBounds { min: self.bounds_min, max: self.bounds_max }
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 pub struct GpuMaterial {
     pub base_color: [f32; 4],
@@ -39,21 +46,6 @@ pub struct GpuMaterial {
     pub alpha_cutoff: f32,
     pub double_sided: bool,
     pub descriptor_set: vk::DescriptorSet,
-}
-
-/// One placed mesh.
-#[derive(Debug, Clone, Copy)]
-pub struct Instance {
-    pub mesh: u32,
-    pub world: Mat4,
-    /// Largest axis scale of `world` (object-space errors and radii to world metres).
-    pub scale: f32,
-    /// A static placement (`pack::Node::is_static`): it never moves, so its shadow is cached
-    /// and the sun's shadow map is not drawn for it alone.
-    pub is_static: bool,
-    /// Where its lightmap lies in the atlas (`pack::Node::lightmap`): with baked pages it is lit
-    /// by them rather than by the probes and the sun.
-    pub lightmap: Option<pack::LightmapRegion>,
 }
 
 /// Baked light the renderer reads (pack lightmaps and probes), in physical units.
@@ -73,9 +65,9 @@ pub struct GpuScene {
     pub id: u64,
     pub meshes: Vec<GpuMesh>,
     pub materials: Vec<GpuMaterial>,
-    pub instances: Vec<Instance>,
-    /// World bounding sphere of every instance, for culling (same order as `instances`).
-    pub spheres: Spheres,
+    /// The placed meshes, behind handles (`spawn`, `set_transform`, `despawn`), with their
+    /// culling spheres.
+    pub instances: Instances,
     pub vertex_buffer: Buffer,
     pub index_buffer: Buffer,
     /// The pack's textures by index; None for the baked lightmap pages, which live in `lightmaps`.
@@ -285,17 +277,12 @@ impl GpuScene {
         }
 
         let world = world_transforms(&m.nodes);
-        let instances: Vec<Instance> = m
-            .nodes
-            .iter()
-            .zip(&world)
-            .filter_map(|(n, w)| n.mesh.map(|mesh| Instance { mesh, world: *w, scale: max_scale(*w), is_static: n.is_static, lightmap: n.lightmap }))
-            .collect();
-        let mut spheres = Spheres::default();
-        for i in &instances {
-            let mesh = &meshes[i.mesh as usize];
-            let (c, r) = world_sphere(i.world, (mesh.bounds_min + mesh.bounds_max) * 0.5, (mesh.bounds_max - mesh.bounds_min).length() * 0.5);
-            spheres.push(c, r);
+        let mut instances = Instances::default();
+        for (n, w) in m.nodes.iter().zip(&world) {
+            if let Some(mesh) = n.mesh {
+                let bounds = meshes[mesh as usize].local_bounds();
+                instances.spawn(Instance { mesh, world: *w, scale: max_scale(*w), is_static: n.is_static, lightmap: n.lightmap }, bounds);
+            }
         }
 
         // Set 2: one for the whole scene.
@@ -339,7 +326,6 @@ impl GpuScene {
             meshes,
             materials,
             instances,
-            spheres,
             vertex_buffer,
             index_buffer,
             textures,
@@ -354,21 +340,30 @@ impl GpuScene {
         })
     }
 
-    /// World-space bounds of every instance together (for framing the camera).
+    /// World-space bounds of every instance together (framing the camera, fitting the shadow
+    /// map): static instances' boxes (cached until a static change) and dynamic instances'
+    /// current spheres (an animated character's follow its pose).
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for i in &self.instances {
-            let m = &self.meshes[i.mesh as usize];
-            let (a, b) = transform_bounds(i.world, m.bounds_min, m.bounds_max);
-            lo = lo.min(a);
-            hi = hi.max(b);
-        }
-        if lo.x > hi.x {
-            (Vec3::splat(-1.0), Vec3::splat(1.0))
-        } else {
-            (lo, hi)
-        }
+        self.instances.world_bounds(|mesh| self.meshes[mesh as usize].local_bounds()).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)))
+    }
+
+    /// Place mesh `mesh` at `world` (static: lightmapped when it has a region, and its shadow
+    /// cached; dynamic: lit by the probes and the sun). Culling and the shadow map see it from
+    /// the next frame.
+    pub fn spawn(&mut self, mesh: u32, world: Mat4, is_static: bool, lightmap: Option<pack::LightmapRegion>) -> Result<InstanceId, InstanceError> {
+        let bounds = self.meshes.get(mesh as usize).ok_or(InstanceError::NoMesh { mesh, meshes: self.meshes.len() })?.local_bounds();
+        Ok(self.instances.spawn(Instance { mesh, world, scale: max_scale(world), is_static, lightmap }, bounds))
+    }
+
+    /// Move an instance (its culling sphere and the scene's bounds follow).
+    pub fn set_transform(&mut self, id: InstanceId, world: Mat4) -> Result<(), InstanceError> {
+        let mesh = self.instances.get(id)?.mesh;
+        self.instances.set_transform(id, world, self.meshes[mesh as usize].local_bounds())
+    }
+
+    /// Remove an instance; other handles stay valid.
+    pub fn despawn(&mut self, id: InstanceId) -> Result<(), InstanceError> {
+        self.instances.despawn(id)
     }
 
     /// Triangles of every instance at full detail.

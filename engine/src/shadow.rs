@@ -206,33 +206,33 @@ impl SunShadow {
 
     /// Fit the map to the scene for a sun towards `towards_sun` and list the casters: every
     /// instance at its shadow LOD, split into static and dynamic; and decide whether the static
-    /// part must be drawn again.
+    /// part must be drawn again. The static list is rebuilt only when it would change (the
+    /// scene, its static version, the map's window or size), so a frame costs O(dynamic) here.
     pub fn prepare(&mut self, scene: &GpuScene, towards_sun: Vec3) {
         let (lo, hi) = scene.bounds();
         (self.view_proj, self.texel_m) = sun_view_proj(towards_sun, lo, hi, self.size);
-        self.casters.clear();
-        self.static_casters.clear();
-        self.dynamic_casters.clear();
         let mut key = std::collections::hash_map::DefaultHasher::new();
-        (scene.id, self.size, self.view_proj.to_cols_array().map(f32::to_bits)).hash(&mut key);
-        for (i, inst) in scene.instances.iter().enumerate() {
-            let mesh = &scene.meshes[inst.mesh as usize];
-            let draw = Draw {
-                instance: i as u32,
-                lod: shadow_lod(&mesh.errors, inst.scale, self.texel_m) as u8,
-            };
-            self.casters.push(draw);
-            if inst.is_static {
-                (draw.instance, draw.lod, inst.mesh, inst.world.to_cols_array().map(f32::to_bits)).hash(&mut key);
-                self.static_casters.push(draw);
-            } else {
-                self.dynamic_casters.push(draw);
-            }
-        }
+        (scene.id, scene.instances.static_version(), self.size, self.view_proj.to_cols_array().map(f32::to_bits)).hash(&mut key);
         let key = Some(key.finish());
-        self.redraw_static = !self.static_casters.is_empty() && key != self.static_key;
-        if self.redraw_static {
+        let caster = |i: u32| {
+            let inst = &scene.instances[i as usize];
+            Draw { instance: i, lod: shadow_lod(&scene.meshes[inst.mesh as usize].errors, inst.scale, self.texel_m) as u8 }
+        };
+        let statics_changed = key != self.static_key;
+        if statics_changed {
+            self.static_casters.clear();
+            self.static_casters.extend((0..scene.instances.len() as u32).filter(|&i| scene.instances[i as usize].is_static).map(caster));
+        }
+        self.dynamic_casters.clear();
+        self.dynamic_casters.extend(scene.instances.dynamic().iter().map(|&i| caster(i)));
+        self.casters.clear();
+        self.casters.extend_from_slice(&self.static_casters);
+        self.casters.extend_from_slice(&self.dynamic_casters);
+        self.redraw_static = !self.static_casters.is_empty() && statics_changed;
+        if statics_changed {
             self.static_key = key;
+        }
+        if self.redraw_static {
             self.static_draws += 1;
         }
     }

@@ -66,7 +66,7 @@ impl Visibility {
         self.previous.resize(scene.instances.len(), None);
         self.visible.clear();
         let cull = if self.culling {
-            cull_spheres(&Frustum::from_view_proj(view_proj), &scene.spheres, &mut self.visible)
+            cull_spheres(&Frustum::from_view_proj(view_proj), scene.instances.spheres(), &mut self.visible)
         } else {
             self.visible.extend(0..scene.instances.len() as u32);
             let n = scene.instances.len() as u32;
@@ -83,7 +83,7 @@ impl Visibility {
             } else if self.lod_selection && mesh.lods.len() > 1 {
                 // Distance to the nearest point of the bounding sphere: an object the camera is
                 // inside or touching is at full detail.
-                let s = &scene.spheres;
+                let s = scene.instances.spheres();
                 let c = Vec3::new(s.x[i as usize], s.y[i as usize], s.z[i as usize]);
                 let distance = ((c - eye).length() - s.r[i as usize]).max(1e-3);
                 // Object-space errors become world metres through the instance's scale.

@@ -218,7 +218,7 @@ fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
                 node_joint_matrices(&pack, &rig, node, &pose, &mut joints);
                 let mut v = data.vertices.clone();
                 skin_cpu(&data, rig.node_weights(node, &pose), &joints, &mut v);
-                let s = &scene.spheres;
+                let s = scene.instances.spheres();
                 let i = a.instance as usize;
                 let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
                 for p in &v {
@@ -261,7 +261,10 @@ fn a_character_with_a_route_walks_it_facing_where_it_goes() {
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
-    let centre = |scene: &GpuScene, i: usize| Vec3::new(scene.spheres.x[i], scene.spheres.y[i], scene.spheres.z[i]);
+    let centre = |scene: &GpuScene, i: usize| {
+        let s = scene.instances.spheres();
+        Vec3::new(s.x[i], s.y[i], s.z[i])
+    };
     let i = anim.instances[0].instance as usize;
     anim.play(0, 0, 0.0, 0.0); // a frozen pose: only the route moves the character
     anim.advance(&mut scene, 0.0);
@@ -276,6 +279,53 @@ fn a_character_with_a_route_walks_it_facing_where_it_goes() {
     assert!(j1.abs_diff_eq(expected, 1e-4), "joint 0 after 1 s:\n{j1}\nexpected\n{expected}");
     let moved = c1 - (Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2) * start.inverse()).transform_point3(c0);
     assert!((moved - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-3, "culling sphere moved by {moved}");
+    anim.destroy(&gpu);
+    scene.destroy(&gpu);
+    renderer.destroy(&gpu);
+    assert_clean(&gpu);
+}
+
+#[test]
+fn a_walking_character_stays_inside_the_shadow_maps_window_along_its_route() {
+    // A small static floor (2 m) and RiggedSimple walking a 10 m square route around it: the
+    // scene's bounds, which the sun's map is fitted to, must follow the walker (its culling
+    // sphere, from its pose), or it walks out of the map and loses its shadow. At every step the
+    // whole sphere projects inside the map's window and depth range.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    let mut pack = cook(&dir, "RiggedSimple");
+    for n in &mut pack.manifest.nodes {
+        n.name = format!("walker/{}", n.name);
+    }
+    pack.manifest.spawns.push(pack::Spawn {
+        name: "walker".into(),
+        kind: "character".into(),
+        position: [0.0; 3],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        params: serde_json::json!({ "route": [[10.0, 0.0, 0.0], [10.0, 0.0, 10.0], [0.0, 0.0, 10.0]], "walk_speed": 2.0 }),
+    });
+    let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
+    // The floor: the character's own mesh as a static instance, shrunk to about 2 m at the origin.
+    let mesh = scene.instances[anim.instances[0].instance as usize].mesh;
+    scene.spawn(mesh, Mat4::from_scale(Vec3::splat(0.3)), true, None).unwrap();
+    let walker = anim.instances[0].instance as usize;
+    let towards_sun = Vec3::new(0.3, 1.0, 0.2).normalize();
+    let mut worst = f32::NEG_INFINITY;
+    for step in 0..40 {
+        anim.advance(&mut scene, 0.5);
+        renderer.shadow.prepare(&scene, towards_sun);
+        let s = scene.instances.spheres();
+        let (c, r) = (Vec3::new(s.x[walker], s.y[walker], s.z[walker]), s.r[walker]);
+        for corner in 0..8 {
+            let d = Vec3::new([-r, r][corner & 1], [-r, r][(corner >> 1) & 1], [-r, r][(corner >> 2) & 1]);
+            let p = renderer.shadow.view_proj.project_point3(c + d);
+            worst = worst.max(p.x.abs()).max(p.y.abs());
+            assert!(p.x.abs() <= 1.0 && p.y.abs() <= 1.0 && (0.0..=1.0).contains(&p.z), "step {step}: the walker at {c} (r {r}) leaves the map: {p}");
+        }
+    }
+    println!("walker's furthest corner in the map: {worst:.3} of the half-width");
     anim.destroy(&gpu);
     scene.destroy(&gpu);
     renderer.destroy(&gpu);

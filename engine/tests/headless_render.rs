@@ -873,14 +873,14 @@ fn the_static_casters_are_drawn_into_the_shadow_map_once_and_reused_while_the_cu
     let ground_at = Mat4::from_translation(Vec3::new(0.0, -0.6, 0.0)) * Mat4::from_scale(Vec3::new(24.0, 1.0, 24.0));
     let roof_mesh = pack.manifest.nodes[0].mesh.unwrap();
     pack.manifest.nodes.push(static_node("ground", ground_at, roof_mesh, 0));
-    // Puts the cube at x and the roof at height y in `scene` (transforms and culling spheres).
+    // Puts the cube at x and the roof at height y in `scene` (through the scene API: the culling
+    // spheres and the shadow cache's key follow).
     let place = |scene: &mut GpuScene, cube_x: f32, roof_y: f32| {
         let [roof, cube] = [0, 1];
         assert!(scene.instances[roof].is_static && !scene.instances[cube].is_static);
-        scene.instances[roof].world = Mat4::from_translation(Vec3::new(0.0, roof_y, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0));
-        scene.instances[cube].world = Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0));
-        let s = &mut scene.spheres;
-        (s.y[roof], s.x[cube]) = (roof_y, cube_x);
+        let (roof, cube) = (scene.instances.id_at(roof), scene.instances.id_at(cube));
+        scene.set_transform(roof, Mat4::from_translation(Vec3::new(0.0, roof_y, 0.0)) * Mat4::from_scale(Vec3::new(6.0, 1.0, 6.0))).unwrap();
+        scene.set_transform(cube, Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0))).unwrap();
     };
     let cam = |cube_x: f32| Camera { position: Vec3::new(cube_x, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };
     let afresh = |cube_x: f32, roof_y: f32, map_size: u32| {

@@ -1,0 +1,63 @@
+//! The scene API while rendering: spawn, move and despawn instances through handles, with the
+//! culling counters exact after each step and the picture following.
+
+use engine::camera::Camera;
+use engine::instances::InstanceError;
+use engine::renderer::Lighting;
+use glam::{Mat4, Vec3};
+
+mod common;
+use common::frames::{looking_down_neg_z, pixel, screen_pixel, Rig};
+use common::{assert_clean, gpu, square_pack};
+
+#[test]
+fn instances_spawned_moved_and_despawned_while_rendering_are_culled_and_drawn_exactly() {
+    let gpu = gpu();
+    let (w, h) = (64u32, 48u32);
+    // One 0.5 m quad at the origin (mesh 0, dynamic), seen from 6 m away along +Z.
+    let mut rig = Rig::new(&gpu, &square_pack("quad", 0.25, 0.0, pack::Material::default()), w, h);
+    let cam: Camera = looking_down_neg_z(6.0);
+    let placed = rig.scene.instances.id_at(0);
+    let mut frame = |rig: &mut Rig| {
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
+        let c = rig.renderer.visibility.counts.cull;
+        (c.tested, c.visible, c.culled, rig.target.pixels().to_vec())
+    };
+    let lit = |px: &[u8], p: Vec3| {
+        let (x, y) = screen_pixel(&cam, w, h, p);
+        pixel(px, w, x, y) != pixel(px, w, 1, 1)
+    };
+    let (t, v, c, px) = frame(&mut rig);
+    assert_eq!((t, v, c), (1, 1, 0));
+    assert!(lit(&px, Vec3::ZERO));
+
+    // Spawn one in view (left) and one behind the camera.
+    let left = Vec3::new(-1.5, 0.0, 0.0);
+    let a = rig.scene.spawn(0, Mat4::from_translation(left), false, None).unwrap();
+    let behind = rig.scene.spawn(0, Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0)), false, None).unwrap();
+    let (t, v, c, px) = frame(&mut rig);
+    assert_eq!((t, v, c), (3, 2, 1));
+    assert!(lit(&px, left));
+
+    // Move the one behind into view (right), and the left one out of view.
+    let right = Vec3::new(1.5, 0.0, 0.0);
+    rig.scene.set_transform(behind, Mat4::from_translation(right)).unwrap();
+    rig.scene.set_transform(a, Mat4::from_translation(Vec3::new(-40.0, 0.0, 0.0))).unwrap();
+    let (t, v, c, px) = frame(&mut rig);
+    assert_eq!((t, v, c), (3, 2, 1));
+    assert!(lit(&px, right) && !lit(&px, left));
+
+    // Despawn the first placed one: the others keep their handles.
+    rig.scene.despawn(placed).unwrap();
+    let (t, v, c, px) = frame(&mut rig);
+    assert_eq!((t, v, c), (2, 1, 1));
+    assert!(!lit(&px, Vec3::ZERO) && lit(&px, right));
+    assert_eq!(rig.scene.set_transform(placed, Mat4::IDENTITY), Err(InstanceError::Stale(placed)));
+    assert_eq!(rig.scene.spawn(7, Mat4::IDENTITY, false, None), Err(InstanceError::NoMesh { mesh: 7, meshes: 1 }));
+    rig.scene.despawn(a).unwrap();
+    rig.scene.despawn(behind).unwrap();
+    let (t, v, c, _) = frame(&mut rig);
+    assert_eq!((t, v, c), (0, 0, 0));
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}
