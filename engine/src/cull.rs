@@ -144,22 +144,18 @@ pub fn cull_spheres(frustum: &Frustum, s: &Spheres, visible: &mut Vec<u32>) -> C
     let inside = if n <= CHUNK {
         chunk(0, n, visible)
     } else {
-        // Fixed chunks on scoped threads, concatenated in order: deterministic.
-        let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).min(n.div_ceil(CHUNK));
-        let per = n.div_ceil(threads);
-        let parts: Vec<(Vec<u32>, u32)> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    let (a, b) = (t * per, ((t + 1) * per).min(n));
-                    scope.spawn(move || {
-                        let mut out = Vec::with_capacity(b.saturating_sub(a));
-                        let inside = chunk(a, b, &mut out);
-                        (out, inside)
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().expect("culling thread")).collect()
-        });
+        // Fixed chunks on the rayon pool (threads made once, not per frame), concatenated in
+        // order: deterministic.
+        use rayon::prelude::*;
+        let parts: Vec<(Vec<u32>, u32)> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|k| {
+                let (a, b) = (k * CHUNK, ((k + 1) * CHUNK).min(n));
+                let mut out = Vec::with_capacity(b - a);
+                let inside = chunk(a, b, &mut out);
+                (out, inside)
+            })
+            .collect();
         let mut inside = 0;
         for (part, k) in parts {
             visible.extend_from_slice(&part);

@@ -216,5 +216,5 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .topology(vk::PrimitiveTopology::TRIANGLE_STRIP)
         .depth(depth_format, false, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, blend)
-        .build(&gpu.device, layout)
+        .build(gpu, layout)
 }

@@ -70,7 +70,7 @@ pub fn fullscreen_pipeline(gpu: &Gpu, name: &str, set_layout: vk::DescriptorSetL
     let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(push)];
     let set_layouts = [set_layout];
     let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges), None)? };
-    match GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, None).color(format, opaque()).build(d, layout) {
+    match GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, None).color(format, opaque()).build(gpu, layout) {
         Ok(pipeline) => Ok((layout, pipeline)),
         Err(e) => {
             unsafe { d.destroy_pipeline_layout(layout, None) };

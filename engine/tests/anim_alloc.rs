@@ -93,7 +93,7 @@ fn the_renderers_per_frame_animation_and_skinning_record_do_not_allocate() {
         return;
     }
     let pack = cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap();
-    let gpu = Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![] }).expect("a Vulkan 1.3 device");
+    let gpu = Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![], pipeline_cache: None }).expect("a Vulkan 1.3 device");
     let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 2).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 2).unwrap().expect("RiggedSimple is skinned");

@@ -18,7 +18,7 @@ fn instances_spawned_moved_and_despawned_while_rendering_are_culled_and_drawn_ex
     let mut rig = Rig::new(&gpu, &square_pack("quad", 0.25, 0.0, pack::Material::default()), w, h);
     let cam: Camera = looking_down_neg_z(6.0);
     let placed = rig.scene.instances.id_at(0);
-    let mut frame = |rig: &mut Rig| {
+    let frame = |rig: &mut Rig| {
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam, &Lighting::default(), true).unwrap();
         let c = rig.renderer.visibility.counts.cull;
         (c.tested, c.visible, c.culled, rig.target.pixels().to_vec())

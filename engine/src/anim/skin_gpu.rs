@@ -52,7 +52,7 @@ impl SkinPipeline {
             let module = shaders::module(d, shaders::SKIN_COMP)?;
             let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(module).name(c"main");
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
-            let pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            let pipeline = d.create_compute_pipelines(gpu.pipeline_cache, &info, None);
             d.destroy_shader_module(module, None);
             let pipeline = pipeline.map_err(|(_, e)| e)?[0];
             Ok(SkinPipeline { set_layout, layout, pipeline })

@@ -108,7 +108,7 @@ fn boxes_pack(placements: impl Iterator<Item = Mat4>) -> Pack {
 }
 
 fn run(args: &Args) -> anyhow::Result<usize> {
-    let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![] })?;
+    let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![], pipeline_cache: GpuOptions::default_pipeline_cache() })?;
     println!("device: {} ({:?}); {} cores", gpu.caps.device_name, gpu.caps.device_type, std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pack = instances_pack(args.instances);
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
@@ -480,7 +480,7 @@ mod skinned_bench {
             anyhow::bail!("{} has no skin or no clip", path.display());
         }
         let pack = replicate(&single, args.characters);
-        let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![] })?;
+        let gpu = Gpu::new(&GpuOptions { validation: false, device: args.device.clone(), surface_extensions: vec![], pipeline_cache: GpuOptions::default_pipeline_cache() })?;
         let mut target = Offscreen::new(&gpu, args.width, args.height)?;
         let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1)?;
         let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts())?;

@@ -213,7 +213,7 @@ fn main() -> ExitCode {
         }
     }
     let pack = &packs[0];
-    let gpu_opts = GpuOptions { validation: args.validation, device: args.device.clone(), surface_extensions: vec![] };
+    let gpu_opts = GpuOptions { validation: args.validation, device: args.device.clone(), surface_extensions: vec![], pipeline_cache: GpuOptions::default_pipeline_cache() };
 
     if !args.headless && has_display() {
         let opts = WindowOptions {

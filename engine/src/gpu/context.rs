@@ -8,7 +8,9 @@ use std::ffi::{c_char, CStr};
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::path::PathBuf;
 use std::time::Duration;
+use super::pipeline_cache::DiskCache;
 
 /// How long a wait for the GPU may take before the device is called hung, unless
 /// ENGINE_GPU_TIMEOUT_S says otherwise: far above any frame (seconds on lavapipe under load),
@@ -60,9 +62,21 @@ pub struct GpuOptions {
     pub device: DevicePreference,
     /// Instance extensions a window surface needs (from ash-window); empty when headless.
     pub surface_extensions: Vec<*const c_char>,
+    /// Where the pipeline cache is kept between runs (`pipeline_cache`); None: in memory only.
+    pub pipeline_cache: Option<PathBuf>,
 }
 
 impl GpuOptions {
+    /// The pipeline cache file of the binaries: `ENGINE_PIPELINE_CACHE` (empty: none), else
+    /// `build/pipeline-cache.bin` when run where `build/` exists (the repository), else none.
+    pub fn default_pipeline_cache() -> Option<PathBuf> {
+        match std::env::var("ENGINE_PIPELINE_CACHE") {
+            Ok(p) if p.is_empty() => None,
+            Ok(p) => Some(PathBuf::from(p)),
+            Err(_) => std::path::Path::new("build").is_dir().then(|| PathBuf::from("build/pipeline-cache.bin")),
+        }
+    }
+
     /// Validation is on when asked for explicitly or when `ENGINE_VALIDATION=1` (tests set it).
     pub fn validation_from_env() -> bool {
         matches!(std::env::var("ENGINE_VALIDATION").as_deref(), Ok("1") | Ok("true"))
@@ -97,6 +111,9 @@ pub struct Gpu {
     pub allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
     /// Pool for one-off transfer command buffers.
     upload_pool: vk::CommandPool,
+    /// Every pipeline is created through this cache (kept on disk when the options name a file).
+    pub pipeline_cache: vk::PipelineCache,
+    disk_cache: DiskCache,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
     validation_log: Arc<ValidationLog>,
     pub swapchain_capable: bool,
@@ -223,6 +240,7 @@ impl Gpu {
             allocation_sizes: Default::default(),
         })
         .map_err(|e| anyhow!("gpu-allocator: {e}"))?;
+        let disk_cache = DiskCache::open(&device, opts.pipeline_cache.as_deref())?;
         let upload_pool = unsafe {
             device.create_command_pool(
                 &vk::CommandPoolCreateInfo::default()
@@ -242,6 +260,8 @@ impl Gpu {
             caps,
             allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
             upload_pool,
+            pipeline_cache: disk_cache.cache,
+            disk_cache,
             debug,
             validation_log,
             swapchain_capable: want_swapchain,
@@ -347,6 +367,7 @@ impl Drop for Gpu {
         unsafe {
             let _ = self.device.device_wait_idle();
             self.device.destroy_command_pool(self.upload_pool, None);
+            self.disk_cache.close(&self.device);
             // The allocator frees its memory blocks on drop, which needs the device alive: a clone
             // still held here (an overlay not destroyed) would free them after the device.
             if !std::thread::panicking() {

@@ -4,6 +4,7 @@
 mod context;
 mod memory;
 mod pipeline;
+mod pipeline_cache;
 mod validation;
 
 pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};

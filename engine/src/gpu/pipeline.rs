@@ -6,6 +6,7 @@
 use crate::shaders;
 use anyhow::{Context, Result};
 use ash::vk;
+use super::Gpu;
 
 /// A graphics pipeline's description. Start from [`GraphicsPipeline::new`] and set what the
 /// pass needs; the defaults are a triangle list with no vertex input, no culling, no depth
@@ -101,7 +102,9 @@ impl<'a> GraphicsPipeline<'a> {
         self
     }
 
-    pub fn build(&self, device: &ash::Device, layout: vk::PipelineLayout) -> Result<vk::Pipeline> {
+    /// Create the pipeline through the device's pipeline cache.
+    pub fn build(&self, gpu: &Gpu, layout: vk::PipelineLayout) -> Result<vk::Pipeline> {
+        let device = &gpu.device;
         let vert = shaders::module(device, self.vert).with_context(|| format!("the {} pipeline's vertex shader", self.name))?;
         let frag = match self.frag.map(|f| shaders::module(device, f)).transpose() {
             Ok(f) => f,
@@ -157,7 +160,7 @@ impl<'a> GraphicsPipeline<'a> {
         if let Some(ds) = &depth_stencil {
             info = info.depth_stencil_state(ds);
         }
-        let result = unsafe { device.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) };
+        let result = unsafe { device.create_graphics_pipelines(gpu.pipeline_cache, &[info], None) };
         // The modules are only needed while the pipeline is created.
         unsafe {
             device.destroy_shader_module(vert, None);

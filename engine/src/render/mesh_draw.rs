@@ -298,5 +298,5 @@ fn create_mesh_pipeline(
     if let Some(format) = color_format {
         pipeline = pipeline.color(format, opaque());
     }
-    pipeline.build(&gpu.device, layout)
+    pipeline.build(gpu, layout)
 }

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 /// The device tests render on: the validation layer always on; ENGINE_DEVICE can still point
 /// them at a real GPU.
 pub fn gpu() -> Gpu {
-    Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![] })
+    Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![], pipeline_cache: None })
         .expect("a Vulkan 1.3 device with the validation layer (run `make setup`)")
 }
 

@@ -220,6 +220,7 @@ pub fn run(o: &Options) -> anyhow::Result<usize> {
         validation: engine::gpu::GpuOptions::validation_from_env(),
         device: o.device.clone(),
         surface_extensions: vec![],
+        pipeline_cache: GpuOptions::default_pipeline_cache(),
     })?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
