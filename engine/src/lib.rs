@@ -1,12 +1,12 @@
 //! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
 
 pub mod anim;
+pub mod app;
 pub mod animated;
 pub mod batches;
 pub mod boids_draw;
 pub mod camera;
 pub mod cull;
-pub mod flight;
 pub mod gpu;
 pub mod headless;
 pub mod instances;
@@ -25,6 +25,5 @@ pub mod stats;
 pub mod tonemap;
 pub mod visibility;
 pub mod walk;
-pub mod window;
 
 pub use pack;

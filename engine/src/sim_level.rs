@@ -31,22 +31,12 @@ fn num(spawn: &pack::Spawn, key: &str, default: f32) -> f32 {
 }
 
 /// A particles spawn's blend: its `blend` parameter ("alpha" or "additive", which the cooker
-/// validates), else a guess from the name: sparks, embers and fire add light, everything else
-/// (spray, smoke) is alpha-blended. A value the cooker would reject (a hand-edited pack) is
-/// treated as absent rather than failing the level.
+/// validates), alpha when absent. Content decides, not the emitter's name. A value the cooker
+/// would reject (a hand-edited pack) is treated as absent rather than failing the level.
 pub fn blend_of(spawn: &pack::Spawn) -> Blend {
     match spawn.params.get("blend").and_then(|v| v.as_str()) {
-        Some("alpha") => Blend::Alpha,
         Some("additive") => Blend::Additive,
-        _ => {
-            let name = spawn.name.to_ascii_lowercase();
-            let additive = ["spark", "ember", "fire", "flame"].iter().any(|k| name.contains(k));
-            if additive {
-                Blend::Additive
-            } else {
-                Blend::Alpha
-            }
-        }
+        _ => Blend::Alpha,
     }
 }
 

@@ -152,7 +152,7 @@ fn boids_aimed_at_a_pillar_never_enter_it() {
 }
 
 #[test]
-fn the_blend_key_overrides_the_name_and_its_absence_keeps_the_name_guess() {
+fn the_blend_comes_from_the_blend_key_and_is_alpha_without_one_whatever_the_name() {
     let particles = |name: &str, params: &str| Spawn {
         name: name.into(),
         kind: "particles".into(),
@@ -168,5 +168,5 @@ fn the_blend_key_overrides_the_name_and_its_absence_keeps_the_name_guess() {
     ];
     let w = world_from_spawns(&spawns, &[], LEVEL_MIN, LEVEL_MAX);
     let blends: Vec<Blend> = w.emitters.iter().map(|e| e.params.blend).collect();
-    assert_eq!(blends, [Blend::Alpha, Blend::Additive, Blend::Additive, Blend::Alpha]);
+    assert_eq!(blends, [Blend::Alpha, Blend::Additive, Blend::Alpha, Blend::Alpha]);
 }

@@ -77,7 +77,7 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
     position = [0, 0, 0]
     rotation = [0, 0, 0]            # Euler degrees as brushes
     params = { }                    # kind-specific, see SPAWN_PARAMS; particles may set
-                                    # blend = "alpha" | "additive" (default: from the name)
+                                    # blend = "alpha" | "additive" (default: alpha)
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ SPAWN_PARAMS = {
     "particles": {"rate_per_s", "lifetime_s", "speed", "spread_deg", "size", "color", "gravity", "blend"},
 }
 # Particle blend modes: "alpha" (soft, sorted back to front: spray, smoke) or "additive" (adds
-# light, order-free: sparks, fire). Absent: the runtime guesses from the emitter's name.
+# light, order-free: sparks, fire). Absent: alpha.
 PARTICLE_BLENDS = ("alpha", "additive")
 
 

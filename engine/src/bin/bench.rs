@@ -176,6 +176,9 @@ fn on(b: bool) -> &'static str {
 // The named scenarios live beside this file (a directory without main.rs is not a binary).
 #[path = "bench/scenarios.rs"]
 mod scenarios;
+/// The demo's camera flight (demo content the flythrough scenario replays).
+#[path = "demo/flight.rs"]
+mod flight;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();

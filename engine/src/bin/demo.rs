@@ -12,7 +12,13 @@ use engine::overlay::{self, FrameStats, Overlay};
 use engine::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::stats::{median, percentile};
-use engine::window::{self, WindowOptions};
+use engine::app::{self, WindowOptions};
+use game::DemoGame;
+
+#[path = "demo/flight.rs"]
+mod flight;
+#[path = "demo/game.rs"]
+mod game;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -53,7 +59,7 @@ emitter's parameters, applied to the running simulation at once. While the point
 overlay, the mouse works it, not the camera.";
 
 fn usage() -> String {
-    format!("{USAGE}\n\nIn the window: {}", window::KEYS)
+    format!("{USAGE}\n\nIn the window: {}", game::KEYS)
 }
 
 const DEFAULT_PACK: &str = "build/temple.pack";
@@ -92,7 +98,7 @@ fn parse_args() -> Result<Args, String> {
         screenshot: PathBuf::from("build/screenshots/demo.png"),
         screenshot_every: None,
         screens: Vec::new(),
-        flight: engine::flight::DEFAULT_SECONDS,
+        flight: flight::DEFAULT_SECONDS,
         screens_dir: PathBuf::from("build/screens"),
         rss_at: Vec::new(),
         overlay: false,
@@ -225,7 +231,7 @@ fn main() -> ExitCode {
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
-        match window::run(&packs, opts) {
+        match app::run(&packs[0], opts, &mut DemoGame::new(&packs)) {
             Ok(run) => {
                 println!("window closed after {} frames on {}", run.frames, run.device_name);
                 return validation_verdict(args.validation, run.validation_errors);
@@ -287,7 +293,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     renderer.animation = engine::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
-    let flight = (args.flight > 0.0).then(|| engine::flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
+    let flight = (args.flight > 0.0).then(|| flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
     let lighting = Lighting::for_pack(&pack.manifest);
     if !args.screens.is_empty() {
         std::fs::create_dir_all(&args.screens_dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", args.screens_dir.display()))?;

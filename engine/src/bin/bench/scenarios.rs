@@ -16,7 +16,7 @@
 use super::{boxes_pack, cube_grid, skinned_bench};
 use engine::animated::AnimatedScene;
 use engine::camera::Camera;
-use engine::flight::{self, Flight};
+use crate::flight::{self, Flight};
 use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
 use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::render::graph::FrameProfile;
@@ -505,7 +505,7 @@ fn read_pack(path: &Path) -> anyhow::Result<Pack> {
 }
 
 /// The demo level as `demo` shows it headless (animation, spawned boids and particles warmed up),
-/// seen along the headless demo's camera flight (`engine::flight`): the measured frames are
+/// seen along the headless demo's camera flight (`src/bin/demo/flight.rs`): the measured frames are
 /// spread over the whole loop (a time-lapse of the camera; the simulation still steps 1/60 s per
 /// frame), so the percentiles cover every view, ground level and above the roofs.
 fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::Result<Setup> {

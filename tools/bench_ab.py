@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Interleaved A/B of two `bench` binaries: scenario by scenario, A then B then B then A ... for
+`--rounds` rounds, so the machine's drift (another job, the clock, the cache) falls on both
+alike. Whichever binary ran first in a pair was faster in both of two back-to-back `--all` runs
+on the shared 2-core machine, which made those comparisons useless.
+
+    tools/bench_ab.py BENCH_A BENCH_B [--rounds 3] [--frames 20] [--warmup 3] [--scenarios a,b]
+
+Prints, per scenario, the median over rounds of each binary's p50 CPU frame time, the ratio
+B/A, the spread of the per-round ratios, and the counters that differ (exact counters: a
+difference means the two did different work). Exit status 0, 2 on bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_report import SCENARIO_ORDER  # noqa: E402
+
+
+def run(binary: Path, scenario: str, out: Path, frames: int, warmup: int) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    subprocess.run([str(binary), "--scenario", scenario, "--frames", str(frames), "--warmup", str(warmup), "--json-dir", str(out), "--quiet"],
+                   check=True, stdout=subprocess.DEVNULL)
+    return json.loads((out / f"{scenario}.json").read_text())
+
+
+def main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("a", type=Path)
+    p.add_argument("b", type=Path)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--frames", type=int, default=20)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--scenarios", default=",".join(SCENARIO_ORDER))
+    args = p.parse_args(argv)
+    for b in (args.a, args.b):
+        if not b.is_file():
+            print(f"bench_ab: {b}: no such binary", file=sys.stderr)
+            return 2
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for scenario in args.scenarios.split(","):
+            p50 = {"A": [], "B": []}
+            counters = {}
+            for r in range(args.rounds):
+                # ABBA: each binary runs first in half of the pairs.
+                order = ("A", "B") if r % 2 == 0 else ("B", "A")
+                for who in order:
+                    binary = args.a if who == "A" else args.b
+                    doc = run(binary, scenario, Path(tmp) / f"{who}{r}", args.frames, args.warmup)
+                    p50[who].append(doc["cpu_frame_ms"]["p50"])
+                    counters[who] = doc.get("counters", {})
+            ratios = [b / a for a, b in zip(p50["A"], p50["B"])]
+            ma, mb = statistics.median(p50["A"]), statistics.median(p50["B"])
+            differ = sorted(k for k in set(counters["A"]) | set(counters["B"]) if counters["A"].get(k) != counters["B"].get(k))
+            rows.append((scenario, ma, mb, mb / ma, min(ratios), max(ratios), ", ".join(differ) or "same"))
+            print(f"{scenario}: A {ma:.2f} ms, B {mb:.2f} ms, B/A {mb / ma:.3f} (rounds {min(ratios):.2f}-{max(ratios):.2f})", file=sys.stderr)
+    print(f"A = {args.a}, B = {args.b}; {args.rounds} rounds (ABBA), {args.frames} frames after {args.warmup} warm-up\n")
+    print("| scenario | A p50 ms (median) | B p50 ms (median) | B/A | per-round B/A | counters that differ |")
+    print("|---|---|---|---|---|---|")
+    for s, ma, mb, r, lo, hi, d in rows:
+        print(f"| {s} | {ma:.2f} | {mb:.2f} | {r:.3f}x | {lo:.2f}-{hi:.2f} | {d} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
