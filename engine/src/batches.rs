@@ -17,7 +17,7 @@ use glam::{Mat3, Mat4, Vec4};
 /// page of the instance's region), and the region's uv1 transform (location 14: scale xy,
 /// offset xy; zero without a region).
 #[repr(C)]
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct InstanceData {
     pub model: Mat4,
     pub normal_cols: [Vec4; 3],
@@ -141,6 +141,6 @@ impl Batcher {
     /// The stream as bytes, for the instance buffer.
     pub fn stream_bytes(&self) -> &[u8] {
         // SAFETY: InstanceData is repr(C) plain floats.
-        unsafe { std::slice::from_raw_parts(self.stream.as_ptr() as *const u8, self.stream.len() * INSTANCE_STRIDE as usize) }
+        bytemuck::cast_slice(&self.stream)
     }
 }

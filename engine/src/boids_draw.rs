@@ -68,7 +68,7 @@ impl BoidsDraw {
         let pipeline = create_pipeline(gpu, layout, depth_format)?;
         let verts = bird_mesh();
         // SAFETY: plain f32 arrays.
-        let bytes = unsafe { std::slice::from_raw_parts(verts.as_ptr() as *const u8, verts.len() * 24) };
+        let bytes: &[u8] = bytemuck::cast_slice(&verts);
         let mesh = Buffer::with_data(gpu, "bird mesh", bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
         Ok(BoidsDraw {
             layout,
@@ -129,7 +129,7 @@ impl BoidsDraw {
             return Ok(());
         }
         // SAFETY: Mat4 is 16 plain f32s, column-major, as the shader reads it.
-        let bytes = unsafe { std::slice::from_raw_parts(self.visible.as_ptr() as *const u8, needed * 64) };
+        let bytes: &[u8] = bytemuck::cast_slice(&self.visible[..needed]);
         self.instances.write(gpu, slot, bytes)
     }
 

@@ -127,7 +127,7 @@ impl ParticlePass {
             return Ok(());
         }
         // SAFETY: Billboard is repr(C) plain floats.
-        let bytes = unsafe { std::slice::from_raw_parts(self.billboards.as_ptr() as *const u8, needed * std::mem::size_of::<Billboard>()) };
+        let bytes: &[u8] = bytemuck::cast_slice(&self.billboards[..needed]);
         self.buffers.write(gpu, slot, bytes)
     }
 

@@ -99,7 +99,7 @@ pub struct SceneLayouts {
 /// What the mesh shaders read per material (set 2 binding 2, std430; `MaterialConstants` in
 /// shaders/mesh_draw.glsl): the emission and the UV transforms of the slots they sample.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct MaterialConstants {
     /// rgb: emitted radiance factor (multiplies the emissive texture).
     emission: [f32; 4],
@@ -301,8 +301,7 @@ impl GpuScene {
             // A buffer cannot be empty.
             constants.push(MaterialConstants::default());
         }
-        // SAFETY: MaterialConstants is repr(C) plain floats.
-        let constant_bytes = unsafe { std::slice::from_raw_parts(constants.as_ptr() as *const u8, std::mem::size_of_val(constants.as_slice())) };
+        let constant_bytes: &[u8] = bytemuck::cast_slice(&constants);
         let material_constants = Buffer::with_data(gpu, "material constants", constant_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
         // Lightmaps are read between their texels, never past the page's edge.
         let clamped = pack::Sampler { wrap_s: pack::Wrap::Clamp, wrap_t: pack::Wrap::Clamp, mipmap_filter: None, ..Default::default() };
@@ -407,22 +406,6 @@ fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
     out
 }
 
-/// An IEEE half float's value.
-pub fn f16_to_f32(h: u16) -> f32 {
-    let (sign, exp, frac) = ((h >> 15) as u32, ((h >> 10) & 0x1f) as u32, (h & 0x3ff) as u32);
-    let bits = match (exp, frac) {
-        (0, 0) => sign << 31,
-        (0, f) => {
-            // Subnormal: renormalise.
-            let shift = f.leading_zeros() - 21;
-            (sign << 31) | ((113 - shift) << 23) | (((f << shift) & 0x3ff) << 13)
-        }
-        (31, f) => (sign << 31) | (0xff << 23) | (f << 13),
-        (e, f) => (sign << 31) | ((e + 112) << 23) | (f << 13),
-    };
-    f32::from_bits(bits)
-}
-
 /// Sun and exposure for a baked pack: exposure k / L with k = 0.18 and L the log-average
 /// luminance (textures.md eq. 21.1) of the lightmaps' covered texels times an albedo of 0.5.
 fn baked_lighting(pack: &Pack) -> BakedLighting {
@@ -431,7 +414,7 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
     for &t in m.lightmap.as_ref().map_or(&[][..], |l| &l.textures[..]) {
         let tex = &m.textures[t as usize];
         for px in pack.bytes(tex.mips[0]).chunks_exact(8) {
-            let c: [f32; 3] = std::array::from_fn(|k| f16_to_f32(u16::from_le_bytes([px[2 * k], px[2 * k + 1]])));
+            let c: [f32; 3] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
             let lum = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
             if lum > 0.0 {
                 sum += (1e-4 + 0.5 * lum as f64).ln();

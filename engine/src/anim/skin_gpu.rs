@@ -17,7 +17,7 @@ const BINDINGS: u32 = 8;
 const GROUP: u32 = 64;
 
 #[repr(C)]
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
     vertex_count: u32,
     target_count: u32,
@@ -87,11 +87,6 @@ struct Slot {
     set: vk::DescriptorSet,
 }
 
-fn bytes_of<T: Copy>(v: &[T]) -> &[u8] {
-    // SAFETY: only used with plain-old-data element types (f32 arrays, u16 arrays, Vertex).
-    unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) }
-}
-
 /// A device-local storage buffer with `bytes`; an empty input gets 16 zero bytes, since unused
 /// bindings still need a buffer and copies of zero bytes are invalid.
 fn input(gpu: &Gpu, name: &str, bytes: &[u8]) -> Result<Buffer> {
@@ -118,10 +113,10 @@ impl SkinnedMesh {
         let weights: Vec<f32> = data.weights.iter().flatten().flatten().copied().collect();
         let inputs = vec![
             input(gpu, "skin bind vertices", pack::Vertex::slice_as_bytes(&data.vertices))?,
-            input(gpu, "skin joints", bytes_of(&joints))?,
-            input(gpu, "skin weights", bytes_of(&weights))?,
-            input(gpu, "morph positions", bytes_of(&data.morph_positions))?,
-            input(gpu, "morph normals", bytes_of(&data.morph_normals))?,
+            input(gpu, "skin joints", bytemuck::cast_slice::<_, u8>(&joints))?,
+            input(gpu, "skin weights", bytemuck::cast_slice::<_, u8>(&weights))?,
+            input(gpu, "morph positions", bytemuck::cast_slice::<_, u8>(&data.morph_positions))?,
+            input(gpu, "morph normals", bytemuck::cast_slice::<_, u8>(&data.morph_normals))?,
         ];
         let d = &gpu.device;
         let sizes = [vk::DescriptorPoolSize {
@@ -157,7 +152,7 @@ impl SkinnedMesh {
         let mut morph_weights = host("morph weights", targets * 4)?;
         morph_weights.mapped().fill(0);
         let mut joint_matrices = host("joint matrices", self.joint_capacity * 64)?;
-        joint_matrices.mapped().copy_from_slice(bytes_of(&vec![Mat4::IDENTITY; self.joint_capacity]));
+        joint_matrices.mapped().copy_from_slice(bytemuck::cast_slice::<_, u8>(&vec![Mat4::IDENTITY; self.joint_capacity][..]));
         let output = Buffer::new(
             gpu,
             "skinned vertices",
@@ -214,8 +209,8 @@ impl SkinnedMesh {
     pub fn update_slot(&mut self, slot: usize, joint_matrices: &[Mat4], morph_weights: &[f32]) {
         let (j, w) = (joint_matrices.len().min(self.joint_capacity), morph_weights.len().min(self.params.target_count as usize));
         let s = &mut self.slots[slot];
-        s.joint_matrices.mapped()[..j * 64].copy_from_slice(bytes_of(&joint_matrices[..j]));
-        s.morph_weights.mapped()[..w * 4].copy_from_slice(bytes_of(&morph_weights[..w]));
+        s.joint_matrices.mapped()[..j * 64].copy_from_slice(bytemuck::cast_slice::<_, u8>(&joint_matrices[..j]));
+        s.morph_weights.mapped()[..w * 4].copy_from_slice(bytemuck::cast_slice::<_, u8>(&morph_weights[..w]));
     }
 
     /// Record slot 0's dispatch and a barrier that makes the output readable as vertices, by
@@ -240,7 +235,7 @@ impl SkinnedMesh {
         let d = &gpu.device;
         unsafe {
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipe.layout, 0, &[self.slots[slot].set], &[]);
-            d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytes_of(std::slice::from_ref(&self.params)));
+            d.cmd_push_constants(cb, pipe.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::bytes_of(&self.params));
             d.cmd_dispatch(cb, self.params.vertex_count.div_ceil(GROUP), 1, 1);
         }
     }

@@ -302,7 +302,7 @@ pub struct ParticleCounters {
 
 /// One camera-facing quad: what the particle pass instances. 32 bytes.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Billboard {
     pub position: [f32; 3],
     pub size: f32,

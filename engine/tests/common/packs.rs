@@ -39,11 +39,9 @@ pub fn texture(b: &mut PackBuilder, name: &str, format: TextureFormat, [width, h
     b.manifest.textures.len() as u32 - 1
 }
 
-/// f32 -> IEEE half (round to nearest; normal range only, which these tests stay in).
+/// f32 -> IEEE half bits (the `half` crate, as the cooker's pages are written).
 pub fn half_bits(v: f32) -> u16 {
-    let b = v.to_bits();
-    let (sign, exp, man) = ((b >> 16) & 0x8000, ((b >> 23) & 0xff) as i32 - 127 + 15, b & 0x7f_ffff);
-    (sign | ((exp as u32) << 10) | ((man + 0x1000) >> 13)) as u16
+    half::f16::from_f32(v).to_bits()
 }
 
 /// A 2x2x2 probe grid over [-2, 2]^3 whose every probe sees the constant `radiance` (SH band 0
