@@ -13,6 +13,7 @@
 //! Parameters are plain structs with serde defaults: the level file and the overlay set them.
 
 pub mod boids;
+pub mod obstacles;
 pub mod clock;
 pub mod curve;
 pub mod grid;
@@ -20,6 +21,7 @@ pub mod integrate;
 pub mod lanes;
 pub mod particles;
 pub mod rng;
+pub mod urges;
 
 use boids::{Flock, NeighbourSearch};
 use clock::FixedClock;
