@@ -78,13 +78,16 @@ pub struct Batch {
     pub front: vk::FrontFace,
     /// Lit by the instances' lightmap regions (the submeshes with a lightmap block).
     pub lightmapped: bool,
+    /// The instances' material override (every submesh drawn with it).
+    pub material: Option<u32>,
 }
 
 /// Reused buffers of the batching, so a frame allocates nothing once warm.
 #[derive(Default)]
 pub struct Batcher {
-    /// (mesh, LOD, mirrored, lightmapped, draw), sorted when instancing.
-    order: Vec<(u32, u8, bool, bool, u32)>,
+    /// (mesh, LOD, mirrored, lightmapped, material override (u32::MAX: none), draw), sorted
+    /// when instancing.
+    order: Vec<(u32, u8, bool, bool, u32, u32)>,
     /// This frame's instance stream so far (copied to the GPU's instance buffer after recording).
     stream: Vec<InstanceData>,
 }
@@ -108,12 +111,12 @@ impl Batcher {
             let inst = &scene.instances[d.instance as usize];
             let mirrored = skinned(d).is_none() && inst.world.determinant() < 0.0;
             let lightmapped = mode.lightmaps && inst.lightmap.is_some();
-            self.order.push((inst.mesh, d.lod, mirrored, lightmapped, i as u32));
+            self.order.push((inst.mesh, d.lod, mirrored, lightmapped, inst.material.unwrap_or(u32::MAX), i as u32));
         }
         if mode.instancing {
             self.order.sort_unstable();
         }
-        for &(mesh, lod, mirrored, lightmapped, i) in &self.order {
+        for &(mesh, lod, mirrored, lightmapped, _, i) in &self.order {
             let d = draws[i as usize];
             let inst = &scene.instances[d.instance as usize];
             let (vertices, base_vertex, model) = match skinned(&d) {
@@ -128,12 +131,12 @@ impl Batcher {
             self.stream.push(InstanceData { model, normal_cols: [n.x_axis.extend(page), n.y_axis.extend(0.0), n.z_axis.extend(0.0)], lightmap: region });
             let joins = mode.instancing && out.last().is_some_and(|b: &Batch| {
                 let prev = &scene.instances[b.instance as usize];
-                prev.mesh == mesh && b.lod == lod && b.vertices == vertices && b.base_vertex == base_vertex && b.front == front && b.lightmapped == lightmapped && b.first_instance + b.count == first_instance
+                prev.mesh == mesh && b.lod == lod && b.vertices == vertices && b.base_vertex == base_vertex && b.front == front && b.lightmapped == lightmapped && b.material == inst.material && b.first_instance + b.count == first_instance
             });
             if joins {
                 out.last_mut().unwrap().count += 1;
             } else {
-                out.push(Batch { instance: d.instance, lod, first_instance, count: 1, vertices, base_vertex, front, lightmapped });
+                out.push(Batch { instance: d.instance, lod, first_instance, count: 1, vertices, base_vertex, front, lightmapped, material: inst.material });
             }
         }
     }

@@ -27,6 +27,8 @@ pub struct Instance {
     /// Where its lightmap lies in the atlas (`pack::Node::lightmap`): with baked pages it is lit
     /// by them rather than by the probes and the sun.
     pub lightmap: Option<pack::LightmapRegion>,
+    /// A material drawn instead of every submesh's own (None: the mesh's materials).
+    pub material: Option<u32>,
 }
 
 /// A spawned instance, valid until it is despawned.
@@ -43,6 +45,8 @@ pub enum InstanceError {
     Stale(InstanceId),
     #[error("mesh {mesh} does not exist (the scene has {meshes})")]
     NoMesh { mesh: u32, meshes: usize },
+    #[error("material {material} does not exist (the scene has {materials})")]
+    NoMaterial { material: u32, materials: usize },
 }
 
 /// A mesh's bounds in its own space: the box and the sphere around it.
@@ -243,7 +247,7 @@ mod tests {
     const UNIT: LocalBounds = LocalBounds { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) };
 
     fn at(x: f32, is_static: bool) -> Instance {
-        Instance { mesh: 0, world: Mat4::from_translation(Vec3::new(x, 0.0, 0.0)), scale: 1.0, is_static, lightmap: None }
+        Instance { mesh: 0, world: Mat4::from_translation(Vec3::new(x, 0.0, 0.0)), scale: 1.0, is_static, lightmap: None, material: None }
     }
 
     #[test]

@@ -48,6 +48,24 @@ pub struct GpuMaterial {
     pub descriptor_set: vk::DescriptorSet,
 }
 
+/// What `GpuScene::spawn` places.
+#[derive(Debug, Clone, Copy)]
+pub struct Spawn {
+    pub mesh: u32,
+    pub world: Mat4,
+    pub is_static: bool,
+    pub lightmap: Option<pack::LightmapRegion>,
+    /// Drawn with this material instead of the mesh's own.
+    pub material: Option<u32>,
+}
+
+impl Spawn {
+    /// A dynamic instance of `mesh` at `world` with the mesh's materials.
+    pub fn dynamic(mesh: u32, world: Mat4) -> Spawn {
+        Spawn { mesh, world, is_static: false, lightmap: None, material: None }
+    }
+}
+
 /// Baked light the renderer reads (pack lightmaps and probes), in physical units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BakedLighting {
@@ -281,7 +299,7 @@ impl GpuScene {
         for (n, w) in m.nodes.iter().zip(&world) {
             if let Some(mesh) = n.mesh {
                 let bounds = meshes[mesh as usize].local_bounds();
-                instances.spawn(Instance { mesh, world: *w, scale: max_scale(*w), is_static: n.is_static, lightmap: n.lightmap }, bounds);
+                instances.spawn(Instance { mesh, world: *w, scale: max_scale(*w), is_static: n.is_static, lightmap: n.lightmap, material: None }, bounds);
             }
         }
 
@@ -346,12 +364,15 @@ impl GpuScene {
         self.instances.world_bounds(|mesh| self.meshes[mesh as usize].local_bounds()).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)))
     }
 
-    /// Place mesh `mesh` at `world` (static: lightmapped when it has a region, and its shadow
-    /// cached; dynamic: lit by the probes and the sun). Culling and the shadow map see it from
-    /// the next frame.
-    pub fn spawn(&mut self, mesh: u32, world: Mat4, is_static: bool, lightmap: Option<pack::LightmapRegion>) -> Result<InstanceId, InstanceError> {
-        let bounds = self.meshes.get(mesh as usize).ok_or(InstanceError::NoMesh { mesh, meshes: self.meshes.len() })?.local_bounds();
-        Ok(self.instances.spawn(Instance { mesh, world, scale: max_scale(world), is_static, lightmap }, bounds))
+    /// Place an instance (static: lightmapped when it has a region, and its shadow cached;
+    /// dynamic: lit by the probes and the sun; a material override draws every submesh with
+    /// that material). Culling and the shadow map see it from the next frame.
+    pub fn spawn(&mut self, s: Spawn) -> Result<InstanceId, InstanceError> {
+        let bounds = self.meshes.get(s.mesh as usize).ok_or(InstanceError::NoMesh { mesh: s.mesh, meshes: self.meshes.len() })?.local_bounds();
+        if let Some(material) = s.material.filter(|&m| m as usize >= self.materials.len()) {
+            return Err(InstanceError::NoMaterial { material, materials: self.materials.len() });
+        }
+        Ok(self.instances.spawn(Instance { mesh: s.mesh, world: s.world, scale: max_scale(s.world), is_static: s.is_static, lightmap: s.lightmap, material: s.material }, bounds))
     }
 
     /// Move an instance (its culling sphere and the scene's bounds follow).

@@ -309,7 +309,7 @@ fn a_walking_character_stays_inside_the_shadow_maps_window_along_its_route() {
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
     // The floor: the character's own mesh as a static instance, shrunk to about 2 m at the origin.
     let mesh = scene.instances[anim.instances[0].instance as usize].mesh;
-    scene.spawn(mesh, Mat4::from_scale(Vec3::splat(0.3)), true, None).unwrap();
+    scene.spawn(engine::scene::Spawn { is_static: true, ..engine::scene::Spawn::dynamic(mesh, Mat4::from_scale(Vec3::splat(0.3))) }).unwrap();
     let walker = anim.instances[0].instance as usize;
     let towards_sun = Vec3::new(0.3, 1.0, 0.2).normalize();
     let mut worst = f32::NEG_INFINITY;

@@ -176,7 +176,8 @@ impl MeshKit {
                 }
                 d.cmd_set_front_face(cb, batch.front);
                 for sm in &lod.submeshes {
-                    let mat = &scene.materials[sm.material as usize];
+                    let material = batch.material.unwrap_or(sm.material);
+                    let mat = &scene.materials[material as usize];
                     // Instances with a lightmap region read it where the submesh has a block;
                     // the rest the probes and the sun.
                     let pipeline = pipeline_for(mat, batch.lightmapped && sm.lightmap_block.is_some());
@@ -185,7 +186,7 @@ impl MeshKit {
                         bound = pipeline;
                     }
                     let push = DrawPush {
-                        material: Vec4::new(mat.alpha_cutoff, sm.material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
+                        material: Vec4::new(mat.alpha_cutoff, material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
                         base_color: Vec4::from(mat.base_color),
                     };
                     d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, bytemuck::bytes_of(&push));
