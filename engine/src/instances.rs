@@ -75,6 +75,9 @@ pub struct Instances {
     spheres: Spheres,
     /// The slot of each dense instance (to fix a moved one's slot on despawn).
     owner: Vec<u32>,
+    /// Whether each dense instance's sphere was set from a pose (`set_sphere`) rather than
+    /// derived from its transform: the bounds then use the sphere, not the transformed box.
+    posed: Vec<bool>,
     slots: Vec<Slot>,
     free: Vec<u32>,
     /// Dense indices of the dynamic instances, kept up to date by spawn and despawn.
@@ -129,6 +132,7 @@ impl Instances {
         self.spheres.push(c, r);
         self.dense.push(instance);
         self.owner.push(slot);
+        self.posed.push(false);
         if instance.is_static {
             self.static_version += 1;
         } else {
@@ -168,13 +172,15 @@ impl Instances {
         }
         let (c, r) = bounds.sphere(world);
         self.set_sphere(i, c, r);
+        self.posed[i] = false;
         Ok(())
     }
 
-    /// Set dense instance `i`'s culling sphere (animation: from the pose).
+    /// Set dense instance `i`'s culling sphere from its pose (animation): the bounds follow it.
     pub fn set_sphere(&mut self, i: usize, centre: Vec3, radius: f32) {
         let s = &mut self.spheres;
         (s.x[i], s.y[i], s.z[i], s.r[i]) = (centre.x, centre.y, centre.z, radius);
+        self.posed[i] = true;
     }
 
     /// Remove `id`: the last dense instance takes its place (its handle stays valid).
@@ -190,6 +196,7 @@ impl Instances {
         }
         self.dense.swap_remove(i);
         self.owner.swap_remove(i);
+        self.posed.swap_remove(i);
         for v in [&mut self.spheres.x, &mut self.spheres.y, &mut self.spheres.z, &mut self.spheres.r] {
             v.swap_remove(i);
         }
@@ -205,9 +212,9 @@ impl Instances {
         Ok(())
     }
 
-    /// World bounds of every instance: static ones as their transformed boxes (cached until a
-    /// static change), dynamic ones as their current spheres (a walking, skinned character's
-    /// come from its pose). None without instances. `bounds(mesh)` gives a mesh's local bounds.
+    /// World bounds of every instance: their transformed boxes (the static ones cached until a
+    /// static change), except where a pose set the sphere (a walking, skinned character): that
+    /// sphere. None without instances. `bounds(mesh)` gives a mesh's local bounds.
     pub fn world_bounds(&self, bounds: impl Fn(u32) -> LocalBounds) -> Option<(Vec3, Vec3)> {
         let statics = match self.static_bounds.get() {
             Some((version, b)) if version == self.static_version => b,
@@ -221,9 +228,15 @@ impl Instances {
             }
         };
         let s = &self.spheres;
-        let dynamic = union(self.dense.iter().enumerate().filter(|(_, inst)| !inst.is_static).map(|(i, _)| {
-            let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
-            (c - Vec3::splat(r), c + Vec3::splat(r))
+        let dynamic = union(self.dynamic.iter().map(|&i| {
+            let (i, inst) = (i as usize, &self.dense[i as usize]);
+            if self.posed[i] {
+                let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
+                (c - Vec3::splat(r), c + Vec3::splat(r))
+            } else {
+                let l = bounds(inst.mesh);
+                crate::scene::transform_bounds(inst.world, l.min, l.max)
+            }
         }));
         union(statics.into_iter().chain(dynamic))
     }
@@ -272,19 +285,22 @@ mod tests {
     }
 
     #[test]
-    fn only_static_changes_bump_the_static_version_and_bounds_follow_the_dynamic_spheres() {
+    fn only_static_changes_bump_the_static_version_and_bounds_follow_moves_and_poses() {
         let mut s = Instances::default();
         let wall = s.spawn(at(0.0, true), UNIT);
         let walker = s.spawn(at(0.0, false), UNIT);
         let v = s.static_version();
         s.set_transform(walker, Mat4::from_translation(Vec3::new(50.0, 0.0, 0.0)), UNIT).unwrap();
         assert_eq!(s.static_version(), v, "moving a dynamic instance leaves static caches valid");
+        // The moved box at x = 50 widens the bounds.
+        assert_eq!(s.world_bounds(|_| UNIT).unwrap(), (Vec3::splat(-1.0), Vec3::new(51.0, 1.0, 1.0)));
+        // A pose's sphere (radius 2 at x = -10) counts as the sphere.
+        s.set_sphere(s.index_of(walker).unwrap() as usize, Vec3::new(-10.0, 0.0, 0.0), 2.0);
         let (lo, hi) = s.world_bounds(|_| UNIT).unwrap();
-        // The walker's sphere (radius sqrt 3) at x = 50 widens the bounds; the wall's box stays.
-        assert_eq!(lo, Vec3::new(-1.0, -(3f32.sqrt()), -(3f32.sqrt())));
-        assert!((hi.x - (50.0 + 3f32.sqrt())).abs() < 1e-5);
+        assert_eq!((lo, hi), (Vec3::new(-12.0, -2.0, -2.0), Vec3::new(1.0, 2.0, 2.0)));
+        assert_eq!(s.static_version(), v, "a pose is not a static change");
         s.set_transform(wall, Mat4::from_translation(Vec3::new(-5.0, 0.0, 0.0)), UNIT).unwrap();
         assert!(s.static_version() > v);
-        assert_eq!(s.world_bounds(|_| UNIT).unwrap().0.x, -6.0);
+        assert_eq!(s.world_bounds(|_| UNIT).unwrap().1.x, -4.0, "the wall's box moved to x = -5");
     }
 }

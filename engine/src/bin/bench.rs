@@ -498,8 +498,9 @@ mod skinned_bench {
         renderer.animation = Some(anim);
         // Every character at full detail, all in view: the pass skins every one each frame.
         renderer.visibility.lod_selection = false;
-        renderer.animate(&mut scene, 0.0);
+        // Framed on the placements, before a pose moves the bounds (as the skinned-64 scenario).
         let (lo, hi) = scene.bounds();
+        renderer.animate(&mut scene, 0.0);
         let camera = Camera::framing(lo - Vec3::splat(1.0), hi + Vec3::splat(1.0));
         let (mut gpu_ms, mut cpu_ms) = (Vec::new(), Vec::new());
         for _ in 0..args.frames {

@@ -176,8 +176,10 @@ fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow:
     }
     renderer.animation = Some(anim);
     renderer.visibility.lod_selection = false;
-    renderer.animate(&mut scene, 0.0);
+    // Framed on the characters' placements (their meshes' boxes), before a pose moves the
+    // bounds: the same view whatever the clips do.
     let (lo, hi) = scene.bounds();
+    renderer.animate(&mut scene, 0.0);
     let camera = Camera::framing(lo - Vec3::splat(1.0), hi + Vec3::splat(1.0));
     let mut content = Map::new();
     content.insert("characters".into(), json!(n));
