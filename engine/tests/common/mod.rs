@@ -6,6 +6,7 @@
 
 pub mod frames;
 pub mod packs;
+pub mod scenes;
 
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
 use pack::Pack;
