@@ -239,15 +239,10 @@ fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
     assert_clean(&gpu);
 }
 
-#[test]
-fn a_character_with_a_route_walks_it_facing_where_it_goes() {
-    // RiggedSimple as a level character: its nodes renamed "walker/..." (as the level cooker
-    // names a spawn's nodes) and a spawn with a route. The route replaces the spawn's placement:
-    // after 1 s at 2 m/s the character has moved 2 m towards the first waypoint (+X) and turned
-    // to face it, and the joint matrices (what the skinning pass uses) moved with it.
-    let Some(dir) = samples() else { return };
-    let gpu = gpu();
-    let mut pack = cook(&dir, "RiggedSimple");
+/// RiggedSimple as a level character: its nodes renamed "walker/..." (as the level cooker names a
+/// spawn's nodes) and a character spawn walking `route` at 2 m/s.
+fn walker_pack(dir: &std::path::Path, route: serde_json::Value) -> Pack {
+    let mut pack = cook(dir, "RiggedSimple");
     for n in &mut pack.manifest.nodes {
         n.name = format!("walker/{}", n.name);
     }
@@ -256,8 +251,20 @@ fn a_character_with_a_route_walks_it_facing_where_it_goes() {
         kind: "character".into(),
         position: [0.0; 3],
         rotation: [0.0, 0.0, 0.0, 1.0],
-        params: serde_json::json!({ "route": [[10.0, 0.0, 0.0], [10.0, 0.0, 10.0]], "walk_speed": 2.0 }),
+        params: serde_json::json!({ "route": route, "walk_speed": 2.0 }),
     });
+    pack
+}
+
+#[test]
+fn a_character_with_a_route_walks_it_facing_where_it_goes() {
+    // RiggedSimple as a level character: its nodes renamed "walker/..." (as the level cooker
+    // names a spawn's nodes) and a spawn with a route. The route replaces the spawn's placement:
+    // after 1 s at 2 m/s the character has moved 2 m towards the first waypoint (+X) and turned
+    // to face it, and the joint matrices (what the skinning pass uses) moved with it.
+    let Some(dir) = samples() else { return };
+    let gpu = gpu();
+    let pack = walker_pack(&dir, serde_json::json!([[10.0, 0.0, 0.0], [10.0, 0.0, 10.0]]));
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
@@ -293,17 +300,7 @@ fn a_walking_character_stays_inside_the_shadow_maps_window_along_its_route() {
     // whole sphere projects inside the map's window and depth range.
     let Some(dir) = samples() else { return };
     let gpu = gpu();
-    let mut pack = cook(&dir, "RiggedSimple");
-    for n in &mut pack.manifest.nodes {
-        n.name = format!("walker/{}", n.name);
-    }
-    pack.manifest.spawns.push(pack::Spawn {
-        name: "walker".into(),
-        kind: "character".into(),
-        position: [0.0; 3],
-        rotation: [0.0, 0.0, 0.0, 1.0],
-        params: serde_json::json!({ "route": [[10.0, 0.0, 0.0], [10.0, 0.0, 10.0], [0.0, 0.0, 10.0]], "walk_speed": 2.0 }),
-    });
+    let pack = walker_pack(&dir, serde_json::json!([[10.0, 0.0, 0.0], [10.0, 0.0, 10.0], [0.0, 0.0, 10.0]]));
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
