@@ -97,9 +97,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--ray-address needs --executor ray")
     bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
                                  seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
+    executor = args.executor
+    if executor == "ray":
+        # A process that exits on Ctrl-C leaves its tasks to the cluster (see RayExecutor).
+        from asset_pipeline.executor import RayExecutor
+        executor = RayExecutor(args.ray_address, cancel_on_interrupt=False)
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
-                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=args.executor, ray_address=args.ray_address,
+                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
                             allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
@@ -109,11 +114,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("cook: interrupted; nothing written", file=sys.stderr)
         if "ray" in sys.modules:
-            # The outputs are already as they were (the pipeline's clean-up ran). Leave now: Ray
-            # 2.60's core worker can abort the process on its way out when a reply for a task we
-            # just cancelled arrives late ("Tried to complete task that was not pending"), which
-            # would turn this clean exit into a crash with a C++ trace. The cluster drops a dead
-            # driver's tasks on its own.
+            # The outputs are already as they were (the pipeline's clean-up ran). Leave now, the
+            # tasks still pending (not cancelled: see RayExecutor): the cluster drops a dead
+            # driver's tasks on its own, and Ray's exit path is not needed.
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(130)

@@ -113,13 +113,18 @@ class RayExecutor:
     """Submits work as Ray tasks on the cluster at `address` (the pipeline connects before the
     first stage of a cook that is not up to date).
 
-    ``submitted`` counts the tasks submitted, ``cancelled`` those cancelled by an interrupt."""
+    ``submitted`` counts the tasks submitted, ``cancelled`` those cancelled by an interrupt.
+    ``cancel_on_interrupt=False`` (the CLI, which exits right after) leaves the tasks pending on
+    Ctrl-C instead: the cluster drops a dead driver's tasks by itself, and cancelling them races
+    Ray 2.60's core worker, which can abort the whole process when a cancelled task's reply
+    arrives late ("Tried to complete task that was not pending"; a fresh-clone run hit it)."""
 
     name = "ray"
 
-    def __init__(self, address: str | None = None, max_retries: int = 3):
+    def __init__(self, address: str | None = None, max_retries: int = 3, cancel_on_interrupt: bool = True):
         self.address = address
         self.max_retries = max_retries
+        self.cancel_on_interrupt = cancel_on_interrupt
         self.submitted = 0
         self.cancelled = 0
         self._ray = None
@@ -190,6 +195,8 @@ class RayExecutor:
                         on_done(i, results[i])
             return results
         except BaseException as e:
+            if isinstance(e, KeyboardInterrupt) and not self.cancel_on_interrupt:
+                raise
             for ref in pending:
                 try:
                     ray.cancel(ref)
