@@ -62,6 +62,9 @@ impl LocalBounds {
     }
 }
 
+/// A world-space box (min, max).
+type Bounds = (Vec3, Vec3);
+
 #[derive(Debug, Clone, Copy)]
 struct Slot {
     generation: u32,
@@ -84,7 +87,7 @@ pub struct Instances {
     dynamic: Vec<u32>,
     static_version: u64,
     /// World bounds of the static instances (transformed boxes), for `static_version`.
-    static_bounds: Cell<Option<(u64, Option<(Vec3, Vec3)>)>>,
+    static_bounds: Cell<Option<(u64, Option<Bounds>)>>,
 }
 
 impl Instances {

@@ -170,14 +170,12 @@ impl ApplicationHandler for App<'_> {
                 s.looking = state == ElementState::Pressed && !consumed;
                 s.last_cursor = None;
             }
-            WindowEvent::CursorMoved { position, .. } => {
-                if s.looking {
-                    if let Some((x, y)) = s.last_cursor {
-                        s.input.look.0 += position.x - x;
-                        s.input.look.1 += position.y - y;
-                    }
-                    s.last_cursor = Some((position.x, position.y));
+            WindowEvent::CursorMoved { position, .. } if s.looking => {
+                if let Some((x, y)) = s.last_cursor {
+                    s.input.look.0 += position.x - x;
+                    s.input.look.1 += position.y - y;
                 }
+                s.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::RedrawRequested => {
                 if let Err(e) = s.frame(&mut *self.game) {
