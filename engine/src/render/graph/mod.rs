@@ -87,10 +87,6 @@ impl Io {
         self.side_effects = true;
         self
     }
-
-    fn is_empty(&self) -> bool {
-        self.uses.is_empty() && !self.side_effects
-    }
 }
 
 /// What a pass records with: the command buffer, the frame slot and the frame's images.
@@ -200,23 +196,24 @@ impl Graph {
         }
         self.make_transients(gpu, &ios, output.extent, &mut images)?;
 
-        let uses: Vec<PassUses> = passes.iter().zip(&ios).map(|(p, io)| PassUses { name: p.name(), uses: io.uses.clone(), side_effects: io.side_effects }).collect();
+        // The declarations move into the plan's form (no copy); the images stay in `ios`.
+        let uses: Vec<PassUses> = passes.iter().zip(&mut ios).map(|(p, io)| PassUses { name: p.name(), uses: std::mem::take(&mut io.uses), side_effects: io.side_effects }).collect();
         // The output is always what a frame is for.
         let exports: Vec<ResourceId> = std::iter::once(OUTPUT).chain(finals.iter().map(|f| f.0)).collect();
         let live = plan::live_passes(&uses, &exports);
         let ran = &mut self.ran[slot];
         ran.clear();
         self.profiler.begin_frame(gpu, cb, slot);
-        for ((pass, io), live) in passes.iter_mut().zip(&ios).zip(live) {
-            if !live || io.is_empty() {
+        for ((pass, decl), live) in passes.iter_mut().zip(&uses).zip(live) {
+            if !live || decl.is_empty() {
                 continue;
             }
-            for u in &io.uses {
+            for u in &decl.uses {
                 if !images.contains_key(&u.resource) && u.access.is_image() {
                     bail!("pass '{}' uses image '{}', which no pass creates or imports", pass.name(), u.resource.0);
                 }
             }
-            let barriers = self.states.plan(&io.uses);
+            let barriers = self.states.plan(&decl.uses);
             emit(gpu, cb, &barriers, &images);
             let query = self.profiler.begin_pass(gpu, cb, slot, ran.len(), pass.counts_invocations());
             pass.record(cx, &Rec { gpu, cb, slot, images: &images })?;

@@ -38,6 +38,13 @@ pub struct PassUses {
     pub side_effects: bool,
 }
 
+impl PassUses {
+    /// Declares nothing: the pass is skipped this frame.
+    pub fn is_empty(&self) -> bool {
+        self.uses.is_empty() && !self.side_effects
+    }
+}
+
 /// A resource's synchronisation state between uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct State {
