@@ -41,6 +41,7 @@ $(VENV)/.cooker-built: $(COOKER_SOURCES) tools/requirements-dev.txt tools/constr
 cook: cooker
 	@mkdir -p build/content
 	$(PY) content/characters/make_creature.py content/levels/characters/golem.gltf
+	$(PY) content/birds/make_dove.py content/levels/birds/dove.gltf
 	$(VENV)/bin/cook content/levels/temple.toml -o $(LEVEL_PACK)
 	$(VENV)/bin/cook content/levels/characters/golem.gltf -o $(CHARACTER_PACK)
 	$(PY) content/demo/make_scene.py build/content/demo.gltf

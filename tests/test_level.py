@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from asset_pipeline import CookError, ir
+from asset_pipeline import CookError, _core, ir
 from asset_pipeline.csg import build_level
 from asset_pipeline.level import load_level
 from conftest import COOK
@@ -112,9 +114,12 @@ def temple() -> ir.Scene:
 
 def test_temple_meshes_are_closed_and_outward(temple):
     assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
-    # The character spawns' golems are the only dynamic meshes, each skinned by its own skin.
+    # The character spawns' golems, each skinned by its own skin, and the flock's bird (drawn by
+    # the boids pass, no node) are the only dynamic meshes.
     static = set(temple.static_meshes())
-    assert [m.name for i, m in enumerate(temple.meshes) if i not in static] == ["golem", "golem"]
+    assert [m.name for i, m in enumerate(temple.meshes) if i not in static] == ["golem", "golem", "dove"]
+    doves = next(s for s in temple.spawns if s.kind == "boids")
+    assert temple.meshes[doves.params["mesh"]].name == "dove"
     assert [s.name for s in temple.skins] == ["priest/golem", "pilgrim/golem"]
     for m in (temple.meshes[i] for i in static):
         check_closed(m.base, m.name)
@@ -757,6 +762,61 @@ def test_error_character_without_the_named_clip_or_a_skin(tmp_path):
     with pytest.raises(CookError) as e:
         build_level(load_level(tmp_path / "level.toml"), import_gltf=lambda p: unskinned)
     assert "spawns[0].params.asset: character 'priest': 'golem.gltf' has no skin" in str(e.value)
+
+
+# ---- boids spawns bring their bird mesh in ------------------------------------------------
+
+FLOCK = ONE_BOX + """
+
+    [[spawns]]
+    name = "flock"
+    kind = "boids"
+    position = [0, 5, 0]
+    params = { count = 8, asset = "birds/dove.gltf" }
+"""
+
+
+def test_boids_spawn_packs_its_bird_mesh_and_names_it(tmp_path):
+    # The demo's own bird, written by its generator and imported by the real glTF importer.
+    r = subprocess.run([sys.executable, str(REPO / "content" / "birds" / "make_dove.py"), str(tmp_path / "birds" / "dove.gltf")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    scene = build(tmp_path, FLOCK)
+    mesh = scene.spawns[0].params["mesh"]
+    assert scene.meshes[mesh].name == "dove" and scene.meshes[mesh].base.triangle_count == 11
+    # No node draws it (the flock does), and it is not baked into the lightmaps.
+    assert all(n.mesh != mesh for n in scene.nodes) and mesh not in scene.static_meshes()
+    feathers = scene.materials[int(scene.meshes[mesh].base.materials[0])]
+    assert feathers.name == "dove feathers" and feathers.double_sided
+    assert str(tmp_path / "birds" / "dove.gltf") in scene.files
+    # The cooked pack names the mesh in the spawn's parameters, as authored plus `mesh`.
+    pack = tmp_path / "flock.pack"
+    r = subprocess.run([str(COOK), str(tmp_path / "level.toml"), "-o", str(pack), "--no-bake"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(_core.read_pack_manifest(pack))
+    flock = doc["spawns"][0]
+    assert flock["params"] == {"count": 8, "asset": "birds/dove.gltf", "mesh": flock["params"]["mesh"]}
+    assert doc["meshes"][flock["params"]["mesh"]]["name"] == "dove"
+
+
+def test_error_boids_without_a_usable_bird(tmp_path):
+    msg = error_of(tmp_path, FLOCK.replace(', asset = "birds/dove.gltf"', ""))
+    assert f":{line_of(tmp_path, 'count = 8')}: spawns[0].params: boids 'flock': no asset" in msg
+    msg = error_of(tmp_path, FLOCK, build_too=True)
+    assert "spawns[0].params.asset: boids 'flock': asset 'birds/dove.gltf' not found" in msg
+    (tmp_path / "birds").mkdir()
+    (tmp_path / "birds" / "dove.gltf").write_text("{}")
+    spec = load_level(write(tmp_path, HEADER + textwrap.dedent(FLOCK)))
+    two = skinned_prop()
+    two.skins, two.clips = [], []
+    two.meshes.append(two.meshes[0])
+    two.nodes.append(ir.Node("second", mesh=1))
+    with pytest.raises(CookError) as e:
+        build_level(spec, import_gltf=lambda p: two)
+    assert "spawns[0].params.asset: boids 'flock': 'birds/dove.gltf' must hold one mesh (the bird), it has 2" in str(e.value)
+    with pytest.raises(CookError) as e:
+        build_level(spec, import_gltf=lambda p: skinned_prop())
+    assert "boids 'flock': 'birds/dove.gltf' is skinned or morphed" in str(e.value)
 
 
 def test_character_route_is_read_as_waypoints_and_bad_routes_are_errors(tmp_path):

@@ -1,62 +1,47 @@
-//! Boids drawn as instanced meshes (issue 8): a small procedural bird, one instance per boid
-//! oriented by `sim::boids::boid_rotation` (heading plus banking roll), frustum-culled with the
-//! same test as the scene's instances (their counts go into the frame's cull counters).
+//! Boids drawn as instanced meshes (issue 8): every bird of a flock is one instance of the mesh
+//! its spawn names (the cooker packs the boids spawn's `asset` and sets its `mesh`), oriented by
+//! `sim::boids::boid_rotation` (heading plus banking roll), frustum-culled with the same test as
+//! the scene's instances (their counts go into the frame's cull counters).
 //!
 //! Drawn in a rendering instance of its own right after the opaque shading pass, depth-tested
-//! and depth-writing (so the particle pass after it is hidden behind birds too). The birds are
-//! not in the depth pre-pass or the shadow map: they are a few hundred triangles, so the
-//! pre-pass would save nothing, and a dove's shadow on the temple floor is a few pixels.
+//! and depth-writing (so the particle pass after it is hidden behind birds too), from the scene's
+//! vertex and index buffers (LOD 0: a bird covers a few pixels and has a few triangles), each
+//! submesh in its material's base colour. The birds are not in the depth pre-pass or the shadow
+//! map: they are a few hundred triangles, so the pre-pass would save nothing, and a bird's shadow
+//! on the ground is a few pixels.
 
 use crate::cull::{Class, CullCounts, Frustum};
-use crate::gpu::{opaque, Buffer, Gpu, GraphicsPipeline, SlotBuffers};
+use crate::gpu::{opaque, Gpu, GraphicsPipeline, SlotBuffers};
 use crate::render::graph::{ImageRef, Rec};
 use crate::render::mesh_draw::depth_attachment;
+use crate::scene::GpuScene;
 use crate::shaders;
 use crate::sim::boids::{boid_rotation, Flock};
 use crate::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 
-/// Bounding radius of the bird mesh at scale 1 (its wing tips are the farthest points).
-const MESH_RADIUS: f32 = 0.47;
+/// One flock's birds in the instance list: drawn with scene mesh `mesh`.
+#[derive(Debug, Clone, Copy)]
+struct Group {
+    mesh: u32,
+    first: u32,
+    count: u32,
+}
 
 pub struct BoidsDraw {
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
-    mesh: Buffer,
-    vertex_count: u32,
     /// Instance buffers (model matrices) per frame slot, with their capacity in instances.
     instances: SlotBuffers,
-    /// Every boid's model matrix this frame (`fill`), and the ones in view (`cull`).
+    /// Every drawn boid's model matrix this frame (`fill`), and the ones in view (`cull`).
     pub boids: Vec<Mat4>,
+    /// The flock each of `boids` belongs to, as runs (a flock's birds are consecutive), and the
+    /// bounding radius of its mesh.
+    groups: Vec<(Group, f32)>,
     visible: Vec<Mat4>,
-    /// Uniform scale of the bird mesh (1: a 0.55 m long dove with a 0.9 m span).
-    pub scale: f32,
-}
-
-/// The bird, facing +Z with up +Y (what `boid_rotation` expects): a flat-shaded diamond body,
-/// two swept wings raised a little at the tips, and a tail fan. Non-indexed (position, normal).
-pub fn bird_mesh() -> Vec<[f32; 6]> {
-    let v = Vec3::new;
-    let (nose, tail, top, bottom, left, right) = (v(0.0, 0.0, 0.3), v(0.0, 0.0, -0.2), v(0.0, 0.06, 0.0), v(0.0, -0.05, 0.0), v(-0.06, 0.0, 0.0), v(0.06, 0.0, 0.0));
-    let mut tris = Vec::new();
-    for (a, b) in [(right, top), (top, left), (left, bottom), (bottom, right)] {
-        tris.push([nose, a, b]);
-        tris.push([tail, b, a]);
-    }
-    // Wings (one triangle each; the shader lights both sides) and the tail fan.
-    tris.push([v(0.04, 0.0, 0.1), v(0.45, 0.06, -0.08), v(0.04, 0.0, -0.1)]);
-    tris.push([v(-0.04, 0.0, 0.1), v(-0.04, 0.0, -0.1), v(-0.45, 0.06, -0.08)]);
-    tris.push([v(0.0, 0.0, -0.15), v(-0.1, 0.0, -0.25), v(0.1, 0.0, -0.25)]);
-    let mut out = Vec::new();
-    for [a, b, c] in tris {
-        let n = (b - a).cross(c - a).normalize_or(Vec3::Y);
-        for p in [a, b, c] {
-            out.push([p.x, p.y, p.z, n.x, n.y, n.z]);
-        }
-    }
-    out
+    visible_groups: Vec<Group>,
 }
 
 impl BoidsDraw {
@@ -64,33 +49,42 @@ impl BoidsDraw {
     pub fn new(gpu: &Gpu, frame_layout: vk::DescriptorSetLayout, depth_format: vk::Format, frames_in_flight: usize) -> Result<BoidsDraw> {
         let d = &gpu.device;
         let set_layouts = [frame_layout];
-        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts), None)? };
-        let pipeline = create_pipeline(gpu, layout, depth_format)?;
-        let verts = bird_mesh();
-        // SAFETY: plain f32 arrays.
-        let bytes: &[u8] = bytemuck::cast_slice(&verts);
-        let mesh = Buffer::with_data(gpu, "bird mesh", bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
+        // The submesh's base colour (linear RGBA) for the fragment shader.
+        let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(16)];
+        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
+        let pipeline = match create_pipeline(gpu, layout, depth_format) {
+            Ok(p) => p,
+            Err(e) => {
+                unsafe { d.destroy_pipeline_layout(layout, None) };
+                return Err(e);
+            }
+        };
         Ok(BoidsDraw {
             layout,
             pipeline,
-            mesh,
-            vertex_count: verts.len() as u32,
             instances: SlotBuffers::new("boid instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 64 * 64),
             boids: Vec::new(),
+            groups: Vec::new(),
             visible: Vec::new(),
-            scale: 1.0,
+            visible_groups: Vec::new(),
         })
     }
 
-    /// Replace this frame's instances with every boid of `flocks`.
-    pub fn fill(&mut self, flocks: &[Flock]) {
+    /// Replace this frame's instances with every boid of `flocks`, flock `i` drawn with
+    /// `scene`'s mesh `meshes[i]`. A flock without a mesh (None, or an index the scene does not
+    /// have) is simulated but not drawn.
+    pub fn fill(&mut self, scene: &GpuScene, flocks: &[Flock], meshes: &[Option<u32>]) {
         self.boids.clear();
-        for f in flocks {
+        self.groups.clear();
+        for (f, mesh) in flocks.iter().zip(meshes) {
+            let Some((mesh, m)) = mesh.and_then(|i| Some((i, scene.meshes.get(i as usize)?))) else { continue };
+            let radius = m.origin_radius;
             let s = f.state();
+            let first = self.boids.len() as u32;
             for i in 0..s.len() {
-                self.boids
-                    .push(Mat4::from_scale_rotation_translation(Vec3::splat(self.scale), boid_rotation(s.velocity(i), s.roll[i]), s.position(i)));
+                self.boids.push(Mat4::from_rotation_translation(boid_rotation(s.velocity(i), s.roll[i]), s.position(i)));
             }
+            self.groups.push((Group { mesh, first, count: s.len() as u32 }, radius));
         }
     }
 
@@ -98,20 +92,27 @@ impl BoidsDraw {
     /// returns the counts to add to the frame's.
     pub fn cull(&mut self, view_proj: Mat4) -> CullCounts {
         let frustum = Frustum::from_view_proj(view_proj);
-        let radius = MESH_RADIUS * self.scale;
         let mut counts = CullCounts {
             tested: self.boids.len() as u32,
             ..Default::default()
         };
         self.visible.clear();
-        for m in &self.boids {
-            match frustum.classify_sphere(m.w_axis.truncate(), radius) {
-                Class::Outside => counts.culled += 1,
-                class => {
-                    counts.visible += 1;
-                    counts.inside += (class == Class::Inside) as u32;
-                    self.visible.push(*m);
+        self.visible_groups.clear();
+        for &(g, radius) in &self.groups {
+            let first = self.visible.len() as u32;
+            for m in &self.boids[g.first as usize..(g.first + g.count) as usize] {
+                match frustum.classify_sphere(m.w_axis.truncate(), radius) {
+                    Class::Outside => counts.culled += 1,
+                    class => {
+                        counts.visible += 1;
+                        counts.inside += (class == Class::Inside) as u32;
+                        self.visible.push(*m);
+                    }
                 }
+            }
+            let count = self.visible.len() as u32 - first;
+            if count > 0 {
+                self.visible_groups.push(Group { mesh: g.mesh, first, count });
             }
         }
         counts
@@ -124,18 +125,17 @@ impl BoidsDraw {
 
     /// Copy the visible boids into `slot`'s instance buffer; the GPU must be done with that slot.
     pub fn upload(&mut self, gpu: &Gpu, slot: usize) -> Result<()> {
-        let needed = self.visible.len();
-        if needed == 0 {
+        if self.visible.is_empty() {
             return Ok(());
         }
-        // SAFETY: Mat4 is 16 plain f32s, column-major, as the shader reads it.
-        let bytes: &[u8] = bytemuck::cast_slice(&self.visible[..needed]);
-        self.instances.write(gpu, slot, bytes)
+        // Mat4 is 16 plain f32s, column-major, as the shader reads it.
+        self.instances.write(gpu, slot, bytemuck::cast_slice(&self.visible))
     }
 
-    /// Draw the uploaded visible boids into `hdr` over `depth` (loaded and stored). Call only
-    /// with boids in view: lavapipe 22.3 crashes on a depth-writing rendering without draws.
-    pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
+    /// Draw the uploaded visible boids with `scene`'s meshes into `hdr` over `depth` (loaded and
+    /// stored). Call only with boids in view: lavapipe 22.3 crashes on a depth-writing rendering
+    /// without draws.
+    pub fn record(&self, rec: &Rec, scene: &GpuScene, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
         let Some(buffer) = self.instances.get(rec.slot) else { return };
         let color_attachment = [vk::RenderingAttachmentInfo::default()
@@ -151,15 +151,22 @@ impl BoidsDraw {
             rec.set_viewport(hdr.extent);
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
-            d.cmd_bind_vertex_buffers(cb, 0, &[self.mesh.buffer, buffer.buffer], &[0, 0]);
-            d.cmd_draw(cb, self.vertex_count, self.visible.len() as u32, 0, 0);
+            d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, buffer.buffer], &[0, 0]);
+            d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
+            for g in &self.visible_groups {
+                let lod = &scene.meshes[g.mesh as usize].lods[0];
+                for sub in &lod.submeshes {
+                    let colour = scene.materials.get(sub.material as usize).map_or([1.0; 4], |m| m.base_color);
+                    d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::FRAGMENT, 0, bytemuck::bytes_of(&colour));
+                    d.cmd_draw_indexed(cb, sub.index_count, g.count, lod.first_index + sub.first_index, lod.base_vertex, g.first);
+                }
+            }
             d.cmd_end_rendering(cb);
         }
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.instances.destroy(gpu);
-        self.mesh.destroy(gpu);
         unsafe {
             gpu.device.destroy_pipeline(self.pipeline, None);
             gpu.device.destroy_pipeline_layout(self.layout, None);
@@ -167,13 +174,14 @@ impl BoidsDraw {
     }
 }
 
-/// The bird pipeline: mesh vertices (binding 0) and per-instance model matrices (binding 1),
-/// no culling (single-triangle wings), reversed-Z depth test and write.
+/// The bird pipeline: the scene's vertices (binding 0, position and normal of `pack::Vertex`)
+/// and per-instance model matrices (binding 1), no culling (single-triangle wings), reversed-Z
+/// depth test and write.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format) -> Result<vk::Pipeline> {
     let bindings = [
         vk::VertexInputBindingDescription {
             binding: 0,
-            stride: 24,
+            stride: pack::VERTEX_STRIDE as u32,
             input_rate: vk::VertexInputRate::VERTEX,
         },
         vk::VertexInputBindingDescription {

@@ -30,6 +30,9 @@ pub struct GpuMesh {
     pub bounds_max: Vec3,
     /// `lods[i].error` for every LOD (what LOD selection reads, without gathering it per draw).
     pub errors: Vec<f32>,
+    /// The farthest any full-detail vertex lies from the mesh's origin: the bounding sphere of
+    /// an instance placed by rotation and translation only (the boids' birds).
+    pub origin_radius: f32,
 }
 
 impl GpuMesh {
@@ -213,8 +216,12 @@ impl GpuScene {
                 vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
                 index_bytes.extend_from_slice(pack.bytes(lod.indices));
             }
+            let origin_radius = mesh.lods.first().map_or(0.0, |lod| {
+                pack.bytes(lod.vertices).chunks_exact(pack::VERTEX_STRIDE).map(|v| Vec3::from(bytemuck::pod_read_unaligned::<[f32; 3]>(&v[..12])).length()).fold(0.0, f32::max)
+            });
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),
+                origin_radius,
                 lods,
                 bounds_min: Vec3::from(mesh.bounds_min),
                 bounds_max: Vec3::from(mesh.bounds_max),

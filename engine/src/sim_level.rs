@@ -7,6 +7,7 @@
 
 use crate::camera::Camera;
 use crate::renderer::Renderer;
+use crate::scene::GpuScene;
 use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState, Pillar};
 use crate::sim::clock::{ClockParams, FixedClock};
 use crate::sim::curve::{Curve, Gradient};
@@ -85,6 +86,12 @@ pub fn emitter_for(spawn: &pack::Spawn, ground_y: f32) -> EmitterParams {
     }
 }
 
+/// A boids spawn's mesh: the `mesh` parameter the cooker writes (the pack checks it names one
+/// of its meshes), None when absent.
+pub fn mesh_of(spawn: &pack::Spawn) -> Option<u32> {
+    spawn.params.get("mesh").and_then(|v| v.as_u64()).and_then(|m| u32::try_from(m).ok())
+}
+
 /// The pack's pillars (the cooker reads them from the level's vertical cylinder brushes) as the
 /// flocks' obstacles.
 pub fn pillars_of(pillars: &[pack::Pillar]) -> Vec<Pillar> {
@@ -147,6 +154,7 @@ pub fn world_from_spawns(spawns: &[pack::Spawn], pillars: &[pack::Pillar], level
                 };
                 world.flocks.push(flock_for(s, bounds, pillars.clone()));
                 world.flock_names.push(s.name.clone());
+                world.flock_meshes.push(mesh_of(s));
             }
             _ => {}
         }
@@ -165,8 +173,8 @@ pub fn warm_up(world: &mut World) {
 /// Hand the world's current state to the renderer's particle and boid passes for `camera`;
 /// call after `World::update` and before `Renderer::record`. Particles are extrapolated by the
 /// clock's leftover fraction of a step, so they move smoothly between fixed steps.
-pub fn prepare_frame(world: &World, renderer: &mut Renderer, camera: &Camera) {
+pub fn prepare_frame(world: &World, renderer: &mut Renderer, scene: &GpuScene, camera: &Camera) {
     let extrapolate_s = world.clock.alpha() * world.clock.dt();
     renderer.particles.fill(&world.emitters, camera.position, camera.forward(), extrapolate_s);
-    renderer.boids.fill(&world.flocks);
+    renderer.boids.fill(scene, &world.flocks, &world.flock_meshes);
 }

@@ -6,14 +6,34 @@ use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use engine::sim::boids::{BoidParams, Flock, FlockState};
-use glam::Vec3;
-use pack::Material;
+use glam::{Mat4, Vec3};
+use pack::{Material, Pack, PackBuilder};
 
 mod common;
-use common::{assert_clean, gpu, square_pack};
+use common::packs::{node, push_mesh, quad_vertices};
+use common::scenes::cube_vertices;
+use common::{assert_clean, gpu};
 
 const W: u32 = 64;
 const H: u32 = 48;
+
+/// Mesh 0: a 2 m square at z = 50 (behind the camera), the scene's one instance. Mesh 1: the
+/// bird, a 0.3 m cube with no node (the cooker packs a boids spawn's asset that way).
+fn pack_with_a_bird() -> Pack {
+    let mut b = PackBuilder::new("generated", "test");
+    b.manifest.materials.push(Material::default());
+    let (quad, quad_idx) = quad_vertices();
+    let square = push_mesh(&mut b, "quad", &quad, &quad_idx, None);
+    b.manifest.nodes.push(node("quad", Mat4::from_scale_rotation_translation(Vec3::splat(2.0), glam::Quat::IDENTITY, Vec3::new(0.0, 0.0, 50.0)), square));
+    let (mut cube, cube_idx) = cube_vertices();
+    for v in &mut cube {
+        v.position = (Vec3::from(v.position) * 0.3).to_array();
+    }
+    assert_eq!(push_mesh(&mut b, "bird", &cube, &cube_idx, None), BIRD);
+    b.finish()
+}
+
+const BIRD: u32 = 1;
 
 fn flock(positions: &[Vec3]) -> Flock {
     let mut s = FlockState::default();
@@ -29,7 +49,7 @@ fn boids_in_view_are_drawn_and_those_behind_the_camera_are_culled() {
     let gpu = gpu();
     let mut target = Offscreen::new(&gpu, W, H).unwrap();
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let scene = GpuScene::upload(&gpu, &square_pack("quad", 1.0, 50.0, Material::default()), renderer.layouts()).unwrap();
+    let scene = GpuScene::upload(&gpu, &pack_with_a_bird(), renderer.layouts()).unwrap();
     let camera = Camera {
         position: Vec3::ZERO,
         yaw: 0.0,
@@ -47,7 +67,7 @@ fn boids_in_view_are_drawn_and_those_behind_the_camera_are_culled() {
     ];
     let behind = [Vec3::new(0.0, 0.0, 3.0), Vec3::new(2.0, 0.0, 6.0), Vec3::new(-1.0, 1.0, 1.0)];
     let positions: Vec<Vec3> = ahead.iter().chain(&behind).copied().collect();
-    renderer.boids.fill(&[flock(&positions)]);
+    renderer.boids.fill(&scene, &[flock(&positions)], &[Some(BIRD)]);
     assert_eq!(renderer.boids.boids.len(), 8);
     target.render(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true).unwrap();
     let c = renderer.visibility.counts;
@@ -62,7 +82,7 @@ fn boids_in_view_are_drawn_and_those_behind_the_camera_are_culled() {
         "the centre bird covers the centre pixel: {centre:?} vs clear ~{clear:?}"
     );
     // None in view: the pass is skipped (no draws, no validation error), nothing drawn.
-    renderer.boids.fill(&[flock(&behind)]);
+    renderer.boids.fill(&scene, &[flock(&behind)], &[Some(BIRD)]);
     target.render(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true).unwrap();
     assert_eq!(renderer.visibility.counts.boids, 0);
     assert_eq!(renderer.visibility.counts.cull.culled, 4);

@@ -152,7 +152,7 @@ fn the_overlay_renders_the_open_simulation_panel_with_validation_clean() {
             apply(&mut w, Target::Emitter(0), "rate /s", 800.0).unwrap();
         }
         w.update(1.0 / 60.0);
-        engine::sim_level::prepare_frame(&w, &mut renderer, &camera);
+        engine::sim_level::prepare_frame(&w, &mut renderer, &scene, &camera);
         let mut drawn = 0;
         let t = target
             .render_with(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true, &mut overlay, |overlay, renderer| {

@@ -146,15 +146,22 @@ def _texture(spec: LevelSpec, mat_index: int, base_dir: Path) -> ir.Texture:
     return ir.Texture(name=name, width=rgba.shape[1], height=rgba.shape[0], format="Rgba8Srgb", mips=[rgba])
 
 
-def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray, static: bool) -> None:
-    """Append `prop`'s meshes, materials, textures, nodes and lights to `scene` (which is being
-    built and is modified), under a new root node `name` placed by `transform` (4x4). `prop` is
-    not modified."""
+def _append_meshes(scene: ir.Scene, prop: ir.Scene) -> int:
+    """Append `prop`'s meshes, materials and textures to `scene`, their references remapped;
+    returns the index the prop's first mesh has in `scene`."""
     mesh0, mat0, tex0 = len(scene.meshes), len(scene.materials), len(scene.textures)
     scene.textures += prop.textures
     scene.materials += [mt.with_textures_offset(tex0) for mt in prop.materials]
     scene.meshes += [dataclasses.replace(me, lods=[
         dataclasses.replace(l, materials=(l.materials + mat0).astype(np.uint32)) for l in me.lods]) for me in prop.meshes]
+    return mesh0
+
+
+def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray, static: bool) -> None:
+    """Append `prop`'s meshes, materials, textures, nodes and lights to `scene` (which is being
+    built and is modified), under a new root node `name` placed by `transform` (4x4). `prop` is
+    not modified."""
+    mesh0 = _append_meshes(scene, prop)
     root = len(scene.nodes)
     scene.nodes.append(ir.Node(name=name, local=tuple(float(x) for x in transform.ravel(order="F"))))
     # The level's switch decides for every mesh node of the prop (a prop's animation is not
@@ -208,6 +215,31 @@ def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -
     scene.skins += [dataclasses.replace(sk, name=f"{sp.name}/{sk.name}", joints=[j + node0 for j in sk.joints]) for sk in prop.skins]
     scene.clips += [ir.Clip(name=f"{sp.name}/{c.name}", channels=[dataclasses.replace(ch, node=ch.node + node0) for ch in c.channels])
                     for c in prop.clips]
+
+
+def merge_boid_mesh(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -> None:
+    """Bring in the glTF of boids spawn `index` (`asset`, relative to the toml): its one mesh,
+    as authored in mesh space (a bird facing +Z with up +Y, at its size in metres), joins the
+    scene's meshes with no node, and the spawn's `mesh` parameter names it for the runtime, which
+    draws every bird of the flock with it. Content decides what a flock looks like."""
+    sp = spec.spawns[index]
+    key = ("spawns", index, "params", "asset")
+    asset = sp.params.get("asset")
+    if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
+        raise spec.error(key, f"boids '{sp.name}': expected a .gltf or .glb asset (the mesh of one bird), got {asset!r}")
+    path = spec.check_file(key, asset, f"boids '{sp.name}': asset")
+    try:
+        prop = import_gltf(path)
+    except Exception as e:  # the importer's message names the problem; the level error names the spawn
+        raise spec.error(key, f"boids '{sp.name}': cannot import '{asset}': {e}") from None
+    used = sorted({nd.mesh for nd in prop.nodes if nd.mesh is not None})
+    if len(used) != 1:
+        raise spec.error(key, f"boids '{sp.name}': '{asset}' must hold one mesh (the bird), it has {len(used)}")
+    if prop.skins or any(me.morph_weights for me in prop.meshes):
+        raise spec.error(key, f"boids '{sp.name}': '{asset}' is skinned or morphed; a flock draws one rigid mesh per bird")
+    mesh = _append_meshes(scene, prop) + used[0]
+    scene.files += [f for f in prop.files if f not in scene.files]
+    scene.spawns[index] = dataclasses.replace(sp, params={**sp.params, "mesh": mesh})
 
 
 def build_level(spec: LevelSpec, *, import_gltf=None) -> ir.Scene:
@@ -289,6 +321,8 @@ def build_level(spec: LevelSpec, *, import_gltf=None) -> ir.Scene:
     for i, sp in enumerate(spec.spawns):
         if sp.kind == "character" and "asset" in sp.params:
             merge_character(scene, spec, i, import_gltf)
+        elif sp.kind == "boids":
+            merge_boid_mesh(scene, spec, i, import_gltf)
     scene.pillars = obstacles.pillars(spec)
 
     scene.validate()

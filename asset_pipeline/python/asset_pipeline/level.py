@@ -77,7 +77,9 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
     position = [0, 0, 0]
     rotation = [0, 0, 0]            # Euler degrees as brushes
     params = { }                    # kind-specific, see SPAWN_PARAMS; particles may set
-                                    # blend = "alpha" | "additive" (default: alpha)
+                                    # blend = "alpha" | "additive" (default: alpha); boids
+                                    # need asset = a glTF holding one mesh, the bird (facing +Z,
+                                    # up +Y, in metres), which the cooker packs for the runtime
 """
 
 from __future__ import annotations
@@ -684,6 +686,8 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
                                             f"(expected one of: {', '.join(sorted(SPAWN_PARAMS[kind])) or 'none'})")
             if (kind, k) in SPAWN_PARAM_READERS:
                 s["params"][k] = SPAWN_PARAM_READERS[(kind, k)](c, s["params"][k], key + ("params", k))
+        if kind == "boids" and "asset" not in s["params"]:
+            c.fail(key + ("params",), f"boids '{s['name']}': no asset (params.asset: the glTF of the bird every member is drawn with)")
         blend = s["params"].get("blend")
         if blend is not None and blend not in PARTICLE_BLENDS:
             c.fail(key + ("params", "blend"), f"spawn '{s['name']}': unknown blend {blend!r} "

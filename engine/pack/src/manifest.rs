@@ -136,7 +136,8 @@ pub struct Spawn {
     pub position: [f32; 3],
     /// Quaternion xyzw.
     pub rotation: [f32; 4],
-    /// Kind-specific parameters (asset, count, radius, rate, ...), kept as authored.
+    /// Kind-specific parameters (asset, count, radius, rate, ...), kept as authored, plus what
+    /// the cooker adds: a boids spawn's `mesh` (the index of the mesh its birds are drawn with).
     #[serde(default)]
     pub params: serde_json::Value,
 }
@@ -607,6 +608,14 @@ impl Manifest {
                             return bad(format!("{what} submesh {s}: lightmap block {block} cannot lie on one of the {pages} pages"));
                         }
                     }
+                }
+            }
+        }
+        for (i, s) in self.spawns.iter().enumerate() {
+            // The cooker names the mesh a boids spawn's flock is drawn with.
+            if let Some(mesh) = s.params.get("mesh") {
+                if !mesh.as_u64().is_some_and(|m| (m as usize) < self.meshes.len()) {
+                    return bad(format!("spawn {i} '{}': mesh {mesh} is not one of the {} meshes", s.name, self.meshes.len()));
                 }
             }
         }

@@ -412,3 +412,20 @@ fn non_finite_numbers_in_the_manifest_are_malformed() {
     let e = Pack::from_bytes(&bytes).unwrap_err().to_string();
     assert!(e.starts_with("malformed pack: light 0 'sun': ") && e.contains("inf"), "{e}");
 }
+
+#[test]
+fn a_spawn_mesh_must_be_one_of_the_packs_meshes() {
+    // A boids spawn names the mesh its flock is drawn with; the runtime indexes the scene's
+    // meshes with it.
+    let spawn = |mesh: serde_json::Value| Spawn { name: "doves".into(), kind: "boids".into(), position: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], params: serde_json::json!({ "mesh": mesh }) };
+    let mut p = sample();
+    p.manifest.spawns.push(spawn(serde_json::json!(0)));
+    let bytes = p.to_bytes().unwrap();
+    assert_eq!(Pack::from_bytes(&bytes).unwrap().manifest.spawns.last().unwrap().params["mesh"], 0);
+    for bad in [serde_json::json!(1), serde_json::json!(-1), serde_json::json!("dove")] {
+        let mut p = sample();
+        p.manifest.spawns.push(spawn(bad.clone()));
+        let e = p.to_bytes().unwrap_err().to_string();
+        assert!(e.contains(&format!("spawn 1 'doves': mesh {bad} is not one of the 1 meshes")), "{e}");
+    }
+}

@@ -72,6 +72,11 @@ fn cube_grid(n: usize) -> impl Iterator<Item = Mat4> {
 
 /// A unit cube mesh, one instance per placement, in the order given (which is draw order).
 fn boxes_pack(placements: impl Iterator<Item = Mat4>) -> Pack {
+    boxes_builder(placements).finish()
+}
+
+/// `boxes_pack` before it is finished, for scenes that add meshes of their own.
+fn boxes_builder(placements: impl Iterator<Item = Mat4>) -> PackBuilder {
     let mut b = PackBuilder::new("bench", "bench");
     let mut verts = Vec::new();
     let mut idx: Vec<u32> = Vec::new();
@@ -104,7 +109,7 @@ fn boxes_pack(placements: impl Iterator<Item = Mat4>) -> Pack {
     for (i, m) in placements.enumerate() {
         b.manifest.nodes.push(Node { name: format!("c{i}"), local: m.to_cols_array(), mesh: Some(0), ..Default::default() });
     }
-    b.finish()
+    b
 }
 
 fn run(args: &Args) -> anyhow::Result<usize> {

@@ -329,7 +329,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         // Frame f shows the flight at f/60 s (frame 0: the player's view).
         let camera = flight.as_ref().map_or(still, |fl| fl.camera(f as f32 / 60.0));
         let screen = args.screens.iter().find(|(k, _)| *k == f).map(|&(_, secs)| secs);
-        engine::sim_level::prepare_frame(&world, &mut renderer, &camera);
+        engine::sim_level::prepare_frame(&world, &mut renderer, &scene, &camera);
         let capture = last || every || screen.is_some();
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, o, |o, renderer| {

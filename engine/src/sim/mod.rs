@@ -37,6 +37,9 @@ pub struct World {
     /// The spawn each emitter and flock came from, by index, where known (the overlay's labels).
     pub emitter_names: Vec<String>,
     pub flock_names: Vec<String>,
+    /// The scene mesh each flock's birds are drawn with, by index (a boids spawn's `mesh`, which
+    /// the cooker sets from its `asset`); None: simulated but not drawn.
+    pub flock_meshes: Vec<Option<u32>>,
 }
 
 impl World {
@@ -47,6 +50,7 @@ impl World {
             flocks: Vec::new(),
             emitter_names: Vec::new(),
             flock_names: Vec::new(),
+            flock_meshes: Vec::new(),
         }
     }
 

@@ -13,7 +13,7 @@
 //! A floor is measured in the same run: clear an image of the same size and wait for it. Each
 //! scenario's percentiles are also given as multiples of the floor's.
 
-use super::{boxes_pack, cube_grid, skinned_bench};
+use super::{boxes_builder, boxes_pack, cube_grid, skinned_bench};
 use engine::animated::AnimatedScene;
 use engine::camera::Camera;
 use crate::flight::{self, Flight};
@@ -29,7 +29,7 @@ use engine::sim::World;
 use engine::sim_level;
 use engine::stats::percentile;
 use glam::{Mat4, Vec3};
-use pack::Pack;
+use pack::{Pack, PackBuilder};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,6 +37,9 @@ use std::time::Instant;
 /// What each scenario renders (its scene, world, camera path and switches).
 #[path = "setups.rs"]
 mod setups;
+
+#[path = "bird.rs"]
+mod bird;
 use setups::setup;
 
 /// Simulated time per frame: a 60 Hz display's frame, whatever the machine's speed.
@@ -378,7 +381,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
             s.world.update(FRAME_S);
         }
         let camera = (s.camera)(frame);
-        sim_level::prepare_frame(&s.world, renderer, &camera);
+        sim_level::prepare_frame(&s.world, renderer, &s.scene, &camera);
         let timing = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false)?;
         let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
         if frame < o.warmup {
@@ -407,7 +410,7 @@ fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, 
         switch.set(renderer, on);
     }
     renderer.count_fragments = true;
-    sim_level::prepare_frame(&s.world, renderer, &camera);
+    sim_level::prepare_frame(&s.world, renderer, &s.scene, &camera);
     let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
     let shaded = renderer.fragment_count(0);
     renderer.count_fragments = false;

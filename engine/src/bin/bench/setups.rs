@@ -104,7 +104,9 @@ fn boids(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> 
         ..BoidParams::default()
     };
     world.flocks.push(Flock::new(params, FlockState::random(n, -h * 0.5, h * 0.5, 5.0, 9)));
-    let scene = GpuScene::upload(gpu, &ground_pack(FLOCK_HALF_M), renderer.layouts())?;
+    let mut pack = ground_pack(FLOCK_HALF_M);
+    world.flock_meshes.push(Some(bird::push_bird(&mut pack)));
+    let scene = GpuScene::upload(gpu, &pack.finish(), renderer.layouts())?;
     let camera = Camera::framing(-h, h);
     let mut content = Map::new();
     content.insert("boids".into(), json!(n));
@@ -118,9 +120,9 @@ fn boids(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> 
     })
 }
 
-/// One flat slab under everything (the mesh passes need something to draw).
-fn ground_pack(half: f32) -> Pack {
-    boxes_pack(std::iter::once(Mat4::from_scale_rotation_translation(
+/// One flat slab under everything (the mesh passes need something to draw), unfinished.
+fn ground_pack(half: f32) -> PackBuilder {
+    boxes_builder(std::iter::once(Mat4::from_scale_rotation_translation(
         Vec3::new(2.0 * half, 0.2, 2.0 * half),
         glam::Quat::IDENTITY,
         Vec3::new(0.0, -half - 0.1, 0.0),
@@ -144,7 +146,7 @@ fn particles(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Set
     for _ in 0..(2.5 / FRAME_S).round() as usize {
         world.update(FRAME_S);
     }
-    let scene = GpuScene::upload(gpu, &ground_pack(10.0), renderer.layouts())?;
+    let scene = GpuScene::upload(gpu, &ground_pack(10.0).finish(), renderer.layouts())?;
     let camera = looking_at(Vec3::new(0.0, 3.0, 14.0), Vec3::new(0.0, 2.0, 0.0));
     let mut content = Map::new();
     content.insert("particles_target".into(), json!(n));

@@ -150,7 +150,7 @@ impl Game for DemoGame<'_> {
     fn update(&mut self, cx: &mut Cx, input: &Input, dt: f32) {
         self.move_camera(cx, input, dt);
         self.world.update(dt as f64);
-        sim_level::prepare_frame(&self.world, cx.renderer, &self.camera);
+        sim_level::prepare_frame(&self.world, cx.renderer, cx.scene, &self.camera);
     }
 
     fn camera(&self) -> Camera {

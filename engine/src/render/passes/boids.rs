@@ -11,7 +11,8 @@ impl Pass for Boids {
         "boids"
     }
 
-    /// Non-indexed instanced draws: see `Pass::counts_invocations`.
+    /// Instanced draws that crashed lavapipe 22.3 inside a statistics query when they were
+    /// non-indexed: see `Pass::counts_invocations`.
     fn counts_invocations(&self) -> bool {
         false
     }
@@ -24,7 +25,7 @@ impl Pass for Boids {
     }
 
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
-        cx.boids.record(rec, cx.frame.frame_set, rec.image(HDR), rec.image(DEPTH));
+        cx.boids.record(rec, cx.scene, cx.frame.frame_set, rec.image(HDR), rec.image(DEPTH));
         Ok(())
     }
 }
