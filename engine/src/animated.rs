@@ -107,8 +107,9 @@ impl AnimatedScene {
             return Ok(None);
         }
         let rig = Rig::from_pack(pack);
+        // Owned until every instance is made: an error frees the ones made before it.
         let pipe = SkinPipeline::new(gpu)?;
-        let mut out = AnimatedScene {
+        let mut out = gpu.own(AnimatedScene {
             rig,
             instances: Vec::new(),
             lookup: vec![None; scene.instances.len()],
@@ -116,7 +117,7 @@ impl AnimatedScene {
             cpu_ms: 0.0,
             dispatches: 0,
             skinned_vertices: 0,
-        };
+        });
         for (i, &node) in instance_nodes.iter().enumerate() {
             if !animated_node(pack, node) {
                 continue;
@@ -128,7 +129,7 @@ impl AnimatedScene {
             out.instances.push(inst);
         }
         out.start_characters(pack);
-        Ok(Some(out))
+        Ok(Some(out.keep()))
     }
 
     /// One animator per character spawn: the instances under the spawn's root node (the level
@@ -165,7 +166,7 @@ impl AnimatedScene {
     fn instance(&self, gpu: &Gpu, pack: &Pack, scene: &GpuScene, index: usize, node: usize, slots: usize) -> Result<AnimatedInstance> {
         let mesh = &scene.meshes[scene.instances[index].mesh as usize];
         let joints = vec![Mat4::IDENTITY; joint_count(pack, node)];
-        let mut lods = Vec::with_capacity(mesh.lods.len());
+        let mut lods = gpu.own(Vec::with_capacity(mesh.lods.len()));
         let mut first: Option<DeformData> = None;
         for lod in 0..mesh.lods.len() {
             let data = DeformData::for_node(pack, node, lod).context("an animated node without a mesh")?;
@@ -219,7 +220,7 @@ impl AnimatedScene {
             morph_reach,
             bind_sphere: ((mesh.bounds_min + mesh.bounds_max) * 0.5, (mesh.bounds_max - mesh.bounds_min).length() * 0.5),
             wanted: vec![false; mesh.lods.len()],
-            lods,
+            lods: lods.keep(),
         })
     }
 

@@ -51,16 +51,10 @@ impl BoidsDraw {
         let set_layouts = [frame_layout];
         // The submesh's base colour (linear RGBA) for the fragment shader.
         let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(16)];
-        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
-        let pipeline = match create_pipeline(gpu, layout, depth_format) {
-            Ok(p) => p,
-            Err(e) => {
-                unsafe { d.destroy_pipeline_layout(layout, None) };
-                return Err(e);
-            }
-        };
+        let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
+        let pipeline = create_pipeline(gpu, *layout, depth_format)?;
         Ok(BoidsDraw {
-            layout,
+            layout: layout.keep(),
             pipeline,
             instances: SlotBuffers::new("boid instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 64 * 64),
             boids: Vec::new(),

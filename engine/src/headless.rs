@@ -40,7 +40,8 @@ impl Offscreen {
     pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Offscreen> {
         let extent = vk::Extent2D { width, height };
         let d = &gpu.device;
-        let color = Image::new(
+        // Owned until the target is whole: an error frees what was made before it.
+        let color = gpu.own(Image::new(
             gpu,
             "offscreen colour",
             OFFSCREEN_FORMAT,
@@ -48,20 +49,20 @@ impl Offscreen {
             1,
             vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
             vk::ImageAspectFlags::COLOR,
-        )?;
-        let readback = Buffer::new(gpu, "readback", width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
-        let pool = unsafe {
+        )?);
+        let readback = gpu.own(Buffer::new(gpu, "readback", width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?);
+        let pool = gpu.own(unsafe {
             d.create_command_pool(
                 &vk::CommandPoolCreateInfo::default()
                     .queue_family_index(gpu.queue_family)
                     .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
                 None,
             )?
-        };
+        });
         let cb = unsafe {
-            d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))?[0]
+            d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(*pool).command_buffer_count(1))?[0]
         };
-        let fence = unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None)? };
+        let fence = gpu.own(unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None)? });
         let timestamps = if gpu.caps.timestamps {
             Some(unsafe {
                 d.create_query_pool(&vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2), None)?
@@ -69,7 +70,7 @@ impl Offscreen {
         } else {
             None
         };
-        Ok(Offscreen { extent, color, readback, pool, cb, fence, timestamps })
+        Ok(Offscreen { extent, color: color.keep(), readback: readback.keep(), pool: pool.keep(), cb, fence: fence.keep(), timestamps })
     }
 
     /// Render one frame and wait for it. With `capture`, the image is copied to the read-back

@@ -60,12 +60,13 @@ impl ParticlePass {
             .stage_flags(vk::ShaderStageFlags::VERTEX)
             .size(std::mem::size_of::<ParticlePush>() as u32)];
         let set_layouts = [frame_layout];
-        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
-        let alpha = create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE_MINUS_SRC_ALPHA)?;
-        let additive = create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE)?;
+        // Owned until the pass is whole: an error frees what was made before it.
+        let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
+        let alpha = gpu.own(create_pipeline(gpu, *layout, depth_format, vk::BlendFactor::ONE_MINUS_SRC_ALPHA)?);
+        let additive = create_pipeline(gpu, *layout, depth_format, vk::BlendFactor::ONE)?;
         Ok(ParticlePass {
-            layout,
-            alpha,
+            layout: layout.keep(),
+            alpha: alpha.keep(),
             additive,
             buffers: SlotBuffers::new("particle instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 256 * std::mem::size_of::<Billboard>()),
             billboards: Vec::new(),

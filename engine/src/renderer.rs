@@ -145,23 +145,25 @@ impl Renderer {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Renderer> {
         let d = &gpu.device;
         let shadow_format = SunShadow::format_for(gpu)?;
-        let mesh = MeshKit::new(gpu, shadow_format)?;
-        let shadow = SunShadow::new(gpu, mesh.frame_layout, std::mem::size_of::<FrameUniforms>() as u64, frames_in_flight, DEFAULT_SHADOW_MAP_SIZE)?;
+        // Each part is owned until the renderer is whole: an error frees what was made.
+        let mesh = gpu.own(MeshKit::new(gpu, shadow_format)?);
+        let shadow = gpu.own(SunShadow::new(gpu, mesh.frame_layout, std::mem::size_of::<FrameUniforms>() as u64, frames_in_flight, DEFAULT_SHADOW_MAP_SIZE)?);
         let n = frames_in_flight as u32;
         let pool_sizes = [
             vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: n },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: n },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: n },
         ];
-        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&pool_sizes), None)? };
-        let mut frame_ubos = Vec::new();
-        let mut counters = Vec::new();
+        let pool = gpu.own(unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&pool_sizes), None)? });
+        let mut frame_ubos = gpu.own(Vec::new());
+        let mut counters = gpu.own(Vec::new());
         let mut frame_sets = Vec::new();
         for _ in 0..frames_in_flight {
-            let ubo = Buffer::new(gpu, "frame uniforms", std::mem::size_of::<FrameUniforms>() as u64, vk::BufferUsageFlags::UNIFORM_BUFFER, MemoryLocation::CpuToGpu)?;
-            let counter = Buffer::new(gpu, "fragment counter", 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu)?;
+            frame_ubos.push(Buffer::new(gpu, "frame uniforms", std::mem::size_of::<FrameUniforms>() as u64, vk::BufferUsageFlags::UNIFORM_BUFFER, MemoryLocation::CpuToGpu)?);
+            counters.push(Buffer::new(gpu, "fragment counter", 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu)?);
+            let (ubo, counter) = (&frame_ubos[frame_sets.len()], &counters[frame_sets.len()]);
             let layouts = [mesh.frame_layout];
-            let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
+            let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&layouts))?[0] };
             let ubo_info = [vk::DescriptorBufferInfo { buffer: ubo.buffer, offset: 0, range: vk::WHOLE_SIZE }];
             let counter_info = [vk::DescriptorBufferInfo { buffer: counter.buffer, offset: 0, range: vk::WHOLE_SIZE }];
             let writes = [
@@ -176,24 +178,27 @@ impl Renderer {
             let counter_write = vk::WriteDescriptorSet::default().dst_set(shadow_set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&counter_info);
             unsafe { d.update_descriptor_sets(&[counter_write], &[]) };
             write_shadow_map_descriptor(gpu, shadow_set, &shadow);
-            frame_ubos.push(ubo);
-            counters.push(counter);
             frame_sets.push(set);
         }
+        let graph = gpu.own(Graph::new(gpu, frames_in_flight)?);
+        let passes = gpu.own(passes::register(gpu, color_format, frames_in_flight)?);
+        let tonemap = gpu.own(ToneMap::new(gpu, color_format, frames_in_flight)?);
+        let particles = gpu.own(ParticlePass::new(gpu, mesh.frame_layout, gpu.caps.depth_format, frames_in_flight)?);
+        let boids = gpu.own(BoidsDraw::new(gpu, mesh.frame_layout, gpu.caps.depth_format, frames_in_flight)?);
         Ok(Renderer {
             color_format,
             depth_format: gpu.caps.depth_format,
-            graph: Graph::new(gpu, frames_in_flight)?,
-            passes: passes::register(gpu, color_format, frames_in_flight)?,
-            pool,
-            frame_ubos,
-            counters,
+            graph: graph.keep(),
+            passes: passes.keep(),
+            pool: pool.keep(),
+            frame_ubos: frame_ubos.keep(),
+            counters: counters.keep(),
             frame_sets,
-            tonemap: ToneMap::new(gpu, color_format, frames_in_flight)?,
-            particles: ParticlePass::new(gpu, mesh.frame_layout, gpu.caps.depth_format, frames_in_flight)?,
-            boids: BoidsDraw::new(gpu, mesh.frame_layout, gpu.caps.depth_format, frames_in_flight)?,
-            mesh,
-            shadow,
+            tonemap: tonemap.keep(),
+            particles: particles.keep(),
+            boids: boids.keep(),
+            mesh: mesh.keep(),
+            shadow: shadow.keep(),
             shadow_casters: 0,
             shadow_casters_drawn: 0,
             instancing: true,

@@ -228,12 +228,13 @@ impl GpuScene {
                 errors: mesh.lods.iter().map(|l| l.error).collect(),
             });
         }
-        let vertex_buffer = Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?;
-        let index_buffer = Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?;
+        // Everything made below is owned until the scene is whole: an error frees what was made.
+        let vertex_buffer = gpu.own(Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?);
+        let index_buffer = gpu.own(Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?);
 
         // The lightmap pages go into one array texture below, not into images of their own.
         let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
-        let mut textures = Vec::with_capacity(m.textures.len());
+        let mut textures = gpu.own(Vec::with_capacity(m.textures.len()));
         for (i, t) in m.textures.iter().enumerate() {
             if pages.contains(&(i as u32)) {
                 textures.push(None);
@@ -253,8 +254,8 @@ impl GpuScene {
             ));
         }
         // Empty texture slots sample this instead: no shader variants.
-        let white = Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?;
-        let lightmaps = match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
+        let white = gpu.own(Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?);
+        let lightmaps = gpu.own(match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
             Some(l) => {
                 let layers: Vec<&[u8]> = pages.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
                 let [width, height] = l.pages[0];
@@ -262,31 +263,31 @@ impl GpuScene {
                     .with_context(|| format!("uploading {} lightmap pages of {width}x{height}", layers.len()))?
             }
             None => Image::sampled_array(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
-        };
-        let mut samplers = SamplerCache::default();
+        });
+        let mut samplers = gpu.own(SamplerCache::default());
 
         let material_count = m.materials.len() as u32;
         let pool_sizes = [
             vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: 2 * material_count + 1 },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 },
         ];
-        let pool = unsafe {
+        let pool = gpu.own(unsafe {
             gpu.device.create_descriptor_pool(
                 &vk::DescriptorPoolCreateInfo::default().max_sets(material_count + 1).pool_sizes(&pool_sizes),
                 None,
             )?
-        };
+        });
         let mut materials = Vec::with_capacity(m.materials.len());
         for mat in &m.materials {
             let layouts = [material_layout];
             let set = unsafe {
-                gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0]
+                gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&layouts))?[0]
             };
             // Each slot's texture with its own sampler state; white for an empty slot.
             let mut slot = |texture: Option<u32>| -> Result<[vk::DescriptorImageInfo; 1]> {
                 let (image, state) = texture
                     .and_then(|t| Some((textures[t as usize].as_ref()?, m.textures[t as usize].sampler)))
-                    .unwrap_or((&white, pack::Sampler::default()));
+                    .unwrap_or((&*white, pack::Sampler::default()));
                 let sampler = samplers.for_texture(gpu, state, image.mip_levels)?;
                 Ok([vk::DescriptorImageInfo { sampler, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }])
             };
@@ -312,7 +313,7 @@ impl GpuScene {
 
         // Set 2: one for the whole scene.
         let probe_bytes = probe_buffer_bytes(pack);
-        let probes = Buffer::with_data(gpu, "probes", &probe_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
+        let probes = gpu.own(Buffer::with_data(gpu, "probes", &probe_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
         let mut constants: Vec<MaterialConstants> = m
             .materials
             .iter()
@@ -327,12 +328,12 @@ impl GpuScene {
             constants.push(MaterialConstants::default());
         }
         let constant_bytes: &[u8] = bytemuck::cast_slice(&constants);
-        let material_constants = Buffer::with_data(gpu, "material constants", constant_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?;
+        let material_constants = gpu.own(Buffer::with_data(gpu, "material constants", constant_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
         // Lightmaps are read between their texels, never past the page's edge.
         let clamped = pack::Sampler { wrap_s: pack::Wrap::Clamp, wrap_t: pack::Wrap::Clamp, mipmap_filter: None, ..Default::default() };
         let lightmap_sampler = samplers.get(gpu, clamped, false)?;
         let scene_layout = [layouts.scene];
-        let scene_set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&scene_layout))?[0] };
+        let scene_set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&scene_layout))?[0] };
         let image_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmaps.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         let constants_info = [vk::DescriptorBufferInfo { buffer: material_constants.buffer, offset: 0, range: vk::WHOLE_SIZE }];
@@ -350,16 +351,16 @@ impl GpuScene {
             meshes,
             materials,
             instances,
-            vertex_buffer,
-            index_buffer,
-            textures,
-            white,
-            lightmaps,
-            samplers,
-            pool,
+            vertex_buffer: vertex_buffer.keep(),
+            index_buffer: index_buffer.keep(),
+            textures: textures.keep(),
+            white: white.keep(),
+            lightmaps: lightmaps.keep(),
+            samplers: samplers.keep(),
+            pool: pool.keep(),
             scene_set,
-            probes,
-            material_constants,
+            probes: probes.keep(),
+            material_constants: material_constants.keep(),
             baked,
         })
     }

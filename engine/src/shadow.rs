@@ -108,10 +108,11 @@ impl SunShadow {
     pub fn new(gpu: &Gpu, frame_layout: vk::DescriptorSetLayout, ubo_size: u64, frames_in_flight: usize, size: u32) -> Result<SunShadow> {
         let d = &gpu.device;
         let (format, linear) = pick_format(gpu)?;
-        let image = create_map(gpu, format, size)?;
-        let static_image = create_static_map(gpu, format, size)?;
+        // Owned until the shadow is whole: an error frees what was made before it.
+        let image = gpu.own(create_map(gpu, format, size)?);
+        let static_image = gpu.own(create_static_map(gpu, format, size)?);
         let filter = if linear { vk::Filter::LINEAR } else { vk::Filter::NEAREST };
-        let sampler = unsafe {
+        let sampler = gpu.own(unsafe {
             d.create_sampler(
                 &vk::SamplerCreateInfo::default()
                     .mag_filter(filter)
@@ -125,7 +126,7 @@ impl SunShadow {
                     .compare_op(vk::CompareOp::LESS_OR_EQUAL),
                 None,
             )?
-        };
+        });
         let n = frames_in_flight as u32;
         // The renderer's set 0 layout: uniforms, the fragment counter, the shadow map.
         let sizes = [
@@ -142,13 +143,14 @@ impl SunShadow {
                 descriptor_count: n,
             },
         ];
-        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)? };
-        let mut ubos = Vec::new();
+        let pool = gpu.own(unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)? });
+        let mut ubos = gpu.own(Vec::new());
         let mut sets = Vec::new();
         for _ in 0..frames_in_flight {
-            let ubo = Buffer::new(gpu, "sun shadow uniforms", ubo_size, vk::BufferUsageFlags::UNIFORM_BUFFER, MemoryLocation::CpuToGpu)?;
+            ubos.push(Buffer::new(gpu, "sun shadow uniforms", ubo_size, vk::BufferUsageFlags::UNIFORM_BUFFER, MemoryLocation::CpuToGpu)?);
+            let ubo = ubos.last().unwrap();
             let layouts = [frame_layout];
-            let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))?[0] };
+            let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&layouts))?[0] };
             let info = [vk::DescriptorBufferInfo {
                 buffer: ubo.buffer,
                 offset: 0,
@@ -160,26 +162,25 @@ impl SunShadow {
                 .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
                 .buffer_info(&info);
             unsafe { d.update_descriptor_sets(&[write], &[]) };
-            ubos.push(ubo);
             sets.push(set);
         }
         Ok(SunShadow {
             size,
             format,
-            image,
-            sampler,
+            image: image.keep(),
+            sampler: sampler.keep(),
             view_proj: Mat4::IDENTITY,
             texel_m: 1.0,
             casters: Vec::new(),
             static_casters: Vec::new(),
             dynamic_casters: Vec::new(),
-            static_image,
+            static_image: static_image.keep(),
             static_key: None,
             redraw_static: false,
             static_draws: 0,
-            ubos,
+            ubos: ubos.keep(),
             sets,
-            pool,
+            pool: pool.keep(),
         })
     }
 
@@ -195,8 +196,9 @@ impl SunShadow {
     /// A new map of `size` texels square. The caller makes sure no frame in flight uses the old
     /// one and points its descriptors at `view()` again.
     pub fn resize(&mut self, gpu: &Gpu, size: u32) -> Result<()> {
-        let image = create_map(gpu, self.format, size)?;
+        let image = gpu.own(create_map(gpu, self.format, size)?);
         let static_image = create_static_map(gpu, self.format, size)?;
+        let image = image.keep();
         self.image.destroy(gpu);
         self.static_image.destroy(gpu);
         (self.image, self.static_image, self.static_key) = (image, static_image, None);

@@ -41,9 +41,9 @@ pub struct ToneMap {
 impl ToneMap {
     /// A tone-map pass writing `display_format` (the swapchain's or the offscreen target's).
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
-        let input = SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?;
+        let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?);
         let (layout, pipeline) = fullscreen_pipeline(gpu, "tone-map", input.layout, std::mem::size_of::<ToneMapPush>() as u32, shaders::TONEMAP_FRAG, display_format)?;
-        Ok(ToneMap { saturation: DEFAULT_SATURATION, input, layout, pipeline })
+        Ok(ToneMap { saturation: DEFAULT_SATURATION, input: input.keep(), layout, pipeline })
     }
 
     /// Record the pass: `hdr` is sampled, every pixel of `target` written. `tone_map` false
@@ -69,14 +69,9 @@ pub fn fullscreen_pipeline(gpu: &Gpu, name: &str, set_layout: vk::DescriptorSetL
     let d = &gpu.device;
     let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(push)];
     let set_layouts = [set_layout];
-    let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges), None)? };
-    match GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, None).color(format, opaque()).build(gpu, layout) {
-        Ok(pipeline) => Ok((layout, pipeline)),
-        Err(e) => {
-            unsafe { d.destroy_pipeline_layout(layout, None) };
-            Err(e)
-        }
-    }
+    let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges), None)? });
+    let pipeline = GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, None).color(format, opaque()).build(gpu, *layout)?;
+    Ok((layout.keep(), pipeline))
 }
 
 /// One full-screen triangle into `target` with `pipeline`, its input `set` and `push` bytes.

@@ -44,18 +44,17 @@ impl SkinPipeline {
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
             .collect();
+        // Owned until the pipeline is whole (the module until it is made): an error frees them.
         unsafe {
-            let set_layout = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)?;
+            let set_layout = gpu.own(d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)?);
             let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(std::mem::size_of::<Params>() as u32)];
-            let set_layouts = [set_layout];
-            let layout = d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?;
-            let module = shaders::module(d, shaders::SKIN_COMP)?;
-            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(module).name(c"main");
-            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
-            let pipeline = d.create_compute_pipelines(gpu.pipeline_cache, &info, None);
-            d.destroy_shader_module(module, None);
-            let pipeline = pipeline.map_err(|(_, e)| e)?[0];
-            Ok(SkinPipeline { set_layout, layout, pipeline })
+            let set_layouts = [*set_layout];
+            let layout = gpu.own(d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?);
+            let module = gpu.own(shaders::module(d, shaders::SKIN_COMP)?);
+            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(*module).name(c"main");
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(*layout)];
+            let pipeline = d.create_compute_pipelines(gpu.pipeline_cache, &info, None).map_err(|(_, e)| e)?[0];
+            Ok(SkinPipeline { set_layout: set_layout.keep(), layout: layout.keep(), pipeline })
         }
     }
 
@@ -111,20 +110,20 @@ impl SkinnedMesh {
         let joint_capacity = joint_count.max(1);
         let joints: Vec<u16> = data.joints.iter().flatten().flatten().copied().collect();
         let weights: Vec<f32> = data.weights.iter().flatten().flatten().copied().collect();
-        let inputs = vec![
-            input(gpu, "skin bind vertices", pack::Vertex::slice_as_bytes(&data.vertices))?,
-            input(gpu, "skin joints", bytemuck::cast_slice::<_, u8>(&joints))?,
-            input(gpu, "skin weights", bytemuck::cast_slice::<_, u8>(&weights))?,
-            input(gpu, "morph positions", bytemuck::cast_slice::<_, u8>(&data.morph_positions))?,
-            input(gpu, "morph normals", bytemuck::cast_slice::<_, u8>(&data.morph_normals))?,
-        ];
+        // Owned until the mesh is whole: an error frees what was made before it.
+        let mut inputs = gpu.own(Vec::with_capacity(BINDINGS as usize));
+        inputs.push(input(gpu, "skin bind vertices", pack::Vertex::slice_as_bytes(&data.vertices))?);
+        inputs.push(input(gpu, "skin joints", bytemuck::cast_slice::<_, u8>(&joints))?);
+        inputs.push(input(gpu, "skin weights", bytemuck::cast_slice::<_, u8>(&weights))?);
+        inputs.push(input(gpu, "morph positions", bytemuck::cast_slice::<_, u8>(&data.morph_positions))?);
+        inputs.push(input(gpu, "morph normals", bytemuck::cast_slice::<_, u8>(&data.morph_normals))?);
         let d = &gpu.device;
         let sizes = [vk::DescriptorPoolSize {
             ty: vk::DescriptorType::STORAGE_BUFFER,
             descriptor_count: BINDINGS * slots as u32,
         }];
-        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(slots as u32).pool_sizes(&sizes), None)? };
-        let mut mesh = SkinnedMesh {
+        let pool = gpu.own(unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(slots as u32).pool_sizes(&sizes), None)? });
+        let mut mesh = gpu.own(SkinnedMesh {
             params: Params {
                 vertex_count: n as u32,
                 target_count: data.targets as u32,
@@ -133,33 +132,32 @@ impl SkinnedMesh {
                 joint_count: joint_capacity as u32,
             },
             joint_capacity,
-            inputs,
+            inputs: inputs.keep(),
             slots: Vec::with_capacity(slots),
-            pool,
-        };
+            pool: pool.keep(),
+        });
         for _ in 0..slots {
-            // On failure `mesh` is dropped without `destroy`: the device is unusable then anyway.
             let slot = mesh.slot(gpu, pipe, data.targets)?;
             mesh.slots.push(slot);
         }
-        Ok(mesh)
+        Ok(mesh.keep())
     }
 
     /// One frame slot's parameter buffers, output and descriptor set (inputs shared).
     fn slot(&self, gpu: &Gpu, pipe: &SkinPipeline, targets: usize) -> Result<Slot> {
         let n = self.params.vertex_count as usize;
         let host = |name: &str, size: usize| Buffer::new(gpu, name, size.max(16) as u64, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::CpuToGpu);
-        let mut morph_weights = host("morph weights", targets * 4)?;
+        let mut morph_weights = gpu.own(host("morph weights", targets * 4)?);
         morph_weights.mapped().fill(0);
-        let mut joint_matrices = host("joint matrices", self.joint_capacity * 64)?;
+        let mut joint_matrices = gpu.own(host("joint matrices", self.joint_capacity * 64)?);
         joint_matrices.mapped().copy_from_slice(bytemuck::cast_slice::<_, u8>(&vec![Mat4::IDENTITY; self.joint_capacity][..]));
-        let output = Buffer::new(
+        let output = gpu.own(Buffer::new(
             gpu,
             "skinned vertices",
             (n * pack::VERTEX_STRIDE) as u64,
             vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
-        )?;
+        )?);
         let d = &gpu.device;
         let layouts = [pipe.set_layout];
         let set = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(self.pool).set_layouts(&layouts))?[0] };
@@ -187,9 +185,9 @@ impl SkinnedMesh {
             .collect();
         unsafe { d.update_descriptor_sets(&writes, &[]) };
         Ok(Slot {
-            morph_weights,
-            joint_matrices,
-            output,
+            morph_weights: morph_weights.keep(),
+            joint_matrices: joint_matrices.keep(),
+            output: output.keep(),
             set,
         })
     }

@@ -4,7 +4,7 @@
 //! world are the game's (`game::Game`; the demo's is `src/bin/demo/game.rs`).
 
 pub mod game;
-mod swapchain;
+pub(crate) mod swapchain;
 
 pub use game::{Cx, Game, Input};
 

@@ -8,7 +8,7 @@ use ash::vk;
 use winit::dpi::PhysicalSize;
 
 /// Per-frame-in-flight command buffers and synchronisation.
-pub(super) struct Frames {
+pub(crate) struct Frames {
     pub pool: vk::CommandPool,
     pub cbs: Vec<vk::CommandBuffer>,
     pub fences: Vec<vk::Fence>,
@@ -18,23 +18,24 @@ pub(super) struct Frames {
 impl Frames {
     pub fn new(gpu: &Gpu) -> Result<Frames> {
         let d = &gpu.device;
+        // Owned until the frames are whole: an error frees what was made before it.
         unsafe {
-            let pool = d.create_command_pool(
+            let pool = gpu.own(d.create_command_pool(
                 &vk::CommandPoolCreateInfo::default()
                     .queue_family_index(gpu.queue_family)
                     .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
                 None,
-            )?;
+            )?);
             let cbs = d.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(FRAMES_IN_FLIGHT as u32),
+                &vk::CommandBufferAllocateInfo::default().command_pool(*pool).command_buffer_count(FRAMES_IN_FLIGHT as u32),
             )?;
-            let mut fences = Vec::new();
-            let mut acquired = Vec::new();
+            let mut fences = gpu.own(Vec::new());
+            let mut acquired = gpu.own(Vec::new());
             for _ in 0..FRAMES_IN_FLIGHT {
                 fences.push(d.create_fence(&vk::FenceCreateInfo::default().flags(vk::FenceCreateFlags::SIGNALED), None)?);
                 acquired.push(d.create_semaphore(&vk::SemaphoreCreateInfo::default(), None)?);
             }
-            Ok(Frames { pool, cbs, fences, acquired })
+            Ok(Frames { pool: pool.keep(), cbs, fences: fences.keep(), acquired: acquired.keep() })
         }
     }
 
@@ -51,7 +52,7 @@ impl Frames {
     }
 }
 
-pub(super) struct Swapchain {
+pub(crate) struct Swapchain {
     pub surface_loader: ash::khr::surface::Instance,
     pub loader: ash::khr::swapchain::Device,
     pub surface: vk::SurfaceKHR,
@@ -84,7 +85,8 @@ impl Swapchain {
             .copied()
             .ok_or_else(|| anyhow!("the surface offers no formats"))?;
         let loader = ash::khr::swapchain::Device::new(&gpu.instance, &gpu.device);
-        let mut sc = Swapchain {
+        // Owned (with the surface) until it is built: a failed build frees what it made.
+        let mut sc = gpu.own(Swapchain {
             surface_loader,
             loader,
             surface,
@@ -95,9 +97,9 @@ impl Swapchain {
             images: vec![],
             views: vec![],
             rendered: vec![],
-        };
+        });
         sc.build(gpu, size)?;
-        Ok(sc)
+        Ok(sc.keep())
     }
 
     fn build(&mut self, gpu: &Gpu, size: PhysicalSize<u32>) -> Result<()> {

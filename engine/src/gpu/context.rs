@@ -121,6 +121,8 @@ pub struct Gpu {
     timeout_ns: AtomicU64,
     /// Set once a wait found the device hung or lost.
     lost: AtomicBool,
+    /// Allocations left before one is made to fail (0: none fails): `fail_allocation`.
+    pub(super) allocation_fault: AtomicU64,
 }
 
 fn cstr_name(raw: &[c_char]) -> String {
@@ -267,6 +269,7 @@ impl Gpu {
             swapchain_capable: want_swapchain,
             timeout_ns: AtomicU64::new(gpu_timeout_from_env()?.as_nanos().min(u64::MAX as u128) as u64),
             lost: AtomicBool::new(false),
+            allocation_fault: AtomicU64::new(0),
         })
     }
 

@@ -1,7 +1,8 @@
 //! Buffers and images with their memory, and uploads through a staging buffer.
 
 use super::Gpu;
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
+use std::sync::atomic::Ordering;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
@@ -15,20 +16,13 @@ pub struct Buffer {
 impl Buffer {
     pub fn new(gpu: &Gpu, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer> {
         let d = &gpu.device;
-        let buffer = unsafe {
-            d.create_buffer(&vk::BufferCreateInfo::default().size(size.max(4)).usage(usage), None)?
-        };
+        let buffer = unsafe { d.create_buffer(&vk::BufferCreateInfo::default().size(size.max(4)).usage(usage), None)? };
+        let mut b = gpu.own(Buffer { buffer, size, allocation: None });
         let requirements = unsafe { d.get_buffer_memory_requirements(buffer) };
-        let allocation = match allocate(gpu, name, requirements, location, true) {
-            Ok(a) => a,
-            Err(e) => {
-                unsafe { d.destroy_buffer(buffer, None) };
-                return Err(e);
-            }
-        };
+        let allocation = b.allocation.insert(allocate(gpu, name, requirements, location, true)?);
         // SAFETY: the allocation is bound once and freed only after the buffer is destroyed.
         unsafe { d.bind_buffer_memory(buffer, allocation.memory(), allocation.offset())? };
-        Ok(Buffer { buffer, size, allocation: Some(allocation) })
+        Ok(b.keep())
     }
 
     /// The mapped bytes of a host-visible buffer.
@@ -45,19 +39,20 @@ impl Buffer {
 
     /// A device-local buffer filled with `bytes` through a staging copy.
     pub fn with_data(gpu: &Gpu, name: &str, bytes: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer> {
-        let mut staging = Buffer::new(gpu, "staging", bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        // The staging buffer is freed when this returns, whichever way.
+        let mut staging = gpu.own(Buffer::new(gpu, "staging", bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?);
         staging.mapped()[..bytes.len()].copy_from_slice(bytes);
-        let dst = Buffer::new(gpu, name, bytes.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
+        let dst = gpu.own(Buffer::new(gpu, name, bytes.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?);
         gpu.one_shot(|cb| unsafe {
             gpu.device.cmd_copy_buffer(cb, staging.buffer, dst.buffer, &[vk::BufferCopy::default().size(bytes.len() as u64)]);
         })?;
-        staging.destroy(gpu);
-        Ok(dst)
+        Ok(dst.keep())
     }
 
+    /// Free the buffer and its memory (once: later calls do nothing).
     pub fn destroy(&mut self, gpu: &Gpu) {
+        unsafe { gpu.device.destroy_buffer(std::mem::take(&mut self.buffer), None) };
         if let Some(a) = self.allocation.take() {
-            unsafe { gpu.device.destroy_buffer(self.buffer, None) };
             let _ = gpu.allocator.lock().unwrap().free(a);
         }
     }
@@ -150,28 +145,23 @@ impl Image {
             .tiling(vk::ImageTiling::OPTIMAL)
             .initial_layout(vk::ImageLayout::UNDEFINED);
         let image = unsafe { d.create_image(&info, None)? };
+        let extent = vk::Extent2D { width: info.extent.width, height: info.extent.height };
+        let mut made = gpu.own(Image { image, view: vk::ImageView::null(), format: info.format, extent, mip_levels: info.mip_levels, layers: info.array_layers, allocation: None });
         let requirements = unsafe { d.get_image_memory_requirements(image) };
-        let allocation = match allocate(gpu, name, requirements, MemoryLocation::GpuOnly, false) {
-            Ok(a) => a,
-            Err(e) => {
-                unsafe { d.destroy_image(image, None) };
-                return Err(e);
-            }
-        };
+        let allocation = made.allocation.insert(allocate(gpu, name, requirements, MemoryLocation::GpuOnly, false)?);
         unsafe { d.bind_image_memory(image, allocation.memory(), allocation.offset())? };
         let range = vk::ImageSubresourceRange { layer_count: info.array_layers, ..full_range(aspect, info.mip_levels) };
-        let view = unsafe { d.create_image_view(&vk::ImageViewCreateInfo::default().image(image).view_type(view_type).format(info.format).subresource_range(range), None)? };
-        let extent = vk::Extent2D { width: info.extent.width, height: info.extent.height };
-        Ok(Image { image, view, format: info.format, extent, mip_levels: info.mip_levels, layers: info.array_layers, allocation: Some(allocation) })
+        made.view = unsafe { d.create_image_view(&vk::ImageViewCreateInfo::default().image(image).view_type(view_type).format(info.format).subresource_range(range), None)? };
+        Ok(made.keep())
     }
 
     /// A sampled image with every mip level uploaded from `mips` (level 0 first, tightly packed),
     /// left in SHADER_READ_ONLY_OPTIMAL.
     pub fn sampled_with_mips(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, mips: &[&[u8]]) -> Result<Image> {
-        let image = Image::new(gpu, name, format, extent, mips.len() as u32, vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST, vk::ImageAspectFlags::COLOR)?;
+        let image = gpu.own(Image::new(gpu, name, format, extent, mips.len() as u32, vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST, vk::ImageAspectFlags::COLOR)?);
         let parts: Vec<(&[u8], u32, u32)> = mips.iter().enumerate().map(|(level, bytes)| (*bytes, level as u32, 0)).collect();
         image.upload(gpu, &parts)?;
-        Ok(image)
+        Ok(image.keep())
     }
 
     /// A sampled 2D array image of one level, layer i uploaded from `layers[i]` (tightly
@@ -183,17 +173,17 @@ impl Image {
             .mip_levels(1)
             .array_layers(layers.len() as u32)
             .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST);
-        let image = Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D_ARRAY, vk::ImageAspectFlags::COLOR)?;
+        let image = gpu.own(Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D_ARRAY, vk::ImageAspectFlags::COLOR)?);
         let parts: Vec<(&[u8], u32, u32)> = layers.iter().enumerate().map(|(layer, bytes)| (*bytes, 0, layer as u32)).collect();
         image.upload(gpu, &parts)?;
-        Ok(image)
+        Ok(image.keep())
     }
 
     /// Copy `parts` (texels, mip level, array layer) into a new colour image through one
     /// staging buffer and leave every level and layer in SHADER_READ_ONLY_OPTIMAL.
     fn upload(&self, gpu: &Gpu, parts: &[(&[u8], u32, u32)]) -> Result<()> {
         let total: usize = parts.iter().map(|p| p.0.len()).sum();
-        let mut staging = Buffer::new(gpu, "texture staging", total as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        let mut staging = gpu.own(Buffer::new(gpu, "texture staging", total as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?);
         let mut regions = Vec::with_capacity(parts.len());
         let mut offset = 0usize;
         for &(bytes, level, layer) in parts {
@@ -212,23 +202,47 @@ impl Image {
             gpu.device.cmd_copy_buffer_to_image(cb, staging.buffer, self.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &regions);
             barrier(gpu, cb, self.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
         })?;
-        staging.destroy(gpu);
         Ok(())
     }
 
+    /// Free the view, the image and its memory (once: later calls do nothing).
     pub fn destroy(&mut self, gpu: &Gpu) {
+        unsafe {
+            gpu.device.destroy_image_view(std::mem::take(&mut self.view), None);
+            gpu.device.destroy_image(std::mem::take(&mut self.image), None);
+        }
         if let Some(a) = self.allocation.take() {
-            unsafe {
-                gpu.device.destroy_image_view(self.view, None);
-                gpu.device.destroy_image(self.image, None);
-            }
             let _ = gpu.allocator.lock().unwrap().free(a);
         }
     }
 }
 
+impl Gpu {
+    /// Make the `nth` allocation from now fail (1: the next one) as if the device were out of
+    /// memory; 0 cancels. For the tests of error paths: every object made before the failure
+    /// must be freed by the constructor that fails.
+    pub fn fail_allocation(&self, nth: u64) {
+        self.allocation_fault.store(nth, Ordering::Relaxed);
+    }
+
+    /// The names of the live allocations of buffers and images (the overlay's own allocations
+    /// included), sorted: what the error-path tests compare before and after.
+    pub fn live_allocations(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.allocator.lock().unwrap().generate_report().allocations.into_iter().map(|a| a.name).collect();
+        names.sort();
+        names
+    }
+}
+
 /// Memory for one buffer (`linear`) or optimally tiled image from the shared allocator.
 fn allocate(gpu: &Gpu, name: &str, requirements: vk::MemoryRequirements, location: MemoryLocation, linear: bool) -> Result<Allocation> {
+    let left = gpu.allocation_fault.load(Ordering::Relaxed);
+    if left > 0 {
+        gpu.allocation_fault.store(left - 1, Ordering::Relaxed);
+        if left == 1 {
+            bail!("allocating {} bytes for '{name}': out of device memory (injected by Gpu::fail_allocation)", requirements.size);
+        }
+    }
     gpu.allocator
         .lock()
         .unwrap()

@@ -3,11 +3,13 @@
 
 mod context;
 mod memory;
+mod owned;
 mod pipeline;
 mod pipeline_cache;
 mod validation;
 
 pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};
 pub use memory::{barrier, full_range, Buffer, Image, SlotBuffers, Transition};
+pub use owned::{Destroy, Owned};
 pub use pipeline::{opaque, GraphicsPipeline};
 pub use validation::ValidationLog;

@@ -105,16 +105,11 @@ impl<'a> GraphicsPipeline<'a> {
     /// Create the pipeline through the device's pipeline cache.
     pub fn build(&self, gpu: &Gpu, layout: vk::PipelineLayout) -> Result<vk::Pipeline> {
         let device = &gpu.device;
-        let vert = shaders::module(device, self.vert).with_context(|| format!("the {} pipeline's vertex shader", self.name))?;
-        let frag = match self.frag.map(|f| shaders::module(device, f)).transpose() {
-            Ok(f) => f,
-            Err(e) => {
-                unsafe { device.destroy_shader_module(vert, None) };
-                return Err(e.context(format!("the {} pipeline's fragment shader", self.name)));
-            }
-        };
-        let mut stages = vec![vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(c"main")];
-        if let Some(f) = frag {
+        // The modules are only needed while the pipeline is created: owned, so freed on return.
+        let vert = gpu.own(shaders::module(device, self.vert).with_context(|| format!("the {} pipeline's vertex shader", self.name))?);
+        let frag = gpu.own(self.frag.map(|f| shaders::module(device, f)).transpose().with_context(|| format!("the {} pipeline's fragment shader", self.name))?);
+        let mut stages = vec![vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(*vert).name(c"main")];
+        if let Some(f) = *frag {
             let mut stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(f).name(c"main");
             if let Some(spec) = &self.frag_specialization {
                 stage = stage.specialization_info(spec);
@@ -161,13 +156,6 @@ impl<'a> GraphicsPipeline<'a> {
             info = info.depth_stencil_state(ds);
         }
         let result = unsafe { device.create_graphics_pipelines(gpu.pipeline_cache, &[info], None) };
-        // The modules are only needed while the pipeline is created.
-        unsafe {
-            device.destroy_shader_module(vert, None);
-            if let Some(f) = frag {
-                device.destroy_shader_module(f, None);
-            }
-        }
         let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the {} pipeline: {e}", self.name))?;
         Ok(pipelines[0])
     }

@@ -107,36 +107,47 @@ impl MeshKit {
         // transforms are applied per vertex).
         let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES)];
         let layout = |b: &[vk::DescriptorSetLayoutBinding]| unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(b), None) };
-        let frame_layout = layout(&frame_binding)?;
-        let material_layout = layout(&material_binding)?;
-        let scene_layout = layout(&scene_bindings)?;
-        let set_layouts = [frame_layout, material_layout, scene_layout];
+        // Everything is owned until the kit is whole: an error frees what was made before it.
+        let frame_layout = gpu.own(layout(&frame_binding)?);
+        let material_layout = gpu.own(layout(&material_binding)?);
+        let scene_layout = gpu.own(layout(&scene_bindings)?);
+        let set_layouts = [*frame_layout, *material_layout, *scene_layout];
         let push = [vk::PushConstantRange::default().stage_flags(MESH_STAGES).size(std::mem::size_of::<DrawPush>() as u32)];
-        let pipeline_layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
-        let pl = pipeline_layout;
+        let pipeline_layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
+        let pl = *pipeline_layout;
+        let made = std::cell::RefCell::new(gpu.own(Vec::<vk::Pipeline>::new()));
+        let pipeline = |p: Result<vk::Pipeline>| -> Result<vk::Pipeline> {
+            let p = p?;
+            made.borrow_mut().push(p);
+            Ok(p)
+        };
         let shading = |lightmapped| {
             let make = |equal: bool, count_fragments| {
                 let variant = Variant { count_fragments, lightmapped };
-                match equal {
+                pipeline(match equal {
                     false => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None),
                     true => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
-                }
+                })
             };
             Shading::new(make, gpu.caps.fragment_atomics)
         };
         let plain = Variant::default();
         let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
-        Ok(MeshKit {
-            frame_layout,
-            material_layout,
-            scene_layout,
-            pipeline_layout,
+        let kit = MeshKit {
+            frame_layout: *frame_layout,
+            material_layout: *material_layout,
+            scene_layout: *scene_layout,
+            pipeline_layout: pl,
             shade: [shading(false)?, shading(true)?],
-            depth: create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, plain, None)?,
-            depth_masked: create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, plain, None)?,
-            shadow: create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
-            shadow_masked: create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias)?,
-        })
+            depth: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, plain, None))?,
+            depth_masked: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, plain, None))?,
+            shadow: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
+            shadow_masked: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
+        };
+        // The kit owns them all now.
+        made.into_inner().keep();
+        (frame_layout.keep(), material_layout.keep(), scene_layout.keep(), pipeline_layout.keep());
+        Ok(kit)
     }
 
     /// The depth-only pipeline for a material: with the alpha-test discard when it is masked.

@@ -26,15 +26,16 @@ impl SampledInput {
             .descriptor_count(1)
             .stage_flags(vk::ShaderStageFlags::FRAGMENT)];
         let n = frames_in_flight as u32;
-        let layout = unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding), None)? };
+        // Owned until the input is whole: an error frees what was made before it.
+        let layout = gpu.own(unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding), None)? });
         let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: n }];
-        let pool = unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)? };
-        let layouts = vec![layout; frames_in_flight];
-        let sets = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))? };
+        let pool = gpu.own(unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(n).pool_sizes(&sizes), None)? });
+        let layouts = vec![*layout; frames_in_flight];
+        let sets = unsafe { d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&layouts))? };
         let clamp = vk::SamplerAddressMode::CLAMP_TO_EDGE;
         let info = vk::SamplerCreateInfo::default().mag_filter(filter).min_filter(filter).address_mode_u(clamp).address_mode_v(clamp).address_mode_w(clamp);
         let sampler = unsafe { d.create_sampler(&info, None)? };
-        Ok(SampledInput { layout, pool, sets, bound: vec![vk::ImageView::null(); frames_in_flight], sampler })
+        Ok(SampledInput { layout: layout.keep(), pool: pool.keep(), sets, bound: vec![vk::ImageView::null(); frames_in_flight], sampler })
     }
 
     /// Slot `slot`'s set, pointing at `view` (in SHADER_READ_ONLY_OPTIMAL).

@@ -68,30 +68,22 @@ impl Profiler {
     pub fn new(gpu: &Gpu, frames_in_flight: usize) -> Result<Profiler> {
         let d = &gpu.device;
         let per_slot = MAX_PASSES as u32;
-        let timestamps = if gpu.caps.timestamps {
+        let timestamps = gpu.own(if gpu.caps.timestamps {
             let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2 * per_slot * frames_in_flight as u32);
             Some(unsafe { d.create_query_pool(&info, None)? })
         } else {
             None
-        };
+        });
         let stats = if gpu.caps.pipeline_statistics {
             let info = vk::QueryPoolCreateInfo::default()
                 .query_type(vk::QueryType::PIPELINE_STATISTICS)
                 .query_count(per_slot * frames_in_flight as u32)
                 .pipeline_statistics(vk::QueryPipelineStatisticFlags::VERTEX_SHADER_INVOCATIONS | vk::QueryPipelineStatisticFlags::FRAGMENT_SHADER_INVOCATIONS);
-            match unsafe { d.create_query_pool(&info, None) } {
-                Ok(p) => Some(p),
-                Err(e) => {
-                    if let Some(t) = timestamps {
-                        unsafe { d.destroy_query_pool(t, None) };
-                    }
-                    return Err(e.into());
-                }
-            }
+            Some(unsafe { d.create_query_pool(&info, None)? })
         } else {
             None
         };
-        Ok(Profiler { timestamps, stats, timestamp_period_ns: gpu.caps.timestamp_period_ns as f64 })
+        Ok(Profiler { timestamps: timestamps.keep(), stats, timestamp_period_ns: gpu.caps.timestamp_period_ns as f64 })
     }
 
     pub fn begin_frame(&self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize) {

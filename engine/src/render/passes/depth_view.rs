@@ -28,9 +28,9 @@ pub struct DepthView {
 
 impl DepthView {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<DepthView> {
-        let input = SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?;
+        let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?);
         let (layout, pipeline) = fullscreen_pipeline(gpu, "depth view", input.layout, std::mem::size_of::<DepthViewPush>() as u32, shaders::DEPTH_VIEW_FRAG, color_format)?;
-        Ok(DepthView { input, layout, pipeline })
+        Ok(DepthView { input: input.keep(), layout, pipeline })
     }
 }
 

@@ -21,16 +21,17 @@ use ash::vk;
 
 /// Every pass of a frame, in order, for a renderer drawing into `color_format` images.
 pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Vec<Box<dyn Pass>>> {
-    Ok(vec![
-        Box::new(skinning::Skinning),
-        Box::new(shadow_static::ShadowStatic),
-        Box::new(shadow_copy::ShadowCopy),
-        Box::new(shadow_dynamic::ShadowDynamic),
-        Box::new(prepass::Prepass),
-        Box::new(shading::Shading),
-        Box::new(boids::Boids),
-        Box::new(particles::Particles),
-        Box::new(tonemap::ToneMapPass),
-        Box::new(DepthView::new(gpu, color_format, frames_in_flight)?),
-    ])
+    // Owned while it grows: a pass that fails to build frees the ones built before it.
+    let mut passes = gpu.own(Vec::<Box<dyn Pass>>::new());
+    passes.push(Box::new(skinning::Skinning));
+    passes.push(Box::new(shadow_static::ShadowStatic));
+    passes.push(Box::new(shadow_copy::ShadowCopy));
+    passes.push(Box::new(shadow_dynamic::ShadowDynamic));
+    passes.push(Box::new(prepass::Prepass));
+    passes.push(Box::new(shading::Shading));
+    passes.push(Box::new(boids::Boids));
+    passes.push(Box::new(particles::Particles));
+    passes.push(Box::new(tonemap::ToneMapPass));
+    passes.push(Box::new(DepthView::new(gpu, color_format, frames_in_flight)?));
+    Ok(passes.keep())
 }
