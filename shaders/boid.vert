@@ -1,7 +1,7 @@
 #version 450
 #include "frame.glsl"
 
-// Instanced boid meshes (engine/src/boids_draw.rs): the flock's mesh from the scene's vertex
+// Instanced boid meshes (engine/src/render/boids_draw.rs): the flock's mesh from the scene's vertex
 // buffer, one model matrix per instance, from the boid's position and `boid_rotation` (heading
 // plus banking roll).
 

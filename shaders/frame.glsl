@@ -1,8 +1,8 @@
-// Per-frame uniforms shared by every pass. Mirrors `FrameUniforms` in engine/src/renderer.rs.
+// Per-frame uniforms shared by every pass. Mirrors `FrameUniforms` in engine/src/render/renderer.rs.
 layout(set = 0, binding = 0) uniform Frame {
     mat4 view_proj;
     // World -> the sun's shadow map: xy * 0.5 + 0.5 is the texture coordinate, z the depth
-    // (0 nearest the sun). engine/src/shadow.rs.
+    // (0 nearest the sun). engine/src/render/shadow.rs.
     mat4 sun_view_proj;
     vec4 camera_pos;   // xyz world position
     vec4 sun_dir;      // xyz unit vector towards the sun

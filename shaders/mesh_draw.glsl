@@ -1,6 +1,6 @@
 // What a mesh draw gives both its vertex and its fragment shaders: the push constants (mirrors
-// `DrawPush` in engine/src/renderer.rs) and every material's constants (set 2 binding 2;
-// `MaterialConstants` in engine/src/scene.rs).
+// `DrawPush` in engine/src/render/mesh_draw.rs) and every material's constants (set 2 binding 2;
+// `MaterialConstants` in engine/src/assets.rs).
 
 layout(push_constant) uniform Draw {
     vec4 material; // x: alpha-test cutoff (or -1), y: material index, z: the submesh's lightmap block

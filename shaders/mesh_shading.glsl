@@ -7,7 +7,7 @@
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
 layout(set = 1, binding = 1) uniform sampler2D emissive_tex;   // _SRGB format: sampled as linear
 
-// Set 2: the scene's baked light (engine/src/scene.rs). The lightmap pages as the layers of one
+// Set 2: the scene's baked light (engine/src/assets.rs). The lightmap pages as the layers of one
 // array (one black layer without a bake), the probe grid, and the material constants.
 layout(set = 2, binding = 0) uniform sampler2DArray lightmap; // B = H/pi in nits, half float
 layout(std430, set = 2, binding = 1) readonly buffer Probes {

@@ -1,13 +1,13 @@
 #version 450
 #include "frame.glsl"
 
-// Camera-facing particle quads (engine/src/particles_pass.rs): one instance per billboard
+// Camera-facing particle quads (engine/src/render/particles_draw.rs): one instance per billboard
 // (`sim::particles::Billboard`), four vertices of a triangle strip made from gl_VertexIndex.
 
 layout(location = 0) in vec4 in_pos_size; // xyz world centre, w edge length in metres
 layout(location = 1) in vec4 in_color;    // linear rgb, alpha
 
-// Mirrors `ParticlePush` in engine/src/particles_pass.rs: the camera's world right and up axes,
+// Mirrors `ParticlePush` in engine/src/render/particles_draw.rs: the camera's world right and up axes,
 // so every quad faces the camera plane (no per-particle rotation on the GPU).
 layout(push_constant) uniform Axes {
     vec4 right;

@@ -1,5 +1,5 @@
 #version 450
-// The tone-map pass (engine/src/tonemap.rs): the shading pass's HDR radiance -> display. The one
+// The tone-map pass (engine/src/render/tonemap.rs): the shading pass's HDR radiance -> display. The one
 // place where exposure and the tone-mapping operator are applied. The target is an _SRGB format,
 // so the value written here is linear and the hardware does the sRGB encode.
 //
@@ -13,7 +13,7 @@
 
 layout(set = 0, binding = 0) uniform sampler2D hdr; // R16G16B16A16_SFLOAT, linear radiance
 
-// Mirrors `ToneMapPush` in engine/src/tonemap.rs.
+// Mirrors `ToneMapPush` in engine/src/render/tonemap.rs.
 layout(push_constant) uniform ToneMap {
     vec4 params; // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s
 } tm;

@@ -1,29 +1,26 @@
-//! The runtime: Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window.
+//! The runtime: a Vulkan 1.3 (ash) renderer for cooked packs, headless or in a window, that a
+//! game links.
+//!
+//! - `gpu`: the device, memory objects (owned while they are made: `gpu::Owned`), pipelines.
+//! - `render`: the renderer (`render::renderer`), its frame graph (`render::graph`) and passes
+//!   (`render::passes`, one file each), and what the passes draw with (meshes, shadow, boids,
+//!   particles, tone map), culling and LOD selection.
+//! - `scene`: the scene of instances behind handles (`scene::GpuScene`, `scene::instances`), the
+//!   camera and walking on the level.
+//! - `assets`: loading a cooked pack onto the device (`GpuScene::upload`).
+//! - `anim`: sampling clips, posing, skinning and morphing (`anim::animated` runs them per frame).
+//! - `sim`: particles and boids, and the level's world built from its spawns (`sim::level`).
+//! - `ui`: the debug overlay (egui).
+//! - `app`: the window, the frame loop and input (`app::Game`), and headless rendering.
 
 pub mod anim;
 pub mod app;
-pub mod animated;
-pub mod batches;
-pub mod boids_draw;
-pub mod camera;
-pub mod cull;
+pub mod assets;
 pub mod gpu;
-pub mod headless;
-pub mod instances;
-pub mod lod_select;
-pub mod overlay;
-pub mod particles_pass;
 pub mod render;
-pub mod renderer;
-pub mod samplers;
 pub mod scene;
-pub mod shaders;
-pub mod shadow;
 pub mod sim;
-pub mod sim_level;
 pub mod stats;
-pub mod tonemap;
-pub mod visibility;
-pub mod walk;
+pub mod ui;
 
 pub use pack;

@@ -79,11 +79,11 @@ fn sampling_blending_and_joint_matrices_do_not_allocate() {
 
 #[test]
 fn the_renderers_per_frame_animation_and_skinning_record_do_not_allocate() {
-    use engine::animated::AnimatedScene;
+    use engine::anim::animated::AnimatedScene;
     use engine::gpu::{DevicePreference, Gpu, GpuOptions};
-    use engine::renderer::Renderer;
+    use engine::render::renderer::Renderer;
     use engine::scene::GpuScene;
-    use engine::visibility::Draw;
+    use engine::render::visibility::Draw;
     let dir = std::env::var_os("GLTF_SAMPLES_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/gltf-samples"));
@@ -94,7 +94,7 @@ fn the_renderers_per_frame_animation_and_skinning_record_do_not_allocate() {
     }
     let pack = cook_core::cook_gltf(&path, &mut |_, _| {}).unwrap();
     let gpu = Gpu::new(&GpuOptions { validation: true, device: DevicePreference::from_env(), surface_extensions: vec![], pipeline_cache: None }).expect("a Vulkan 1.3 device");
-    let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 2).unwrap();
+    let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 2).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 2).unwrap().expect("RiggedSimple is skinned");
     let draws: Vec<Draw> = (0..scene.instances.len() as u32).map(|instance| Draw { instance, lod: 0 }).collect();

@@ -7,11 +7,11 @@
 use engine::anim::skin_cpu::{skin_cpu, DeformData};
 use engine::anim::route::Route;
 use engine::anim::{joint_count, node_joint_matrices, Rig};
-use engine::animated::AnimatedScene;
-use engine::camera::Camera;
+use engine::anim::animated::AnimatedScene;
+use engine::scene::camera::Camera;
 use engine::gpu::Gpu;
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::{world_transforms, GpuScene};
 use glam::{Mat4, Vec3};
 use pack::{Pack, Vertex};
@@ -33,7 +33,7 @@ fn baked(pack: &Pack, time: f32) -> Pack {
     rig.update_globals(&mut pose);
     let world = world_transforms(&pack.manifest.nodes);
     for node in 0..pack.manifest.nodes.len() {
-        if !engine::animated::animated_node(pack, node) {
+        if !engine::anim::animated::animated_node(pack, node) {
             continue;
         }
         let mesh = pack.manifest.nodes[node].mesh.unwrap() as usize;

@@ -1,9 +1,9 @@
 //! Boids drawn as instanced meshes on the real device (lavapipe in CI) with validation on:
 //! culled with the scene (their counts join the frame's), drawn where they are in view.
 
-use engine::camera::Camera;
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::scene::camera::Camera;
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use engine::sim::boids::{BoidParams, Flock, FlockState};
 use glam::{Mat4, Vec3};

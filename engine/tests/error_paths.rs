@@ -4,11 +4,11 @@
 //! exactly as they were before it started, validation clean; left to succeed, it must work.
 
 use anyhow::Result;
-use engine::animated::AnimatedScene;
-use engine::camera::Camera;
+use engine::anim::animated::AnimatedScene;
+use engine::scene::camera::Camera;
 use engine::gpu::{Destroy, Gpu};
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
 use pack::Material;

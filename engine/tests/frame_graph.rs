@@ -1,7 +1,7 @@
 //! The frame graph on a real device: a debug pass added with one line (`passes::register`)
 //! shows the depth buffer, and the graph drops the passes only the shaded frame needed.
 
-use engine::renderer::Lighting;
+use engine::render::renderer::Lighting;
 
 mod common;
 use common::frames::{looking_down_neg_z, pixel, srgb_encode, Rig};

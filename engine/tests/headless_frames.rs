@@ -2,11 +2,11 @@
 //! basics): emission and the tone map, the sun's shadow map, device behaviour, texture
 //! fallbacks and the overlay. Validation on; scenes built in code.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use engine::gpu::Gpu;
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::overlay::{headless_input, FrameStats, Overlay};
-use engine::renderer::Lighting;
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::ui::{headless_input, FrameStats, Overlay};
+use engine::render::renderer::Lighting;
 use engine::scene::GpuScene;
 use glam::{Mat4, Vec3};
 use pack::{Material, Pack, PackBuilder, TextureFormat, Vertex};
@@ -170,8 +170,8 @@ fn a_dynamic_object_under_a_static_roof_gets_no_sun_and_gets_it_moved_out() {
         rig.destroy(&gpu);
         (p, casters, block)
     };
-    let (under, casters_under, block_under) = centre(0.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
-    let (out, casters_out, block_out) = centre(8.0, engine::shadow::DEFAULT_SHADOW_MAP_SIZE);
+    let (under, casters_under, block_under) = centre(0.0, engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE);
+    let (out, casters_out, block_out) = centre(8.0, engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE);
     eprintln!("under the roof {under:?} (probe only {shaded:?}); out {out:?} (with sun {lit:?})");
     assert_eq!((casters_under, casters_out), (2, 2), "roof and cube cast");
     assert_bytes_near("under the roof", under, shaded, 1);
@@ -226,7 +226,7 @@ fn the_static_casters_are_drawn_into_the_shadow_map_once_and_reused_while_the_cu
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &cam(cube_x), &Lighting::default(), true).unwrap();
         (rig.target.pixels().to_vec(), rig.renderer.shadow.static_draws, rig.renderer.shadow_casters)
     };
-    let size = engine::shadow::DEFAULT_SHADOW_MAP_SIZE;
+    let size = engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE;
     let mut seen = Vec::new();
     for x in [0.0, 8.0, 0.5, 0.0] {
         let (px, static_draws, casters) = frame(&mut rig, x, 1.5);
@@ -283,7 +283,7 @@ fn a_cpu_device_samples_textures_without_anisotropy() {
     // Lavapipe's anisotropic sampling can stall a frame for minutes (`samplers::max_anisotropy`): a
     // CPU device gets none, any other its own limit up to 16x.
     let gpu = gpu();
-    let got = engine::samplers::max_anisotropy(&gpu);
+    let got = engine::render::samplers::max_anisotropy(&gpu);
     if gpu.caps.device_type == ash::vk::PhysicalDeviceType::CPU {
         assert_eq!(got, None, "{} is a CPU device", gpu.caps.device_name);
     } else {
@@ -361,7 +361,7 @@ fn the_half_float_fallback_keeps_cooked_normals_unit_length() {
         let (a, b) = (i as f64 * 0.7391, i as f64 * 0.0123);
         let n = [a.cos() * b.sin(), a.sin() * b.sin(), b.cos()];
         let texel: Vec<u8> = n.iter().chain([1.0].iter()).flat_map(|&c| (((c * 0.5 + 0.5) * 65535.0).round() as u16).to_le_bytes()).collect();
-        let halves = engine::scene::unorm16_to_half(&texel);
+        let halves = engine::assets::unorm16_to_half(&texel);
         let v: Vec<f64> = halves.chunks_exact(2).take(3).map(|h| half_to_f64(u16::from_le_bytes([h[0], h[1]])) * 2.0 - 1.0).collect();
         worst = worst.max(((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs());
     }

@@ -1,8 +1,8 @@
 //! Headless rendering on the real Vulkan device (lavapipe in CI) with validation on: every test
 //! fails on any validation error. Scenes are built in code so these tests need no cooker.
 
-use engine::camera::Camera;
-use engine::renderer::{Lighting, CLEAR_COLOR};
+use engine::scene::camera::Camera;
+use engine::render::renderer::{Lighting, CLEAR_COLOR};
 use glam::{Mat4, Vec3};
 use pack::{LightmapRegion, Material, Node, Pack, PackBuilder, TextureFormat, Vertex};
 

@@ -5,7 +5,7 @@
 //! here.
 
 use engine::gpu::Gpu;
-use engine::renderer::Lighting;
+use engine::render::renderer::Lighting;
 use glam::Vec3;
 use pack::{AlphaMode, Filter, Material, Pack, PackBuilder, Sampler, TextureFormat, TextureTransform, Vertex, Wrap};
 

@@ -3,10 +3,10 @@
 //! Stand-in lighting (no baked data), so the tone map passes the HDR values through and a pixel
 //! is the sRGB encoding of the blend equation's result.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use engine::gpu::Gpu;
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer, CLEAR_COLOR};
 use engine::scene::GpuScene;
 use engine::sim::particles::{Billboard, Blend};
 use glam::Vec3;

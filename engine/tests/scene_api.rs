@@ -1,9 +1,9 @@
 //! The scene API while rendering: spawn, move and despawn instances through handles, with the
 //! culling counters exact after each step and the picture following.
 
-use engine::camera::Camera;
-use engine::instances::InstanceError;
-use engine::renderer::Lighting;
+use engine::scene::camera::Camera;
+use engine::scene::instances::InstanceError;
+use engine::render::renderer::Lighting;
 use engine::scene::Spawn;
 use glam::{Mat4, Vec3};
 

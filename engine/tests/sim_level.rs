@@ -1,8 +1,8 @@
-//! The level's simulation built from spawns (engine/src/sim_level.rs): the temple's own spawn
+//! The level's simulation built from spawns (engine/src/sim/level.rs): the temple's own spawn
 //! lines map onto emitters and flocks with the authored numbers, and replay identically.
 
 use engine::sim::particles::Blend;
-use engine::sim_level::{warm_up, world_from_spawns};
+use engine::sim::level::{warm_up, world_from_spawns};
 use glam::Vec3;
 use pack::Spawn;
 

@@ -1,15 +1,15 @@
-//! The overlay's simulation panel (engine/src/overlay/sim_panel.rs): edits through its model
+//! The overlay's simulation panel (engine/src/ui/sim_panel.rs): edits through its model
 //! (`apply`) and through its sliders (scripted pointer input, no display) change the running
 //! world's parameters at once, and the overlay with the panel open renders with validation clean.
 
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::overlay::sim_panel::{apply, Target, EMITTER_KNOBS, FLOCK_KNOBS};
-use engine::overlay::{headless_input, FrameStats, Overlay, Panel, SimPanel};
-use engine::renderer::{Lighting, Renderer};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::ui::sim_panel::{apply, Target, EMITTER_KNOBS, FLOCK_KNOBS};
+use engine::ui::{headless_input, FrameStats, Overlay, Panel, SimPanel};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::sim::particles::Blend;
 use engine::sim::World;
-use engine::sim_level::world_from_spawns;
+use engine::sim::level::world_from_spawns;
 use glam::Vec3;
 use pack::Material;
 
@@ -138,7 +138,7 @@ fn the_overlay_renders_the_open_simulation_panel_with_validation_clean() {
     let mut renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
     let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
     let mut overlay = Overlay::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
-    let camera = engine::camera::Camera {
+    let camera = engine::scene::camera::Camera {
         position: Vec3::ZERO,
         yaw: 0.0,
         pitch: 0.0,
@@ -152,7 +152,7 @@ fn the_overlay_renders_the_open_simulation_panel_with_validation_clean() {
             apply(&mut w, Target::Emitter(0), "rate /s", 800.0).unwrap();
         }
         w.update(1.0 / 60.0);
-        engine::sim_level::prepare_frame(&w, &mut renderer, &scene, &camera);
+        engine::sim::level::prepare_frame(&w, &mut renderer, &scene, &camera);
         let mut drawn = 0;
         let t = target
             .render_with(&gpu, &mut renderer, &scene, &camera, &Lighting::default(), true, &mut overlay, |overlay, renderer| {

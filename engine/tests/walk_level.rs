@@ -2,7 +2,7 @@
 //! runs this; without it the test says so and passes): from the player spawn round the fountain,
 //! up the portico step and through the main door into the hall.
 
-use engine::walk::{WalkMesh, BODY_RADIUS_M};
+use engine::scene::walk::{WalkMesh, BODY_RADIUS_M};
 use glam::Vec3;
 use std::path::Path;
 

@@ -1,6 +1,6 @@
 //! Animation on the CPU side: clip sampling (`sample`), poses and skeletons (`pose`), characters walking routes (`route`), the CPU
 //! reference of skinning and morphing (`skin_cpu`), the GPU skinning pass (`skin_gpu`) and the
-//! pose dump for tools (`dump`). The renderer drives them through `crate::animated`.
+//! pose dump for tools (`dump`). The renderer drives them through `crate::anim::animated`.
 
 pub mod dump;
 pub mod pose;
@@ -8,6 +8,7 @@ pub mod route;
 pub mod sample;
 pub mod skin_cpu;
 pub mod skin_gpu;
+pub mod animated;
 
 use glam::Mat4;
 use pack::Pack;

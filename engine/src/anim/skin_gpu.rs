@@ -6,7 +6,7 @@
 
 use super::skin_cpu::DeformData;
 use crate::gpu::{Buffer, Gpu};
-use crate::shaders;
+use crate::render::shaders;
 use anyhow::{bail, Result};
 use ash::vk;
 use glam::Mat4;

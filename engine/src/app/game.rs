@@ -3,11 +3,11 @@
 //! window owns the device, the swapchain, the renderer and the scene; the game owns everything
 //! else (the demo's is `src/bin/demo/game.rs`).
 
-use crate::animated::AnimatedScene;
-use crate::camera::Camera;
+use crate::anim::animated::AnimatedScene;
+use crate::scene::camera::Camera;
 use crate::gpu::Gpu;
-use crate::overlay::Panel;
-use crate::renderer::{Lighting, Renderer};
+use crate::ui::Panel;
+use crate::render::renderer::{Lighting, Renderer};
 use crate::scene::GpuScene;
 use anyhow::Result;
 use std::collections::HashSet;

@@ -4,14 +4,15 @@
 //! world are the game's (`game::Game`; the demo's is `src/bin/demo/game.rs`).
 
 pub mod game;
+pub mod headless;
 pub(crate) mod swapchain;
 
 pub use game::{Cx, Game, Input};
 
 use crate::gpu::{Gpu, GpuOptions};
-use crate::overlay::{FrameStats, Overlay};
+use crate::ui::{FrameStats, Overlay};
 use crate::render::graph::{Access, Pass, OUTPUT};
-use crate::renderer::{FrameTarget, Renderer};
+use crate::render::renderer::{FrameTarget, Renderer};
 use crate::scene::GpuScene;
 use anyhow::{anyhow, Context, Result};
 use ash::vk;
@@ -239,7 +240,7 @@ impl State {
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         let loaded = renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| {
             let scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
-            match crate::animated::AnimatedScene::new(&gpu, pack, &scene, FRAMES_IN_FLIGHT) {
+            match crate::anim::animated::AnimatedScene::new(&gpu, pack, &scene, FRAMES_IN_FLIGHT) {
                 Ok(a) => Ok((scene, a)),
                 Err(e) => {
                     let mut scene = scene;

@@ -16,10 +16,10 @@
 //! Subcommand "sim" (CPU only, no device): boid step time for each flock size, grid against
 //! brute force up to --brute-max in the same run, and particle update time.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use engine::gpu::{DevicePreference, Gpu, GpuOptions};
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::stats::median;
 use glam::{Mat4, Vec3};
@@ -411,7 +411,7 @@ mod sim_bench {
 /// `bench skinned`: the skinning pass and CPU animation cost of many characters (issue 7).
 mod skinned_bench {
     use super::*;
-    use engine::animated::AnimatedScene;
+    use engine::anim::animated::AnimatedScene;
 
     const USAGE: &str = "usage: bench skinned --pack PACK [--characters N] [--frames F] [--width W --height H] [--device auto|cpu|gpu|NAME]";
 
@@ -554,7 +554,7 @@ mod skinned_bench {
     /// outside the timestamped stream (0.05 ms for 733k vertices), so the bench reports both.
     fn skinning_wall_ms(gpu: &Gpu, pack: &Pack, anim: &mut AnimatedScene, rounds: usize) -> anyhow::Result<WallTimes> {
         use engine::anim::skin_cpu::{skin_cpu, DeformData};
-        let draws: Vec<engine::visibility::Draw> = anim.instances.iter().map(|a| engine::visibility::Draw { instance: a.instance, lod: 0 }).collect();
+        let draws: Vec<engine::render::visibility::Draw> = anim.instances.iter().map(|a| engine::render::visibility::Draw { instance: a.instance, lod: 0 }).collect();
         let data: Vec<DeformData> = anim.instances.iter().map(|a| DeformData::for_node(pack, a.node as usize, 0).expect("an animated node has a mesh")).collect();
         let mut out: Vec<Vec<Vertex>> = data.iter().map(|d| vec![Vertex::default(); d.vertices.len()]).collect();
         let (mut gpu_ms, mut cpu_ms, mut ratio) = (Vec::new(), Vec::new(), Vec::new());

@@ -5,11 +5,11 @@
 //!
 //! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::overlay::{self, FrameStats, Overlay};
-use engine::renderer::{Lighting, Renderer};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::ui::{self, FrameStats, Overlay};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::stats::{median, percentile};
 use engine::app::{self, WindowOptions};
@@ -104,7 +104,7 @@ fn parse_args() -> Result<Args, String> {
         overlay: false,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
-        shadow_map_size: engine::shadow::DEFAULT_SHADOW_MAP_SIZE,
+        shadow_map_size: engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE,
         dump_pose: None,
     };
     let mut it = std::env::args().skip(1);
@@ -285,12 +285,12 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let gpu = Gpu::new(gpu_opts)?;
     println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
-    let mut renderer = Renderer::new(&gpu, engine::headless::OFFSCREEN_FORMAT, 1)?;
+    let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1)?;
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
     // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
     let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
-    renderer.animation = engine::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
+    renderer.animation = engine::anim::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
     let flight = (args.flight > 0.0).then(|| flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
@@ -298,8 +298,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if !args.screens.is_empty() {
         std::fs::create_dir_all(&args.screens_dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", args.screens_dir.display()))?;
     }
-    let mut world = engine::sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
-    engine::sim_level::warm_up(&mut world);
+    let mut world = engine::sim::level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
+    engine::sim::level::warm_up(&mut world);
     // Long enough for every requested screen unless the frame count was given.
     let frames = args.frames.unwrap_or_else(|| args.screens.iter().map(|&(k, _)| k + 1).max().unwrap_or(0).max(100));
     if let Some(&(_, secs)) = args.screens.iter().find(|&&(k, _)| k >= frames) {
@@ -329,13 +329,13 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         // Frame f shows the flight at f/60 s (frame 0: the player's view).
         let camera = flight.as_ref().map_or(still, |fl| fl.camera(f as f32 / 60.0));
         let screen = args.screens.iter().find(|(k, _)| *k == f).map(|&(_, secs)| secs);
-        engine::sim_level::prepare_frame(&world, &mut renderer, &scene, &camera);
+        engine::sim::level::prepare_frame(&world, &mut renderer, &scene, &camera);
         let capture = last || every || screen.is_some();
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, o, |o, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
-                let mut sim = overlay::SimPanel::new(&mut world);
-                o.build(overlay::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
+                let mut sim = ui::SimPanel::new(&mut world);
+                o.build(ui::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
             })?,
             None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
         };

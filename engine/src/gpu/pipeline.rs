@@ -3,7 +3,7 @@
 //! attachment formats; the rest (dynamic rendering, dynamic viewport and scissor, one sample,
 //! fill mode, shader module lifetime) is the same and lives here once.
 
-use crate::shaders;
+use crate::render::shaders;
 use anyhow::{Context, Result};
 use ash::vk;
 use super::Gpu;

@@ -2,17 +2,17 @@
 //! frame's prepared data (culled draws as batches, the instance stream, which passes have work).
 //! Prepared on the CPU by `Renderer::prepare` before the graph runs; passes only record.
 
-use crate::animated::AnimatedScene;
-use crate::batches::Batch;
-use crate::boids_draw::BoidsDraw;
+use crate::anim::animated::AnimatedScene;
+use crate::render::batches::Batch;
+use crate::render::boids_draw::BoidsDraw;
 use crate::gpu::Gpu;
-use crate::particles_pass::ParticlePass;
+use crate::render::particles_draw::ParticlePass;
 use crate::render::graph::ResourceId;
 use crate::render::mesh_draw::MeshKit;
 use crate::scene::GpuScene;
-use crate::shadow::SunShadow;
-use crate::tonemap::ToneMap;
-use crate::visibility::Draw;
+use crate::render::shadow::SunShadow;
+use crate::render::tonemap::ToneMap;
+use crate::render::visibility::Draw;
 use ash::vk;
 use glam::Vec3;
 

@@ -1,13 +1,13 @@
 //! What the mesh passes (shadow, pre-pass, shading) share: the descriptor set layouts, one
 //! pipeline layout, the pipelines (all with mesh.vert), and the draw loop over batches.
 
-use crate::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
+use crate::render::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
 use crate::gpu::{opaque, Gpu, GraphicsPipeline};
 use crate::render::graph::{ImageRef, Rec};
 use crate::scene::{GpuMaterial, GpuScene};
-use crate::shaders;
-use crate::shadow::{DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
-use crate::tonemap::HDR_FORMAT;
+use crate::render::shaders;
+use crate::render::shadow::{DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
+use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};

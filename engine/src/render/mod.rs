@@ -1,9 +1,23 @@
-//! The renderer's frame: a frame graph (`graph`) running passes (`passes/`, one file each) that
-//! record with what `frame` gives them; `mesh_draw` is what the mesh passes share and
-//! `sampled_input` what the full-screen passes share.
+//! Rendering. `renderer` owns a frame: it culls and picks LODs (`cull`, `lod_select`,
+//! `visibility`), batches draws (`batches`) and runs the frame graph (`graph`), whose passes
+//! (`passes/`, one file each) record with what `frame` gives them. What the passes draw with:
+//! `mesh_draw` (the mesh pipelines, shared by the mesh passes), `shadow` (the sun's map),
+//! `boids_draw`, `particles_draw`, `tonemap`, `sampled_input` (shared by the full-screen passes),
+//! `samplers` and `shaders`.
 
+pub mod batches;
+pub mod boids_draw;
+pub mod cull;
 pub mod frame;
 pub mod graph;
+pub mod lod_select;
 pub mod mesh_draw;
+pub mod particles_draw;
 pub mod passes;
+pub mod renderer;
 pub mod sampled_input;
+pub mod samplers;
+pub mod shaders;
+pub mod shadow;
+pub mod tonemap;
+pub mod visibility;

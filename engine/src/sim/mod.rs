@@ -17,6 +17,7 @@ pub mod obstacles;
 pub mod clock;
 pub mod curve;
 pub mod grid;
+pub mod level;
 pub mod integrate;
 pub mod lanes;
 pub mod particles;

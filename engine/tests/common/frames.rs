@@ -1,10 +1,10 @@
 //! Drawing a pack headless and reading the frame: the rig the renderer tests draw with, pixels,
 //! the sRGB transfer functions and the tone map's bytes for a known radiance.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use engine::gpu::Gpu;
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::renderer::{Lighting, Renderer};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use glam::Vec3;
 use pack::Pack;

@@ -14,19 +14,19 @@
 //! scenario's percentiles are also given as multiples of the floor's.
 
 use super::{boxes_builder, boxes_pack, cube_grid, skinned_bench};
-use engine::animated::AnimatedScene;
-use engine::camera::Camera;
+use engine::anim::animated::AnimatedScene;
+use engine::scene::camera::Camera;
 use crate::flight::{self, Flight};
 use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
-use engine::headless::{Offscreen, OFFSCREEN_FORMAT};
+use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::render::graph::FrameProfile;
-use engine::renderer::{Lighting, Renderer};
+use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::sim::boids::{Aabb, BoidParams, Flock, FlockState};
 use engine::sim::clock::{ClockParams, FixedClock};
 use engine::sim::particles::{EmitterParams, ParticleSystem, Preset};
 use engine::sim::World;
-use engine::sim_level;
+use engine::sim::level;
 use engine::stats::percentile;
 use glam::{Mat4, Vec3};
 use pack::{Pack, PackBuilder};
@@ -381,7 +381,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
             s.world.update(FRAME_S);
         }
         let camera = (s.camera)(frame);
-        sim_level::prepare_frame(&s.world, renderer, &s.scene, &camera);
+        level::prepare_frame(&s.world, renderer, &s.scene, &camera);
         let timing = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false)?;
         let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
         if frame < o.warmup {
@@ -410,7 +410,7 @@ fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, 
         switch.set(renderer, on);
     }
     renderer.count_fragments = true;
-    sim_level::prepare_frame(&s.world, renderer, &s.scene, &camera);
+    level::prepare_frame(&s.world, renderer, &s.scene, &camera);
     let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
     let shaded = renderer.fragment_count(0);
     renderer.count_fragments = false;

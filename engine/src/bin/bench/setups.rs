@@ -34,8 +34,8 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
     let scene = GpuScene::upload(gpu, &pack, renderer.layouts())?;
     renderer.animation = AnimatedScene::new(gpu, &pack, &scene, 1)?;
     let (min, max) = scene.bounds();
-    let mut world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
-    sim_level::warm_up(&mut world);
+    let mut world = level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
+    level::warm_up(&mut world);
     let flight = Flight::for_pack(&pack.manifest, min, max, flight::DEFAULT_SECONDS);
     let (warmup, frames) = (o.warmup, o.frames.max(1));
     let camera = move |k: usize| flight.camera(k.saturating_sub(warmup) as f32 / frames as f32 * flight.seconds);

@@ -8,7 +8,7 @@
 //! leaves the ground only vertically and flies above the level's bounds, so it never passes
 //! through a wall: the runtime keeps no collision geometry to steer around.
 
-use engine::camera::Camera;
+use engine::scene::camera::Camera;
 use glam::Vec3;
 
 /// Seconds for the whole loop unless the caller chooses.

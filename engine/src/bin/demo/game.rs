@@ -4,13 +4,13 @@
 
 use anyhow::Result;
 use engine::app::{Cx, Game, Input};
-use engine::camera::{Camera, EYE_HEIGHT_M};
-use engine::overlay::{Panel, SimPanel};
-use engine::renderer::Lighting;
+use engine::scene::camera::{Camera, EYE_HEIGHT_M};
+use engine::ui::{Panel, SimPanel};
+use engine::render::renderer::Lighting;
 use engine::sim::clock::{ClockParams, FixedClock};
 use engine::sim::World;
-use engine::sim_level;
-use engine::walk::WalkMesh;
+use engine::sim::level;
+use engine::scene::walk::WalkMesh;
 use glam::{Vec2, Vec3};
 use winit::keyboard::KeyCode;
 
@@ -58,8 +58,8 @@ impl<'a> DemoGame<'a> {
     /// switches and walk mode stay as they are.
     fn set_up(&mut self, cx: &mut Cx, pack: &pack::Pack) {
         let (min, max) = cx.scene.bounds();
-        self.world = sim_level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
-        sim_level::warm_up(&mut self.world);
+        self.world = level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
+        level::warm_up(&mut self.world);
         self.camera = Camera::for_pack(&pack.manifest, min, max);
         self.lighting = Lighting::for_pack(&pack.manifest);
         self.walk_mesh = WalkMesh::from_pack(pack);
@@ -150,7 +150,7 @@ impl Game for DemoGame<'_> {
     fn update(&mut self, cx: &mut Cx, input: &Input, dt: f32) {
         self.move_camera(cx, input, dt);
         self.world.update(dt as f64);
-        sim_level::prepare_frame(&self.world, cx.renderer, cx.scene, &self.camera);
+        level::prepare_frame(&self.world, cx.renderer, cx.scene, &self.camera);
     }
 
     fn camera(&self) -> Camera {

@@ -5,8 +5,8 @@
 use crate::render::frame::{FrameCx, DEPTH, FRAGMENT_COUNTER, HDR, SHADOW_MAP, SKINNED};
 use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Size};
 use crate::render::mesh_draw::{depth_attachment, DrawSetup};
-use crate::renderer::CLEAR_COLOR;
-use crate::tonemap::HDR_FORMAT;
+use crate::render::renderer::CLEAR_COLOR;
+use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 

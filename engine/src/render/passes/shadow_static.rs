@@ -32,7 +32,7 @@ impl Pass for ShadowStatic {
 
 /// One depth-only rendering of `batches` from the sun into `target`, cleared to `clear` or on
 /// top of what it holds; returns the draw calls. Shared by the three shadow passes' drawing two.
-pub(super) fn draw_casters(cx: &FrameCx, rec: &Rec, target: crate::render::graph::ResourceId, clear: Option<f32>, batches: &[crate::batches::Batch]) -> u32 {
+pub(super) fn draw_casters(cx: &FrameCx, rec: &Rec, target: crate::render::graph::ResourceId, clear: Option<f32>, batches: &[crate::render::batches::Batch]) -> u32 {
     let image = rec.image(target);
     let depth = depth_attachment(image, clear, vk::AttachmentStoreOp::STORE);
     let rendering = vk::RenderingInfo::default().render_area(cx.shadow.area()).layer_count(1).depth_attachment(&depth);

@@ -5,8 +5,8 @@
 //! Everything is seeded from the spawn's name, and the clock is fixed-step, so a level replays
 //! identically for the same sequence of frame times (the reference-image test relies on it).
 
-use crate::camera::Camera;
-use crate::renderer::Renderer;
+use crate::scene::camera::Camera;
+use crate::render::renderer::Renderer;
 use crate::scene::GpuScene;
 use crate::sim::boids::{Aabb, BoidParams, Flock, FlockState, Pillar};
 use crate::sim::clock::{ClockParams, FixedClock};

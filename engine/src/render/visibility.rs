@@ -2,8 +2,8 @@
 //! instance from its projected error (`lod_select`, with last frame's choice for hysteresis).
 //! The result is a draw list plus exact counters (tests and the overlay pin them).
 
-use crate::cull::{cull_spheres, CullCounts, Frustum};
-use crate::lod_select::{pixels_per_metre_at_unit_distance, LodPolicy};
+use crate::render::cull::{cull_spheres, CullCounts, Frustum};
+use crate::render::lod_select::{pixels_per_metre_at_unit_distance, LodPolicy};
 use crate::scene::GpuScene;
 use glam::{Mat4, Vec3};
 

@@ -4,8 +4,8 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
-use crate::renderer::Renderer;
-use crate::visibility::LOD_BUCKETS;
+use crate::render::renderer::Renderer;
+use crate::render::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 
 /// One collapsible section of the overlay window.

@@ -22,7 +22,7 @@ pub fn module(device: &ash::Device, spv: &[u8]) -> Result<vk::ShaderModule> {
 }
 
 #[cfg(test)]
-#[path = "../build/shader_compile.rs"]
+#[path = "../../build/shader_compile.rs"]
 mod shader_compile;
 
 #[cfg(test)]

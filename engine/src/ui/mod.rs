@@ -17,7 +17,7 @@ pub use sim_panel::SimPanel;
 use crate::gpu::Gpu;
 use crate::render::frame::FrameCx;
 use crate::render::graph::{Access, FrameProfile, Io, Pass, Rec, OUTPUT};
-use crate::renderer::Renderer;
+use crate::render::renderer::Renderer;
 use anyhow::{anyhow, Result};
 use ash::vk;
 use egui_ash_renderer::allocator::GpuAllocator;

@@ -5,20 +5,20 @@
 //! whatever passes the caller adds (the overlay, a read-back). Used by the headless target and
 //! the window.
 
-use crate::animated::AnimatedScene;
-use crate::batches::{BatchMode, Batcher, INSTANCE_STRIDE};
-use crate::boids_draw::BoidsDraw;
-use crate::camera::Camera;
+use crate::anim::animated::AnimatedScene;
+use crate::render::batches::{BatchMode, Batcher, INSTANCE_STRIDE};
+use crate::render::boids_draw::BoidsDraw;
+use crate::scene::camera::Camera;
 use crate::gpu::{Buffer, Gpu, SlotBuffers};
-use crate::particles_pass::ParticlePass;
+use crate::render::particles_draw::ParticlePass;
 use crate::render::frame::{FrameCx, FrameData, Settings, FRAGMENT_COUNTER};
 use crate::render::graph::{Access, FrameProfile, Graph, ImageRef, Pass, ResourceId};
 use crate::render::mesh_draw::MeshKit;
 use crate::render::passes;
 use crate::scene::{GpuScene, SceneLayouts};
-use crate::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
-use crate::tonemap::ToneMap;
-use crate::visibility::Visibility;
+use crate::render::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
+use crate::render::tonemap::ToneMap;
+use crate::render::visibility::Visibility;
 use anyhow::Result;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};

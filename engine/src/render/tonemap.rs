@@ -7,7 +7,7 @@ use crate::gpu::{opaque, Gpu, GraphicsPipeline};
 use crate::render::graph::{ImageRef, Rec};
 use crate::render::sampled_input::SampledInput;
 use bytemuck::{Pod, Zeroable};
-use crate::shaders;
+use crate::render::shaders;
 use anyhow::Result;
 use ash::vk;
 use glam::Vec4;

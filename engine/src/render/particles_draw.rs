@@ -16,9 +16,9 @@
 use crate::gpu::{Gpu, GraphicsPipeline, SlotBuffers};
 use crate::render::graph::{ImageRef, Rec};
 use crate::render::mesh_draw::depth_attachment;
-use crate::shaders;
+use crate::render::shaders;
 use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
-use crate::tonemap::HDR_FORMAT;
+use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 use glam::{Vec3, Vec4};

@@ -1,12 +1,12 @@
 //! Rendering without a window: an offscreen colour target, one frame at a time, with
 //! read-back to RGBA8 and PNG, and per-frame CPU and GPU timings.
 
-use crate::camera::Camera;
+use crate::scene::camera::Camera;
 use crate::gpu::{Buffer, Gpu, Image};
-use crate::overlay::Overlay;
+use crate::ui::Overlay;
 use crate::render::frame::FrameCx;
 use crate::render::graph::{Access, Io, Pass, Rec, ResourceId, OUTPUT};
-use crate::renderer::{FrameTarget, Lighting, Renderer};
+use crate::render::renderer::{FrameTarget, Lighting, Renderer};
 use crate::scene::GpuScene;
 use anyhow::{Context, Result};
 use ash::vk;

@@ -178,7 +178,7 @@ pub fn world_sphere(model: Mat4, centre: Vec3, radius: f32) -> (Vec3, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::perspective_reverse_z;
+    use crate::scene::camera::perspective_reverse_z;
 
     /// Vulkan [0, 1] depth, finite far, Y flipped (pipeline.md §2).
     fn perspective_finite(fov_y: f32, aspect: f32, n: f32, f: f32) -> Mat4 {

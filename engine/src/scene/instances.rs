@@ -10,7 +10,7 @@
 //! instance costs its own sphere; the dynamic part of the bounds is derived from the dynamic
 //! instances' spheres (skinned characters' come from their pose), O(dynamic) when asked.
 
-use crate::cull::{world_sphere, Spheres};
+use crate::render::cull::{world_sphere, Spheres};
 use glam::{Mat4, Vec3};
 use std::cell::Cell;
 

@@ -10,14 +10,14 @@
 //! map: they are a few hundred triangles, so the pre-pass would save nothing, and a bird's shadow
 //! on the ground is a few pixels.
 
-use crate::cull::{Class, CullCounts, Frustum};
+use crate::render::cull::{Class, CullCounts, Frustum};
 use crate::gpu::{opaque, Gpu, GraphicsPipeline, SlotBuffers};
 use crate::render::graph::{ImageRef, Rec};
 use crate::render::mesh_draw::depth_attachment;
 use crate::scene::GpuScene;
-use crate::shaders;
+use crate::render::shaders;
 use crate::sim::boids::{boid_rotation, Flock};
-use crate::tonemap::HDR_FORMAT;
+use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 use glam::Mat4;

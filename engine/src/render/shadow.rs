@@ -17,7 +17,7 @@
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::render::graph::ImageRef;
 use crate::scene::GpuScene;
-use crate::visibility::Draw;
+use crate::render::visibility::Draw;
 use anyhow::Result;
 use ash::vk;
 use glam::{Mat3, Mat4, Vec3, Vec4};

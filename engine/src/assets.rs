@@ -1,121 +1,15 @@
-//! A cooked pack on the GPU: one vertex and one index buffer for all meshes, textures, material
-//! descriptor sets, the baked lightmap pages as one array texture, and instances (mesh, world
-//! transform, lightmap region) from the node hierarchy.
+//! Loading a cooked pack onto the device: every mesh's vertices and indices into one vertex and
+//! one index buffer, textures (with the sampler state each material slot asks for), material
+//! descriptor sets, the baked lightmap pages as one array texture, the probe grid, and the
+//! instances from the node hierarchy. What it makes is a `scene::GpuScene`.
 
-pub use crate::instances::{Instance, InstanceError, InstanceId, Instances, LocalBounds};
 use crate::gpu::{Buffer, Gpu, Image};
-use crate::samplers::SamplerCache;
+use crate::render::samplers::SamplerCache;
+use crate::scene::{max_scale, world_transforms, BakedLighting, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts};
 use anyhow::{Context, Result};
 use ash::vk;
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use pack::{Pack, TextureFormat, TextureTransform};
-
-/// Where one level of detail of a mesh lives inside the shared buffers.
-#[derive(Debug, Clone)]
-pub struct GpuLod {
-    pub base_vertex: i32,
-    pub first_index: u32,
-    pub submeshes: Vec<pack::Submesh>,
-    /// Geometric error to LOD 0, metres in object space (0 for LOD 0).
-    pub error: f32,
-    pub triangles: u32,
-}
-
-#[derive(Debug, Clone)]
-pub struct GpuMesh {
-    pub name: String,
-    /// Full detail first.
-    pub lods: Vec<GpuLod>,
-    pub bounds_min: Vec3,
-    pub bounds_max: Vec3,
-    /// `lods[i].error` for every LOD (what LOD selection reads, without gathering it per draw).
-    pub errors: Vec<f32>,
-    /// The farthest any full-detail vertex lies from the mesh's origin: the bounding sphere of
-    /// an instance placed by rotation and translation only (the boids' birds).
-    pub origin_radius: f32,
-}
-
-impl GpuMesh {
-    /// The mesh's box in its own space.
-    pub fn local_bounds(&self) -> LocalBounds {
-        LocalBounds { min: self.bounds_min, max: self.bounds_max }
-    }
-}
-
-#[derive(Debug, Clone, Copy)]
-pub struct GpuMaterial {
-    pub base_color: [f32; 4],
-    /// Alpha-test threshold, or a negative value for "no alpha test".
-    pub alpha_cutoff: f32,
-    pub double_sided: bool,
-    pub descriptor_set: vk::DescriptorSet,
-}
-
-/// What `GpuScene::spawn` places.
-#[derive(Debug, Clone, Copy)]
-pub struct Spawn {
-    pub mesh: u32,
-    pub world: Mat4,
-    pub is_static: bool,
-    pub lightmap: Option<pack::LightmapRegion>,
-    /// Drawn with this material instead of the mesh's own.
-    pub material: Option<u32>,
-}
-
-impl Spawn {
-    /// A dynamic instance of `mesh` at `world` with the mesh's materials.
-    pub fn dynamic(mesh: u32, world: Mat4) -> Spawn {
-        Spawn { mesh, world, is_static: false, lightmap: None, material: None }
-    }
-}
-
-/// Baked light the renderer reads (pack lightmaps and probes), in physical units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BakedLighting {
-    /// Unit vector towards the sun, and its illuminance (lux, linear RGB); zero without a sun.
-    pub sun_dir: Vec3,
-    pub sun_lux: Vec3,
-    /// Exposure that maps the lightmaps' log-average luminance (times a typical albedo of 0.5)
-    /// to the key 0.18 (textures.md §5.4), before the Reinhard operator.
-    pub exposure: f32,
-}
-
-pub struct GpuScene {
-    /// Unique per upload in this process, so caches of derived data (the shadow map's static
-    /// part) can tell one scene from the next even where Vulkan reuses handles.
-    pub id: u64,
-    pub meshes: Vec<GpuMesh>,
-    pub materials: Vec<GpuMaterial>,
-    /// The placed meshes, behind handles (`spawn`, `set_transform`, `despawn`), with their
-    /// culling spheres.
-    pub instances: Instances,
-    pub vertex_buffer: Buffer,
-    pub index_buffer: Buffer,
-    /// The pack's textures by index; None for the baked lightmap pages, which live in `lightmaps`.
-    textures: Vec<Option<Image>>,
-    white: Image,
-    /// Every baked lightmap page as one layer of a 2D array (pages have one size), so instances
-    /// on different pages still draw in one instanced call; one black layer without a bake.
-    lightmaps: Image,
-    samplers: SamplerCache,
-    pool: vk::DescriptorPool,
-    /// Set 2, bound once per pass: the lightmap array, the probe grid and every material's
-    /// constants.
-    pub scene_set: vk::DescriptorSet,
-    probes: Buffer,
-    material_constants: Buffer,
-    /// Present when the pack has baked lightmaps: the renderer then shades in physical units.
-    pub baked: Option<BakedLighting>,
-}
-
-/// The descriptor set layouts a scene's sets are made for (the renderer's).
-#[derive(Debug, Clone, Copy)]
-pub struct SceneLayouts {
-    /// Set 1: the base colour and emissive textures.
-    pub material: vk::DescriptorSetLayout,
-    /// Set 2: lightmap array, probe grid, material constants.
-    pub scene: vk::DescriptorSetLayout,
-}
 
 /// What the mesh shaders read per material (set 2 binding 2, std430; `MaterialConstants` in
 /// shaders/mesh_draw.glsl): the emission and the UV transforms of the slots they sample.
@@ -156,43 +50,6 @@ fn can_filter(gpu: &Gpu, format: vk::Format) -> bool {
 /// stays within 1e-3 of unit length.
 pub fn unorm16_to_half(bytes: &[u8]) -> Vec<u8> {
     bytes.chunks_exact(2).flat_map(|b| half::f16::from_f32(u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0).to_le_bytes()).collect()
-}
-
-/// Largest axis scale of a transform's 3x3 part.
-pub fn max_scale(m: Mat4) -> f32 {
-    let m3 = glam::Mat3::from_mat4(m);
-    m3.x_axis.length().max(m3.y_axis.length()).max(m3.z_axis.length())
-}
-
-/// World transforms of every node (parents precede children, as the pack guarantees).
-pub fn world_transforms(nodes: &[pack::Node]) -> Vec<Mat4> {
-    let mut world: Vec<Mat4> = Vec::with_capacity(nodes.len());
-    for n in nodes {
-        let local = Mat4::from_cols_array(&n.local);
-        let w = match n.parent {
-            Some(p) => world[p as usize] * local,
-            None => local,
-        };
-        world.push(w);
-    }
-    world
-}
-
-/// World-space bounds of a box under a transform (the box of the transformed corners).
-pub fn transform_bounds(m: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
-    let mut lo = Vec3::splat(f32::INFINITY);
-    let mut hi = Vec3::splat(f32::NEG_INFINITY);
-    for i in 0..8 {
-        let c = Vec3::new(
-            if i & 1 == 0 { min.x } else { max.x },
-            if i & 2 == 0 { min.y } else { max.y },
-            if i & 4 == 0 { min.z } else { max.z },
-        );
-        let p = m.transform_point3(c);
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    (lo, hi)
 }
 
 impl GpuScene {
@@ -363,54 +220,6 @@ impl GpuScene {
             material_constants: material_constants.keep(),
             baked,
         })
-    }
-
-    /// World-space bounds of every instance together (framing the camera, fitting the shadow
-    /// map): static instances' boxes (cached until a static change) and dynamic instances'
-    /// current spheres (an animated character's follow its pose).
-    pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.instances.world_bounds(|mesh| self.meshes[mesh as usize].local_bounds()).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)))
-    }
-
-    /// Place an instance (static: lightmapped when it has a region, and its shadow cached;
-    /// dynamic: lit by the probes and the sun; a material override draws every submesh with
-    /// that material). Culling and the shadow map see it from the next frame.
-    pub fn spawn(&mut self, s: Spawn) -> Result<InstanceId, InstanceError> {
-        let bounds = self.meshes.get(s.mesh as usize).ok_or(InstanceError::NoMesh { mesh: s.mesh, meshes: self.meshes.len() })?.local_bounds();
-        if let Some(material) = s.material.filter(|&m| m as usize >= self.materials.len()) {
-            return Err(InstanceError::NoMaterial { material, materials: self.materials.len() });
-        }
-        Ok(self.instances.spawn(Instance { mesh: s.mesh, world: s.world, scale: max_scale(s.world), is_static: s.is_static, lightmap: s.lightmap, material: s.material }, bounds))
-    }
-
-    /// Move an instance (its culling sphere and the scene's bounds follow).
-    pub fn set_transform(&mut self, id: InstanceId, world: Mat4) -> Result<(), InstanceError> {
-        let mesh = self.instances.get(id)?.mesh;
-        self.instances.set_transform(id, world, self.meshes[mesh as usize].local_bounds())
-    }
-
-    /// Remove an instance; other handles stay valid.
-    pub fn despawn(&mut self, id: InstanceId) -> Result<(), InstanceError> {
-        self.instances.despawn(id)
-    }
-
-    /// Triangles of every instance at full detail.
-    pub fn triangle_count(&self) -> u64 {
-        self.instances.iter().map(|i| self.meshes[i.mesh as usize].lods[0].triangles as u64).sum()
-    }
-
-    pub fn destroy(&mut self, gpu: &Gpu) {
-        unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
-        self.samplers.destroy(gpu);
-        for t in self.textures.iter_mut().flatten() {
-            t.destroy(gpu);
-        }
-        self.white.destroy(gpu);
-        self.lightmaps.destroy(gpu);
-        self.probes.destroy(gpu);
-        self.material_constants.destroy(gpu);
-        self.vertex_buffer.destroy(gpu);
-        self.index_buffer.destroy(gpu);
     }
 }
 

@@ -6,9 +6,9 @@
 //! instanced calls they cost what their triangles cost. A real GPU's driver is spared the same
 //! per-call work on the CPU.
 
-use crate::animated::AnimatedScene;
+use crate::anim::animated::AnimatedScene;
 use crate::scene::GpuScene;
-use crate::visibility::Draw;
+use crate::render::visibility::Draw;
 use ash::vk;
 use glam::{Mat3, Mat4, Vec4};
 
