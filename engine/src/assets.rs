@@ -74,7 +74,7 @@ impl GpuScene {
                 index_bytes.extend_from_slice(pack.bytes(lod.indices));
             }
             let origin_radius = mesh.lods.first().map_or(0.0, |lod| {
-                pack.bytes(lod.vertices).chunks_exact(pack::VERTEX_STRIDE).map(|v| Vec3::from(bytemuck::pod_read_unaligned::<[f32; 3]>(&v[..12])).length()).fold(0.0, f32::max)
+                pack::Vertex::read_all(pack.bytes(lod.vertices)).iter().map(|v| Vec3::from(v.position).length()).fold(0.0, f32::max)
             });
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),

@@ -14,7 +14,7 @@ pub struct BufferRange {
 /// (five 16-byte words, which the skinning shader moves whole). The runtime's vertex input state
 /// is derived from these offsets (see `VERTEX_ATTRIBUTES`).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Vertex {
     pub position: [f32; 3],
     pub normal: [f32; 3],
@@ -60,9 +60,13 @@ pub const VERTEX_ATTRIBUTES: [(u32, u32, AttributeFormat); 7] = [
 impl Vertex {
     /// Raw bytes of a vertex slice, for writing into the data blob.
     pub fn slice_as_bytes(v: &[Vertex]) -> &[u8] {
-        // SAFETY: Vertex is repr(C), 80 bytes, made only of plain numbers with no padding holes
-        // (the explicit `_pad` field fills the tail).
-        unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) }
+        // Pod: repr(C), 80 bytes of plain numbers, no padding holes (`_pad` fills the tail).
+        bytemuck::cast_slice(v)
+    }
+
+    /// The vertices of `bytes` (`VERTEX_STRIDE` each, at any alignment).
+    pub fn read_all(bytes: &[u8]) -> Vec<Vertex> {
+        bytes.chunks_exact(VERTEX_STRIDE).map(bytemuck::pod_read_unaligned).collect()
     }
 }
 

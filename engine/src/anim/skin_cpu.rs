@@ -34,10 +34,8 @@ impl DeformData {
     pub fn from_pack(pack: &Pack, mesh: usize, lod: usize) -> DeformData {
         let m = &pack.manifest.meshes[mesh].lods[lod];
         let bytes = pack.bytes(m.vertices);
-        let vertices = (0..m.vertex_count as usize)
-            // SAFETY: the range was validated to hold vertex_count `Vertex`es, a plain-old-data type.
-            .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * pack::VERTEX_STRIDE..].as_ptr() as *const Vertex) })
-            .collect();
+        // The range was validated to hold vertex_count vertices.
+        let vertices = Vertex::read_all(bytes);
         let deform = pack.manifest.animation.deform(mesh as u32);
         let d = deform.map(|d| d.lods[lod]).unwrap_or_default();
         let skin = d.skin;

@@ -254,11 +254,8 @@ impl SkinnedMesh {
             gpu.device.cmd_pipeline_barrier2(cb, &vk::DependencyInfo::default().memory_barriers(&to_host));
         });
         let out = run.map(|_| {
-            let bytes = readback.mapped_ref();
-            (0..self.params.vertex_count as usize)
-                // SAFETY: the buffer holds vertex_count vertices written by the shader.
-                .map(|i| unsafe { std::ptr::read_unaligned(bytes[i * pack::VERTEX_STRIDE..].as_ptr() as *const Vertex) })
-                .collect()
+            // The buffer holds vertex_count vertices written by the shader.
+            Vertex::read_all(&readback.mapped_ref()[..self.params.vertex_count as usize * pack::VERTEX_STRIDE])
         });
         readback.destroy(gpu);
         out
