@@ -6,9 +6,11 @@ render of the same pack at the same size: the window must show the same scene.
 """
 
 import os
+import queue
 import shutil
 import signal
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -19,6 +21,50 @@ from PIL import Image
 from conftest import DEMO, REPO
 
 WIDTH, HEIGHT = 640, 360
+
+
+class DemoLog:
+    """demo's stdout lines as they come and its stderr, each read by a thread of its own: a wait
+    for a line ends at its deadline even when demo prints nothing, and demo never blocks on a
+    full stderr pipe that nobody reads (validation warnings go there)."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self.proc = proc
+        self.lines: list[str] = []
+        self.err: list[str] = []
+        self._queue: queue.Queue = queue.Queue()
+        self._threads = [threading.Thread(target=self._pump, args=(proc.stdout, self._queue.put, None), daemon=True),
+                         threading.Thread(target=self._pump, args=(proc.stderr, self.err.append, ""), daemon=True)]
+        for t in self._threads:
+            t.start()
+
+    @staticmethod
+    def _pump(stream, put, end):
+        """Every line of `stream`, then `end` (None marks the end of stdout's queue)."""
+        for line in stream:
+            put(line)
+        put(end)
+
+    def wait_for(self, text: str, timeout: float) -> None:
+        """Until a line containing `text` has been printed (fails at `timeout` seconds, or when
+        demo exits first, with what it printed)."""
+        deadline = time.monotonic() + timeout
+        while not any(text in line for line in self.lines):
+            try:
+                line = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise AssertionError(f"no '{text}' within {timeout} s:\n{''.join(self.lines)}\n{''.join(self.err[-40:])}") from None
+            assert line is not None, f"demo exited ({self.proc.wait(timeout=60)}) before '{text}':\n{''.join(self.lines)}\n{''.join(self.err)}"
+            self.lines.append(line)
+
+    def finish(self, timeout: float = 60) -> tuple[str, str]:
+        """demo's whole stdout and stderr once it has exited."""
+        self.proc.wait(timeout=timeout)
+        for t in self._threads:  # each ends at its pipe's end, after demo's last line
+            t.join(timeout=timeout)
+        while (line := self._queue.get(timeout=timeout)) is not None:
+            self.lines.append(line)
+        return "".join(self.lines), "".join(self.err)
 
 
 def free_display() -> int:
@@ -58,22 +104,15 @@ def window_screenshot(xvfb, tmp_path, *extra_args):
         text=True,
         env=env,
     )
+    log = DemoLog(demo)
     try:
-        lines = []
-        deadline = time.time() + 120
-        while True:
-            line = demo.stdout.readline()
-            assert line or demo.poll() is None, f"demo exited early ({demo.returncode}):\n{''.join(lines)}\n{demo.stderr.read()}"
-            lines.append(line)
-            if "presented 10 frames" in line:
-                break
-            assert time.time() < deadline, f"no frames presented within 120 s:\n{''.join(lines)}"
-        assert any(l.startswith("window:") for l in lines), "demo fell back to headless instead of opening a window"
+        log.wait_for("presented 10 frames", timeout=120)
+        assert any(l.startswith("window:") for l in log.lines), "demo fell back to headless instead of opening a window"
         shot = tmp_path / "window.png"
         subprocess.run(["import", "-display", xvfb, "-window", "root", str(shot)], check=True, timeout=60)
     finally:
         demo.send_signal(signal.SIGTERM)  # closes the window cleanly (validation verdict, teardown)
-        out, err = demo.communicate(timeout=60)
+        out, err = log.finish()
     assert demo.returncode == 0, f"demo exit {demo.returncode}:\n{out}\n{err}"
     assert "validation errors: 0" in out, out
     assert "[vulkan validation error]" not in err, err
@@ -127,15 +166,11 @@ class DemoWindow:
         self.env.pop("WAYLAND_DISPLAY", None)
         self.proc = subprocess.Popen([str(DEMO), *map(str, packs), "--width", str(WIDTH), "--height", str(HEIGHT)],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=self.env)
-        self.log: list[str] = []
+        self.demo_log = DemoLog(self.proc)
+        self.log = self.demo_log.lines
 
     def wait_for(self, text: str, timeout: float = 120.0):
-        deadline = time.time() + timeout
-        while not any(text in line for line in self.log):
-            line = self.proc.stdout.readline()
-            assert line or self.proc.poll() is None, f"demo exited ({self.proc.returncode}):\n{''.join(self.log)}\n{self.proc.stderr.read()}"
-            self.log.append(line)
-            assert time.time() < deadline, f"no '{text}' within {timeout} s:\n{''.join(self.log)}"
+        self.demo_log.wait_for(text, timeout)
 
     def xdotool(self, *args):
         subprocess.run(["xdotool", *map(str, args)], check=True, timeout=30, env=self.env)
@@ -175,8 +210,7 @@ class DemoWindow:
         validation message."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
-        out, err = self.proc.communicate(timeout=60)
-        out = "".join(self.log) + out
+        out, err = self.demo_log.finish()
         assert self.proc.returncode == 0, f"demo exit {self.proc.returncode}:\n{out}\n{err}"
         assert "validation errors: 0" in out and "[vulkan validation" not in err, out + err
 

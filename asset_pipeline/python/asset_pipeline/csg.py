@@ -177,6 +177,21 @@ def merge_prop(scene: ir.Scene, prop: ir.Scene, name: str, transform: np.ndarray
                                                 direction=tuple(float(x) for x in d)))
 
 
+def _spawn_asset(spec: LevelSpec, index: int, label: str, import_gltf) -> tuple[str, ir.Scene]:
+    """Spawn `index`'s `asset` (a glTF relative to the toml) imported, with its name; errors
+    name the spawn as "<label> '<spawn>'"."""
+    sp = spec.spawns[index]
+    key = ("spawns", index, "params", "asset")
+    asset = sp.params.get("asset")
+    if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
+        raise spec.error(key, f"{label} '{sp.name}': expected a .gltf or .glb asset, got {asset!r}")
+    path = spec.check_file(key, asset, f"{label} '{sp.name}': asset")
+    try:
+        return asset, import_gltf(path)
+    except Exception as e:  # the importer's message names the problem; the level error names the spawn
+        raise spec.error(key, f"{label} '{sp.name}': cannot import '{asset}': {e}") from None
+
+
 def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -> None:
     """Bring in the glTF of character spawn `index` (`asset`, relative to the toml) as dynamic
     meshes under a root node named after the spawn, placed at its position and rotation, with
@@ -184,14 +199,7 @@ def merge_character(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -
     two characters from one asset keep apart; the runtime plays "<spawn>/<animation>"."""
     sp = spec.spawns[index]
     key = ("spawns", index, "params", "asset")
-    asset = sp.params["asset"]
-    if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
-        raise spec.error(key, f"character '{sp.name}': expected a .gltf or .glb asset, got {asset!r}")
-    path = spec.check_file(key, asset, f"character '{sp.name}': asset")
-    try:
-        prop = import_gltf(path)
-    except Exception as e:  # the importer's message names the problem; the level error names the spawn
-        raise spec.error(key, f"character '{sp.name}': cannot import '{asset}': {e}") from None
+    asset, prop = _spawn_asset(spec, index, "character", import_gltf)
     if not prop.skins:
         raise spec.error(key, f"character '{sp.name}': '{asset}' has no skin")
     animation = sp.params.get("animation")
@@ -224,14 +232,7 @@ def merge_boid_mesh(scene: ir.Scene, spec: LevelSpec, index: int, import_gltf) -
     draws every bird of the flock with it. Content decides what a flock looks like."""
     sp = spec.spawns[index]
     key = ("spawns", index, "params", "asset")
-    asset = sp.params.get("asset")
-    if not isinstance(asset, str) or not asset.lower().endswith((".gltf", ".glb")):
-        raise spec.error(key, f"boids '{sp.name}': expected a .gltf or .glb asset (the mesh of one bird), got {asset!r}")
-    path = spec.check_file(key, asset, f"boids '{sp.name}': asset")
-    try:
-        prop = import_gltf(path)
-    except Exception as e:  # the importer's message names the problem; the level error names the spawn
-        raise spec.error(key, f"boids '{sp.name}': cannot import '{asset}': {e}") from None
+    asset, prop = _spawn_asset(spec, index, "boids", import_gltf)
     used = sorted({nd.mesh for nd in prop.nodes if nd.mesh is not None})
     if len(used) != 1:
         raise spec.error(key, f"boids '{sp.name}': '{asset}' must hold one mesh (the bird), it has {len(used)}")

@@ -12,8 +12,7 @@
 
 use crate::render::cull::{Class, CullCounts, Frustum};
 use crate::gpu::{opaque, Gpu, GraphicsPipeline, SlotBuffers};
-use crate::render::graph::{ImageRef, Rec};
-use crate::render::mesh_draw::depth_attachment;
+use crate::render::graph::{ImageRef, Rec, Rendering};
 use crate::scene::GpuScene;
 use crate::render::shaders;
 use crate::sim::boids::{boid_rotation, Flock};
@@ -132,17 +131,8 @@ impl BoidsDraw {
     pub fn record(&self, rec: &Rec, scene: &GpuScene, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
         let Some(buffer) = self.instances.get(rec.slot) else { return };
-        let color_attachment = [vk::RenderingAttachmentInfo::default()
-            .image_view(hdr.view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::STORE)];
-        let depth_attachment = depth_attachment(depth, None, vk::AttachmentStoreOp::STORE);
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
-        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
+        rec.begin_rendering(&Rendering::color(hdr, None).depth(depth, None, vk::AttachmentStoreOp::STORE));
         unsafe {
-            d.cmd_begin_rendering(cb, &rendering);
-            rec.set_viewport(hdr.extent);
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, buffer.buffer], &[0, 0]);
@@ -155,8 +145,8 @@ impl BoidsDraw {
                     d.cmd_draw_indexed(cb, sub.index_count, g.count, lod.first_index + sub.first_index, lod.base_vertex, g.first);
                 }
             }
-            d.cmd_end_rendering(cb);
         }
+        rec.end_rendering();
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {

@@ -3,7 +3,7 @@
 
 use crate::render::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
 use crate::gpu::{opaque, Gpu, GraphicsPipeline};
-use crate::render::graph::{ImageRef, Rec};
+use crate::render::graph::{Rec, Rendering};
 use crate::scene::{GpuMaterial, GpuScene};
 use crate::render::shaders;
 use crate::render::shadow::{DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
@@ -162,12 +162,11 @@ impl MeshKit {
 
     /// One rendering instance drawing `setup.batches`, each submesh with the pipeline
     /// `pipeline_for(material, lightmapped)` gives. Returns the draw calls it made.
-    pub fn draw(&self, rec: &Rec, scene: &GpuScene, rendering: &vk::RenderingInfo, setup: &DrawSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> vk::Pipeline) -> u32 {
+    pub fn draw(&self, rec: &Rec, scene: &GpuScene, rendering: &Rendering, setup: &DrawSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> vk::Pipeline) -> u32 {
         let (d, cb) = (&rec.gpu.device, rec.cb);
         let mut calls = 0;
+        rec.begin_rendering(rendering);
         unsafe {
-            d.cmd_begin_rendering(cb, rendering);
-            rec.set_viewport(rendering.render_area.extent);
             d.cmd_set_depth_test_enable(cb, setup.depth_test);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 2, &[scene.scene_set], &[]);
@@ -208,8 +207,8 @@ impl MeshKit {
                     calls += 1;
                 }
             }
-            d.cmd_end_rendering(cb);
         }
+        rec.end_rendering();
         calls
     }
 
@@ -237,17 +236,6 @@ pub struct DrawSetup<'a> {
     pub instances: vk::Buffer,
     pub depth_test: bool,
     pub cull: bool,
-}
-
-/// A depth attachment of `image`: cleared to `clear` or loaded, then `store`d. A pass that only
-/// tests (`Access::DepthTest`) stores with NONE: DONT_CARE and STORE are writes to Vulkan.
-pub fn depth_attachment(image: ImageRef, clear: Option<f32>, store: vk::AttachmentStoreOp) -> vk::RenderingAttachmentInfo<'static> {
-    vk::RenderingAttachmentInfo::default()
-        .image_view(image.view)
-        .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-        .load_op(if clear.is_some() { vk::AttachmentLoadOp::CLEAR } else { vk::AttachmentLoadOp::LOAD })
-        .store_op(store)
-        .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: clear.unwrap_or(0.0), stencil: 0 } })
 }
 
 fn attribute_format(f: pack::AttributeFormat) -> vk::Format {

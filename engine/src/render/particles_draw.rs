@@ -14,8 +14,7 @@
 //!   texture to tell the two apart).
 
 use crate::gpu::{Gpu, GraphicsPipeline, SlotBuffers};
-use crate::render::graph::{ImageRef, Rec};
-use crate::render::mesh_draw::depth_attachment;
+use crate::render::graph::{ImageRef, Rec, Rendering};
 use crate::render::shaders;
 use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
 use crate::render::tonemap::HDR_FORMAT;
@@ -137,19 +136,10 @@ impl ParticlePass {
     pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef, camera_right: Vec3, camera_up: Vec3) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
         let Some(buffer) = self.buffers.get(rec.slot) else { return };
-        let color_attachment = [vk::RenderingAttachmentInfo::default()
-            .image_view(hdr.view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::STORE)];
-        // Tested, not written: kept as it is (store NONE).
-        let depth_attachment = depth_attachment(depth, None, vk::AttachmentStoreOp::NONE);
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
-        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color_attachment).depth_attachment(&depth_attachment);
         let push = ParticlePush { right: camera_right.extend(0.0), up: camera_up.extend(0.0) };
+        // Depth tested, not written: kept as it is (store NONE).
+        rec.begin_rendering(&Rendering::color(hdr, None).depth(depth, None, vk::AttachmentStoreOp::NONE));
         unsafe {
-            d.cmd_begin_rendering(cb, &rendering);
-            rec.set_viewport(hdr.extent);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
             d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::VERTEX, 0, bytemuck::bytes_of(&push));
             d.cmd_bind_vertex_buffers(cb, 0, &[buffer.buffer], &[0]);
@@ -165,8 +155,8 @@ impl ParticlePass {
                 }
                 d.cmd_draw(cb, 4, b.count, 0, b.first);
             }
-            d.cmd_end_rendering(cb);
         }
+        rec.end_rendering();
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {

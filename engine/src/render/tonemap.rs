@@ -4,7 +4,7 @@
 //! `_SRGB` image so the hardware does the sRGB encode. The one place tone mapping happens.
 
 use crate::gpu::{opaque, Gpu, GraphicsPipeline};
-use crate::render::graph::{ImageRef, Rec};
+use crate::render::graph::{ImageRef, Rec, Rendering};
 use crate::render::sampled_input::SampledInput;
 use bytemuck::{Pod, Zeroable};
 use crate::render::shaders;
@@ -51,7 +51,7 @@ impl ToneMap {
     pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool) {
         let set = self.input.set(rec.gpu, rec.slot, hdr.view);
         let push = ToneMapPush { params: Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0) };
-        draw_fullscreen(rec, target, vk::AttachmentLoadOp::DONT_CARE, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
+        draw_fullscreen(rec, target, true, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
@@ -74,22 +74,16 @@ pub fn fullscreen_pipeline(gpu: &Gpu, name: &str, set_layout: vk::DescriptorSetL
     Ok((layout.keep(), pipeline))
 }
 
-/// One full-screen triangle into `target` with `pipeline`, its input `set` and `push` bytes.
-pub fn draw_fullscreen(rec: &Rec, target: ImageRef, load: vk::AttachmentLoadOp, pipeline: vk::Pipeline, layout: vk::PipelineLayout, set: vk::DescriptorSet, push: &[u8]) {
+/// One full-screen triangle into `target` with `pipeline`, its input `set` and `push` bytes;
+/// `overwrite`: every pixel is written, so the old contents are not loaded.
+pub fn draw_fullscreen(rec: &Rec, target: ImageRef, overwrite: bool, pipeline: vk::Pipeline, layout: vk::PipelineLayout, set: vk::DescriptorSet, push: &[u8]) {
     let (d, cb) = (&rec.gpu.device, rec.cb);
-    let color = [vk::RenderingAttachmentInfo::default()
-        .image_view(target.view)
-        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-        .load_op(load)
-        .store_op(vk::AttachmentStoreOp::STORE)];
-    let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
+    rec.begin_rendering(&if overwrite { Rendering::color_overwritten(target) } else { Rendering::color(target, None) });
     unsafe {
-        d.cmd_begin_rendering(cb, &vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color));
-        rec.set_viewport(target.extent);
         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
         d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, layout, 0, &[set], &[]);
         d.cmd_push_constants(cb, layout, vk::ShaderStageFlags::FRAGMENT, 0, push);
         d.cmd_draw(cb, 3, 1, 0, 0);
-        d.cmd_end_rendering(cb);
     }
+    rec.end_rendering();
 }

@@ -16,7 +16,7 @@ pub use sim_panel::SimPanel;
 
 use crate::gpu::Gpu;
 use crate::render::frame::FrameCx;
-use crate::render::graph::{Access, FrameProfile, Io, Pass, Rec, OUTPUT};
+use crate::render::graph::{Access, FrameProfile, Io, Pass, Rec, Rendering, OUTPUT};
 use crate::render::renderer::Renderer;
 use anyhow::{anyhow, Result};
 use ash::vk;
@@ -271,17 +271,11 @@ impl Pass for Overlay {
         if p.primitives.is_empty() {
             return Ok(());
         }
-        let (d, cb) = (&rec.gpu.device, rec.cb);
+        let cb = rec.cb;
         let target = rec.image(OUTPUT);
-        let color = [vk::RenderingAttachmentInfo::default()
-            .image_view(target.view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::LOAD)
-            .store_op(vk::AttachmentStoreOp::STORE)];
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: target.extent };
-        unsafe { d.cmd_begin_rendering(cb, &vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color)) };
+        rec.begin_rendering(&Rendering::color(target, None));
         let drawn = self.painter.cmd_draw(cb, target.extent, p.pixels_per_point, &p.primitives);
-        unsafe { d.cmd_end_rendering(cb) };
+        rec.end_rendering();
         drawn.map_err(|e| anyhow!("overlay: recording the UI: {e}"))
     }
 }

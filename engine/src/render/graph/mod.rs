@@ -12,10 +12,12 @@
 pub mod access;
 pub mod plan;
 mod profile;
+mod rendering;
 
 pub use access::{aspect_of, view_aspect_of, Access};
 pub use plan::ResourceId;
 pub use profile::{FrameProfile, PassProfile, ShaderInvocations};
+pub use rendering::Rendering;
 
 use crate::gpu::{Gpu, Image};
 use crate::render::frame::FrameCx;
@@ -101,16 +103,6 @@ impl Rec<'_> {
     /// An image this pass declared (or the output).
     pub fn image(&self, id: ResourceId) -> ImageRef {
         *self.images.get(&id).unwrap_or_else(|| panic!("image '{}' was not declared this frame", id.0))
-    }
-
-    /// Viewport and scissor covering an image of `extent` (dynamic state).
-    pub fn set_viewport(&self, extent: vk::Extent2D) {
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent };
-        let viewport = vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 };
-        unsafe {
-            self.gpu.device.cmd_set_viewport(self.cb, 0, &[viewport]);
-            self.gpu.device.cmd_set_scissor(self.cb, 0, &[area]);
-        }
     }
 }
 

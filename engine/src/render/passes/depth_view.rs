@@ -53,7 +53,7 @@ impl Pass for DepthView {
     fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let set = self.input.set(rec.gpu, rec.slot, rec.image(DEPTH).view);
         let push = DepthViewPush { params: Vec4::new(1.0, 0.0, 0.0, 0.0) };
-        draw_fullscreen(rec, rec.image(OUTPUT), vk::AttachmentLoadOp::DONT_CARE, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
+        draw_fullscreen(rec, rec.image(OUTPUT), true, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
         Ok(())
     }
 

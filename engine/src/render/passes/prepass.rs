@@ -2,8 +2,8 @@
 //! shading pass shades each pixel once (depth EQUAL).
 
 use crate::render::frame::{FrameCx, DEPTH, SKINNED};
-use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Size};
-use crate::render::mesh_draw::{depth_attachment, DrawSetup};
+use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Rendering, Size};
+use crate::render::mesh_draw::DrawSetup;
 use anyhow::Result;
 use ash::vk;
 
@@ -26,9 +26,7 @@ impl Pass for Prepass {
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let depth = rec.image(DEPTH);
         // Reversed-Z: the far plane is depth 0.
-        let attachment = depth_attachment(depth, Some(0.0), vk::AttachmentStoreOp::STORE);
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: depth.extent };
-        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).depth_attachment(&attachment);
+        let rendering = Rendering::depth_only(depth, Some(0.0), vk::AttachmentStoreOp::STORE);
         let f = cx.frame;
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: true, cull: true };
         cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, false));

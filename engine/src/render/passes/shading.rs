@@ -3,8 +3,8 @@
 //! with a depth test of its own.
 
 use crate::render::frame::{FrameCx, DEPTH, FRAGMENT_COUNTER, HDR, SHADOW_MAP, SKINNED};
-use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Size};
-use crate::render::mesh_draw::{depth_attachment, DrawSetup};
+use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Rendering, Size};
+use crate::render::mesh_draw::DrawSetup;
 use crate::render::renderer::CLEAR_COLOR;
 use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
@@ -38,21 +38,14 @@ impl Pass for Shading {
         // Alpha 0 marks the clear colour as "no surface" for the tone map, which leaves it as it
         // is: it is display-referred, not radiance.
         let [r, g, b, _] = CLEAR_COLOR;
-        let color = [vk::RenderingAttachmentInfo::default()
-            .image_view(hdr.view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: [r, g, b, 0.0] } })];
+        let color = Rendering::color(hdr, Some([r, g, b, 0.0]));
         // After a pre-pass depth is only tested (and kept as it is); alone, the pass clears and
         // writes it, and stores it when boids or particles test against it next.
         let later = f.draw_particles || f.draw_boids;
-        let attachment = match prepass {
-            true => depth_attachment(depth, None, vk::AttachmentStoreOp::NONE),
-            false => depth_attachment(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
+        let rendering = match prepass {
+            true => color.depth(depth, None, vk::AttachmentStoreOp::NONE),
+            false => color.depth(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
         };
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent: hdr.extent };
-        let rendering = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&color).depth_attachment(&attachment);
         let count = counts(cx);
         let shade = [0, 1].map(|lightmapped| cx.mesh.shade[lightmapped].pick(prepass, count));
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };

@@ -2,8 +2,8 @@
 //! changed (`SunShadow::prepare` decides); `shadow_copy` starts each frame's map from it.
 
 use crate::render::frame::{FrameCx, SHADOW_CACHE, SKINNED};
-use crate::render::graph::{Access, Io, Pass, Rec};
-use crate::render::mesh_draw::{depth_attachment, DrawSetup};
+use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
+use crate::render::mesh_draw::DrawSetup;
 use anyhow::Result;
 use ash::vk;
 
@@ -33,9 +33,7 @@ impl Pass for ShadowStatic {
 /// One depth-only rendering of `batches` from the sun into `target`, cleared to `clear` or on
 /// top of what it holds; returns the draw calls. Shared by the three shadow passes' drawing two.
 pub(super) fn draw_casters(cx: &FrameCx, rec: &Rec, target: crate::render::graph::ResourceId, clear: Option<f32>, batches: &[crate::render::batches::Batch]) -> u32 {
-    let image = rec.image(target);
-    let depth = depth_attachment(image, clear, vk::AttachmentStoreOp::STORE);
-    let rendering = vk::RenderingInfo::default().render_area(cx.shadow.area()).layer_count(1).depth_attachment(&depth);
+    let rendering = Rendering::depth_only(rec.image(target), clear, vk::AttachmentStoreOp::STORE);
     let setup = DrawSetup { frame_set: cx.shadow.sets[cx.slot], batches, instances: cx.frame.instances, depth_test: true, cull: false };
     cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, true))
 }
