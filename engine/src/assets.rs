@@ -5,7 +5,7 @@
 
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::render::samplers::SamplerCache;
-use crate::scene::{max_scale, world_transforms, BakedLighting, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts};
+use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts};
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::Vec3;
@@ -73,12 +73,8 @@ impl GpuScene {
                 vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
                 index_bytes.extend_from_slice(pack.bytes(lod.indices));
             }
-            let origin_radius = mesh.lods.first().map_or(0.0, |lod| {
-                pack::Vertex::read_all(pack.bytes(lod.vertices)).iter().map(|v| Vec3::from(v.position).length()).fold(0.0, f32::max)
-            });
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),
-                origin_radius,
                 lods,
                 bounds_min: Vec3::from(mesh.bounds_min),
                 bounds_max: Vec3::from(mesh.bounds_max),
@@ -201,6 +197,14 @@ impl GpuScene {
         ];
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
+        let mut flock_meshes = gpu.own(Vec::new());
+        for mesh in m.spawns.iter().filter(|s| s.kind == "boids").filter_map(|s| s.params.get("mesh")?.as_u64()) {
+            let mesh = mesh as u32; // the pack checked it names one of its meshes
+            if !flock_meshes.iter().any(|(m, _)| *m == mesh) {
+                let f = flock_mesh(gpu, pack, mesh)?;
+                flock_meshes.push((mesh, f));
+            }
+        }
 
         static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         Ok(GpuScene {
@@ -219,6 +223,7 @@ impl GpuScene {
             probes: probes.keep(),
             material_constants: material_constants.keep(),
             baked,
+            flock_meshes: flock_meshes.keep(),
         })
     }
 }
@@ -266,4 +271,26 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
         None => (Vec3::Y, Vec3::ZERO),
     };
     BakedLighting { sun_dir, sun_lux, exposure: 0.18 / log_average }
+}
+
+/// Mesh `mesh`'s full detail as a flock mesh (see `scene::FlockMesh`).
+fn flock_mesh(gpu: &Gpu, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
+    let m = &pack.manifest;
+    let lod = &m.meshes[mesh as usize].lods[0];
+    let vertices = pack::Vertex::read_all(pack.bytes(lod.vertices));
+    let indices: Vec<u32> = pack.bytes(lod.indices).chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+    let mut corners: Vec<[f32; 6]> = Vec::with_capacity(indices.len());
+    let mut parts = Vec::new();
+    for sub in &lod.submeshes {
+        let first = corners.len() as u32;
+        for &i in &indices[sub.first_index as usize..(sub.first_index + sub.index_count) as usize] {
+            let v = &vertices[i as usize];
+            corners.push([v.position[0], v.position[1], v.position[2], v.normal[0], v.normal[1], v.normal[2]]);
+        }
+        parts.push((first, sub.index_count, m.materials[sub.material as usize].base_color));
+    }
+    let radius = vertices.iter().map(|v| Vec3::from(v.position).length()).fold(0.0, f32::max);
+    let name = format!("flock mesh '{}'", m.meshes[mesh as usize].name);
+    let vertices = Buffer::with_data(gpu, &name, bytemuck::cast_slice(&corners), vk::BufferUsageFlags::VERTEX_BUFFER)?;
+    Ok(FlockMesh { vertices, parts, radius })
 }

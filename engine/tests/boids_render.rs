@@ -12,13 +12,13 @@ use pack::{Material, Pack, PackBuilder};
 mod common;
 use common::packs::{node, push_mesh, quad_vertices};
 use common::scenes::cube_vertices;
-use common::{assert_clean, gpu};
+use common::{assert_clean, gpu, spawn};
 
 const W: u32 = 64;
 const H: u32 = 48;
 
 /// Mesh 0: a 2 m square at z = 50 (behind the camera), the scene's one instance. Mesh 1: the
-/// bird, a 0.3 m cube with no node (the cooker packs a boids spawn's asset that way).
+/// bird, a 0.3 m cube with no node, named by a boids spawn (as the cooker packs a spawn's asset).
 fn pack_with_a_bird() -> Pack {
     let mut b = PackBuilder::new("generated", "test");
     b.manifest.materials.push(Material::default());
@@ -30,6 +30,8 @@ fn pack_with_a_bird() -> Pack {
         v.position = (Vec3::from(v.position) * 0.3).to_array();
     }
     assert_eq!(push_mesh(&mut b, "bird", &cube, &cube_idx, None), BIRD);
+    // The flock's spawn names it (the cooker writes `mesh` from the spawn's asset).
+    b.manifest.spawns.push(spawn("flock", "boids", [0.0; 3], &format!(r#"{{ "mesh": {BIRD} }}"#)));
     b.finish()
 }
 

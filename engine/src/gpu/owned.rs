@@ -97,6 +97,12 @@ destroy_by_method! {
     crate::app::swapchain::Frames,
 }
 
+impl Destroy for (u32, crate::scene::FlockMesh) {
+    fn destroy(&mut self, gpu: &Gpu) {
+        self.1.vertices.destroy(gpu)
+    }
+}
+
 impl Destroy for Box<dyn crate::render::graph::Pass> {
     fn destroy(&mut self, gpu: &Gpu) {
         (**self).destroy(gpu)

@@ -4,9 +4,9 @@
 //! the scene's instances (their counts go into the frame's cull counters).
 //!
 //! Drawn in a rendering instance of its own right after the opaque shading pass, depth-tested
-//! and depth-writing (so the particle pass after it is hidden behind birds too), from the scene's
-//! vertex and index buffers (LOD 0: a bird covers a few pixels and has a few triangles), each
-//! submesh in its material's base colour. The birds are not in the depth pre-pass or the shadow
+//! and depth-writing (so the particle pass after it is hidden behind birds too), from the
+//! scene's flock mesh of the bird (`scene::FlockMesh`: full detail, a bird covers a few pixels),
+//! each submesh in its material's base colour. The birds are not in the depth pre-pass or the shadow
 //! map: they are a few hundred triangles, so the pre-pass would save nothing, and a bird's shadow
 //! on the ground is a few pixels.
 
@@ -64,14 +64,14 @@ impl BoidsDraw {
     }
 
     /// Replace this frame's instances with every boid of `flocks`, flock `i` drawn with
-    /// `scene`'s mesh `meshes[i]`. A flock without a mesh (None, or an index the scene does not
-    /// have) is simulated but not drawn.
+    /// `scene`'s mesh `meshes[i]`. A flock without a mesh (None, or one no boids spawn of the
+    /// scene's pack names, so it has no flock mesh) is simulated but not drawn.
     pub fn fill(&mut self, scene: &GpuScene, flocks: &[Flock], meshes: &[Option<u32>]) {
         self.boids.clear();
         self.groups.clear();
         for (f, mesh) in flocks.iter().zip(meshes) {
-            let Some((mesh, m)) = mesh.and_then(|i| Some((i, scene.meshes.get(i as usize)?))) else { continue };
-            let radius = m.origin_radius;
+            let Some((mesh, m)) = mesh.and_then(|i| Some((i, scene.flock_mesh(i)?))) else { continue };
+            let radius = m.radius;
             let s = f.state();
             let first = self.boids.len() as u32;
             for i in 0..s.len() {
@@ -125,8 +125,8 @@ impl BoidsDraw {
         self.instances.write(gpu, slot, bytemuck::cast_slice(&self.visible))
     }
 
-    /// Draw the uploaded visible boids with `scene`'s meshes into `hdr` over `depth` (loaded and
-    /// stored). Call only with boids in view: lavapipe 22.3 crashes on a depth-writing rendering
+    /// Draw the uploaded visible boids with `scene`'s flock meshes into `hdr` over `depth` (loaded
+    /// and stored). Call only with boids in view: lavapipe 22.3 crashes on a depth-writing rendering
     /// without draws.
     pub fn record(&self, rec: &Rec, scene: &GpuScene, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
@@ -135,14 +135,12 @@ impl BoidsDraw {
         unsafe {
             d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
-            d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, buffer.buffer], &[0, 0]);
-            d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
             for g in &self.visible_groups {
-                let lod = &scene.meshes[g.mesh as usize].lods[0];
-                for sub in &lod.submeshes {
-                    let colour = scene.materials.get(sub.material as usize).map_or([1.0; 4], |m| m.base_color);
+                let Some(mesh) = scene.flock_mesh(g.mesh) else { continue };
+                d.cmd_bind_vertex_buffers(cb, 0, &[mesh.vertices.buffer, buffer.buffer], &[0, 0]);
+                for &(first, count, colour) in &mesh.parts {
                     d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::FRAGMENT, 0, bytemuck::bytes_of(&colour));
-                    d.cmd_draw_indexed(cb, sub.index_count, g.count, lod.first_index + sub.first_index, lod.base_vertex, g.first);
+                    d.cmd_draw(cb, count, g.count, first, g.first);
                 }
             }
         }
@@ -158,14 +156,14 @@ impl BoidsDraw {
     }
 }
 
-/// The bird pipeline: the scene's vertices (binding 0, position and normal of `pack::Vertex`)
-/// and per-instance model matrices (binding 1), no culling (single-triangle wings), reversed-Z
-/// depth test and write.
+/// The bird pipeline: the flock mesh's (position, normal) corners (binding 0) and per-instance
+/// model matrices (binding 1), no culling (single-triangle wings), reversed-Z depth test and
+/// write.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format) -> Result<vk::Pipeline> {
     let bindings = [
         vk::VertexInputBindingDescription {
             binding: 0,
-            stride: pack::VERTEX_STRIDE as u32,
+            stride: 24,
             input_rate: vk::VertexInputRate::VERTEX,
         },
         vk::VertexInputBindingDescription {

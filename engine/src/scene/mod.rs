@@ -35,9 +35,6 @@ pub struct GpuMesh {
     pub bounds_max: Vec3,
     /// `lods[i].error` for every LOD (what LOD selection reads, without gathering it per draw).
     pub errors: Vec<f32>,
-    /// The farthest any full-detail vertex lies from the mesh's origin: the bounding sphere of
-    /// an instance placed by rotation and translation only (the boids' birds).
-    pub origin_radius: f32,
 }
 
 impl GpuMesh {
@@ -111,6 +108,28 @@ pub struct GpuScene {
     pub(crate) material_constants: Buffer,
     /// Present when the pack has baked lightmaps: the renderer then shades in physical units.
     pub baked: Option<BakedLighting>,
+    /// The meshes the pack's boids spawns name, by mesh index, as the boids pass draws them.
+    pub flock_meshes: Vec<(u32, FlockMesh)>,
+}
+
+/// A mesh drawn as the birds of a flock: its full detail as a compact stream of (position,
+/// normal) per triangle corner, each submesh a run in its material's base colour. Thousands of
+/// instances of a few dozen triangles: lavapipe fetches 24-byte vertices without an index
+/// buffer measurably faster than the 80-byte shared ones (the `boids-10k` bench).
+pub struct FlockMesh {
+    pub vertices: Buffer,
+    /// (first vertex, vertex count, linear RGBA base colour) per submesh.
+    pub parts: Vec<(u32, u32, [f32; 4])>,
+    /// The farthest vertex from the mesh's origin: the bounding sphere of a bird, which is
+    /// placed by rotation and translation only.
+    pub radius: f32,
+}
+
+impl GpuScene {
+    /// The flock mesh of mesh `mesh`, if a boids spawn of the pack names it.
+    pub fn flock_mesh(&self, mesh: u32) -> Option<&FlockMesh> {
+        self.flock_meshes.iter().find(|(m, _)| *m == mesh).map(|(_, f)| f)
+    }
 }
 
 /// The descriptor set layouts a scene's sets are made for (the renderer's).
@@ -206,5 +225,8 @@ impl GpuScene {
         self.material_constants.destroy(gpu);
         self.vertex_buffer.destroy(gpu);
         self.index_buffer.destroy(gpu);
+        for (_, f) in &mut self.flock_meshes {
+            f.vertices.destroy(gpu);
+        }
     }
 }

@@ -5,8 +5,9 @@
 use glam::Vec3;
 use pack::{Material, Mesh, MeshLod, PackBuilder, Submesh, Vertex};
 
-/// Append the bird (facing +Z, up +Y, 0.55 m long, 0.9 m span; no node: the flock draws it)
-/// and its material to `b`; returns its mesh index.
+/// Append the bird (facing +Z, up +Y, 0.55 m long, 0.9 m span; no node: the flock draws it),
+/// its material and a boids spawn naming it (as the cooker writes them) to `b`; returns its
+/// mesh index.
 pub fn push_bird(b: &mut PackBuilder) -> u32 {
     let v = Vec3::new;
     let (nose, tail, top, bottom, left, right) = (v(0.0, 0.0, 0.3), v(0.0, 0.0, -0.2), v(0.0, 0.06, 0.0), v(0.0, -0.05, 0.0), v(-0.06, 0.0, 0.0), v(0.06, 0.0, 0.0));
@@ -39,5 +40,7 @@ pub fn push_bird(b: &mut PackBuilder) -> u32 {
         bounds_min: lo.to_array(),
         bounds_max: hi.to_array(),
     });
-    b.manifest.meshes.len() as u32 - 1
+    let mesh = b.manifest.meshes.len() as u32 - 1;
+    b.manifest.spawns.push(pack::Spawn { name: "flock".into(), kind: "boids".into(), position: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], params: serde_json::json!({ "mesh": mesh }) });
+    mesh
 }

@@ -11,8 +11,7 @@ impl Pass for Boids {
         "boids"
     }
 
-    /// Instanced draws that crashed lavapipe 22.3 inside a statistics query when they were
-    /// non-indexed: see `Pass::counts_invocations`.
+    /// Non-indexed instanced draws: see `Pass::counts_invocations`.
     fn counts_invocations(&self) -> bool {
         false
     }

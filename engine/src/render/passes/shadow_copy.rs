@@ -12,6 +12,12 @@ impl Pass for ShadowCopy {
         "shadow copy"
     }
 
+    /// No draws: no vertex or fragment shader invocations to count (and a statistics query on
+    /// lavapipe is not free).
+    fn counts_invocations(&self) -> bool {
+        false
+    }
+
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         let s = cx.shadow;
         if cx.frame.draw_shadow && !s.static_casters.is_empty() {

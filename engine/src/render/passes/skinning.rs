@@ -12,6 +12,12 @@ impl Pass for Skinning {
         "skinning"
     }
 
+    /// No draws: no vertex or fragment shader invocations to count (and a statistics query on
+    /// lavapipe is not free).
+    fn counts_invocations(&self) -> bool {
+        false
+    }
+
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         if cx.animation.is_some() {
             io.uses(SKINNED, Access::StorageWriteCompute);
