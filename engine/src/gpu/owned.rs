@@ -126,13 +126,6 @@ impl<T: Destroy> Destroy for Option<T> {
     }
 }
 
-impl<A: Destroy, B: Destroy> Destroy for (A, B) {
-    fn destroy(&mut self, gpu: &Gpu) {
-        self.0.destroy(gpu);
-        self.1.destroy(gpu);
-    }
-}
-
 /// Raw handles destroyed by one device call each (null handles are ignored by Vulkan).
 macro_rules! destroy_handle {
     ($($ty:ty => $call:ident),* $(,)?) => {$(

@@ -244,14 +244,6 @@ impl SunShadow {
         self.ubos[slot].mapped()[..bytes.len()].copy_from_slice(bytes);
     }
 
-    /// The map's size as a render area.
-    pub fn area(&self) -> vk::Rect2D {
-        vk::Rect2D {
-            offset: vk::Offset2D::default(),
-            extent: vk::Extent2D { width: self.size, height: self.size },
-        }
-    }
-
     /// The map, as the frame graph imports it (the shadow passes draw it, the shading pass samples it).
     pub fn map_ref(&self) -> ImageRef {
         image_ref(&self.image)
