@@ -25,6 +25,7 @@ use anyhow::{bail, Result};
 use ash::vk;
 use plan::{PassUses, States, Use};
 use profile::Profiler;
+use std::cell::RefCell;
 use std::collections::HashMap;
 
 /// The image every frame ends in: the display (swapchain) or headless colour target, imported
@@ -143,6 +144,10 @@ pub struct Graph {
     profiler: Profiler,
     /// The names of the passes that ran in each slot's last frame, and whether each was counted.
     ran: Vec<Vec<(&'static str, bool)>>,
+    /// Each slot's profile once read in full. The queries are read once a frame: lavapipe's
+    /// pipeline statistics add the fragment count into the result again on every read (a
+    /// second read of a pass's query gave 17x its fragment invocations).
+    profiles: RefCell<Vec<Option<FrameProfile>>>,
 }
 
 impl Graph {
@@ -156,6 +161,7 @@ impl Graph {
             frames_in_flight,
             profiler: Profiler::new(gpu, frames_in_flight)?,
             ran: vec![Vec::new(); frames_in_flight],
+            profiles: RefCell::new(vec![None; frames_in_flight]),
         })
     }
 
@@ -195,6 +201,7 @@ impl Graph {
         let live = plan::live_passes(&uses, &exports);
         let ran = &mut self.ran[slot];
         ran.clear();
+        self.profiles.get_mut()[slot] = None;
         self.profiler.begin_frame(gpu, cb, slot);
         for ((pass, decl), live) in passes.iter_mut().zip(&uses).zip(live) {
             if !live || decl.is_empty() {
@@ -221,7 +228,14 @@ impl Graph {
     /// GPU time and shader invocations of each pass of the frame last recorded in `slot`, once
     /// the GPU has finished it; None when the device has neither timestamps nor statistics.
     pub fn profile(&self, gpu: &Gpu, slot: usize) -> Option<FrameProfile> {
-        self.profiler.read(gpu, slot, &self.ran[slot])
+        if let Some(p) = &self.profiles.borrow()[slot] {
+            return Some(p.clone());
+        }
+        let (profile, complete) = self.profiler.read(gpu, slot, &self.ran[slot])?;
+        if complete {
+            self.profiles.borrow_mut()[slot] = Some(profile.clone());
+        }
+        Some(profile)
     }
 
     /// The names of the passes that ran in `slot`'s last frame, in order.

@@ -132,7 +132,9 @@ impl Profiler {
         }
     }
 
-    pub fn read(&self, gpu: &Gpu, slot: usize, ran: &[(&'static str, bool)]) -> Option<FrameProfile> {
+    /// The profile of `slot`'s last frame and whether every query of it was ready (a frame the
+    /// GPU has not finished reads as zeros where it is not).
+    pub fn read(&self, gpu: &Gpu, slot: usize, ran: &[(&'static str, bool)]) -> Option<(FrameProfile, bool)> {
         if self.timestamps.is_none() && self.stats.is_none() {
             return None;
         }
@@ -150,16 +152,21 @@ impl Profiler {
             unsafe { gpu.device.get_query_pool_results(pool, n * slot as u32 + i as u32, &mut v, vk::QueryResultFlags::TYPE_64) }.ok()?;
             Some(ShaderInvocations { vertex: v[0][0], fragment: v[0][1] })
         };
+        let mut complete = times_ok || self.timestamps.is_none() || count == 0;
         let passes = ran
             .iter()
             .enumerate()
-            .map(|(i, &(name, counted))| PassProfile {
-                name,
-                gpu_ms: (times_ok && i < count).then(|| times[2 * i + 1].saturating_sub(times[2 * i]) as f64 * self.timestamp_period_ns * 1e-6),
-                invocations: if counted && i < count { invocations(i) } else { None },
+            .map(|(i, &(name, counted))| {
+                let invocations = if counted && i < count { invocations(i) } else { None };
+                complete &= invocations.is_some() || !(counted && i < count);
+                PassProfile {
+                    name,
+                    gpu_ms: (times_ok && i < count).then(|| times[2 * i + 1].saturating_sub(times[2 * i]) as f64 * self.timestamp_period_ns * 1e-6),
+                    invocations,
+                }
             })
             .collect();
-        Some(FrameProfile { passes })
+        Some((FrameProfile { passes }, complete))
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
