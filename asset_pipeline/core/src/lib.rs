@@ -17,6 +17,7 @@ mod mesh;
 pub mod measure;
 pub mod pack_build;
 mod scene;
+pub mod tangents;
 mod transform;
 mod uri;
 pub mod uv_raster;

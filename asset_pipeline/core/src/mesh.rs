@@ -231,21 +231,39 @@ fn primitive(p: &gltf::Primitive, buffers: &[Vec<u8>], budget: &mut u64) -> Resu
     if normals.is_none() {
         let remap;
         (vertices, idx, remap) = flat_normals(&vertices, &idx);
-        // Unwelding copies vertices; their deformation data follows them.
-        if let Some((j, w)) = &mut deform.influences {
-            *j = remap.iter().map(|&i| j[i as usize]).collect();
-            *w = remap.iter().map(|&i| w[i as usize]).collect();
-        }
-        for d in &mut deform.morph_positions {
-            *d = remap.iter().map(|&i| d[i as usize]).collect();
-        }
+        deform.follow(&remap);
     }
     if tangents.is_none() {
-        for v in &mut vertices {
-            v.tangent = default_tangent(v.normal);
+        match p.material().normal_texture() {
+            // Normal-mapped: the tangents the map was baked against (split at UV seams).
+            Some(t) => {
+                let remap;
+                (vertices, idx, remap) = crate::tangents::mikktspace(&vertices, &idx, t.tex_coord().min(1));
+                deform.follow(&remap);
+            }
+            // Nothing reads them; any frame will do.
+            None => {
+                for v in &mut vertices {
+                    v.tangent = crate::tangents::fallback(v.normal);
+                }
+            }
         }
     }
     Ok((vertices, idx, deform))
+}
+
+impl Deform {
+    /// The deformation data of vertices that were copied: `remap[i]` is the vertex the new
+    /// vertex `i` copies.
+    fn follow(&mut self, remap: &[u32]) {
+        if let Some((j, w)) = &mut self.influences {
+            *j = remap.iter().map(|&i| j[i as usize]).collect();
+            *w = remap.iter().map(|&i| w[i as usize]).collect();
+        }
+        for d in self.morph_positions.iter_mut().chain(&mut self.morph_normals) {
+            *d = remap.iter().map(|&i| d[i as usize]).collect();
+        }
+    }
 }
 
 /// Strips and fans as the equivalent list, with the winding glTF specifies.
@@ -274,15 +292,6 @@ fn flat_normals(vertices: &[Vertex], idx: &[u32]) -> (Vec<Vertex>, Vec<u32>, Vec
     let remap = idx[..out.len()].to_vec();
     let idx = (0..out.len() as u32).collect();
     (out, idx, remap)
-}
-
-/// Stand-in until MikkTSpace: a unit tangent perpendicular to the normal, so the TBN basis the
-/// shader builds is at least orthonormal.
-fn default_tangent(n: [f32; 3]) -> [f32; 4] {
-    // Project the axis least aligned with n, so the difference never vanishes.
-    let axis = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-    let d = dot(n, axis);
-    normalize(sub(axis, n.map(|c| c * d))).map_or([1.0, 0.0, 0.0, 1.0], |t| [t[0], t[1], t[2], 1.0])
 }
 
 /// glTF vertex colours are linear already; only the storage changes.
