@@ -4,11 +4,11 @@
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec4 in_tangent; // xyz, w = the bitangent's sign (glTF)
 layout(location = 3) in vec2 in_uv0;
 layout(location = 4) in vec2 in_uv1;
 layout(location = 5) in vec4 in_color;
 layout(location = 13) in vec2 in_texcoord1;
-// Location 2 (tangent) exists in the vertex format but is not read yet.
 
 // Per instance (binding 1, the renderer's instance stream; `InstanceData` in batches.rs): the
 // model matrix, the columns of its normal matrix (the inverse-transpose of the 3x3: non-uniform
@@ -34,6 +34,10 @@ layout(location = 4) out vec2 out_lightmap_uv;
 layout(location = 5) out vec2 out_emissive_uv;
 // The lightmap array's layer: the region's page plus the submesh's block.
 layout(location = 6) flat out float out_lightmap_layer;
+layout(location = 7) out vec4 out_tangent;
+layout(location = 8) out vec2 out_normal_uv;
+layout(location = 9) out vec2 out_metallic_roughness_uv;
+layout(location = 10) out vec2 out_occlusion_uv;
 
 // A texture slot's coordinates (`MaterialConstants` rows). Per vertex rather than per fragment:
 // the transform is affine, so interpolating its result is the same as transforming the
@@ -49,6 +53,13 @@ void main() {
     uint m = uint(draw.material.y);
     out_base_color_uv = slot_uv(materials[m].base_color_uv[0], materials[m].base_color_uv[1]);
     out_emissive_uv = slot_uv(materials[m].emissive_uv[0], materials[m].emissive_uv[1]);
+    out_normal_uv = slot_uv(materials[m].normal_uv[0], materials[m].normal_uv[1]);
+    out_metallic_roughness_uv = slot_uv(materials[m].metallic_roughness_uv[0], materials[m].metallic_roughness_uv[1]);
+    out_occlusion_uv = slot_uv(materials[m].occlusion_uv[0], materials[m].occlusion_uv[1]);
+    // A tangent is a direction in the surface: it moves with the model matrix itself. A
+    // mirroring instance (negative determinant) flips the frame's handedness.
+    mat3 model3 = mat3(in_model);
+    out_tangent = vec4(model3 * in_tangent.xyz, determinant(model3) < 0.0 ? -in_tangent.w : in_tangent.w);
     out_color = in_color;
     out_world = world.xyz;
     out_lightmap_uv = in_uv1 * in_lightmap.xy + in_lightmap.zw;

@@ -9,11 +9,17 @@ layout(push_constant) uniform Draw {
 
 struct MaterialConstants {
     vec4 emission; // rgb: emitted radiance factor, times the emissive texture
+    // x: metallic, y: roughness (factors, times the metallic-roughness texture's b and g),
+    // z: normalTexture.scale, w: occlusion strength.
+    vec4 pbr;
     // A texture slot's UV transform (glTF texCoord and KHR_texture_transform) as two rows
     // (a, b, c, tex_coord) and (d, e, f, 0): uv' = (a u + b v + c, d u + e v + f) of uv0
     // (tex_coord 0) or texcoord1 (1).
     vec4 base_color_uv[2];
     vec4 emissive_uv[2];
+    vec4 normal_uv[2];
+    vec4 metallic_roughness_uv[2];
+    vec4 occlusion_uv[2];
 };
 layout(std430, set = 2, binding = 2) readonly buffer MaterialBlock {
     MaterialConstants materials[];

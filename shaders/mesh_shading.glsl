@@ -6,6 +6,9 @@
 // Set 1: the material's textures, each with its own sampler; white where the slot is empty.
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
 layout(set = 1, binding = 1) uniform sampler2D emissive_tex;   // _SRGB format: sampled as linear
+layout(set = 1, binding = 2) uniform sampler2D normal_tex;     // n * 0.5 + 0.5 (white: no map, scale 0)
+layout(set = 1, binding = 3) uniform sampler2D metallic_roughness_tex; // g: roughness, b: metallic
+layout(set = 1, binding = 4) uniform sampler2D occlusion_tex;  // r
 
 // Set 2: the scene's baked light (engine/src/assets.rs). The lightmap pages as the layers of one
 // array (one black layer without a bake), the probe grid, and the material constants.
@@ -16,6 +19,9 @@ layout(std430, set = 2, binding = 1) readonly buffer Probes {
     uvec4 counts;  // 0 when the pack has no probes
     float data[];  // per probe: 27 SH floats (9 x rgb, B = E/pi without the sun), sun visibility
 } probes;
+// The specular lobe's directional albedo split by Schlick, (A, B) over (n.v, roughness): a lobe
+// of reflectance f0 returns f0 A + B of a uniform environment (engine/shading, `DfgLut`).
+layout(set = 2, binding = 3) uniform sampler2D dfg_lut;
 
 // The sun's shadow map (depth, 0 nearest the sun), sampled with a LESS_OR_EQUAL comparison and
 // linear filtering: each lookup is a 2x2 PCF in hardware. Set 0 is the renderer's.
@@ -28,6 +34,10 @@ layout(location = 3) in vec3 in_world;
 layout(location = 4) in vec2 in_lightmap_uv;
 layout(location = 5) in vec2 in_emissive_uv;
 layout(location = 6) flat in float in_lightmap_layer;
+layout(location = 7) in vec4 in_tangent;
+layout(location = 8) in vec2 in_normal_uv;
+layout(location = 9) in vec2 in_metallic_roughness_uv;
+layout(location = 10) in vec2 in_occlusion_uv;
 
 // Set by the renderer's counting pipelines: each shaded fragment adds one to counters.fragments
 // (helper invocations' atomics have no effect, so only real fragments count).
@@ -76,9 +86,12 @@ float sh_basis(int i, vec3 n) {
     return 0.5462742 * (n.x * n.x - n.y * n.y);
 }
 
-// B(n) at p from the probe grid, trilinear over the 8 probes around p; and (w) the interpolated
-// sun visibility. (0, 0, 0, 1) without probes.
-vec4 probe_light(vec3 p, vec3 n) {
+// B(n) at p from the probe grid, trilinear over the 8 probes around p, with (w) the
+// interpolated sun visibility; and in `at_r` the same B in the direction r (the rough
+// environment the specular lobe reflects until reflection probes exist). (0, 0, 0, 1) and 0
+// without probes.
+vec4 probe_light(vec3 p, vec3 n, vec3 r, out vec3 at_r) {
+    at_r = vec3(0.0);
     if (probes.counts.x == 0u) {
         return vec4(0.0, 0.0, 0.0, 1.0);
     }
@@ -86,22 +99,30 @@ vec4 probe_light(vec3 p, vec3 n) {
     ivec3 c0 = ivec3(floor(g));
     vec3 f = clamp(g - vec3(c0), 0.0, 1.0);
     float y[9];
+    float yr[9];
     for (int i = 0; i < 9; i++) {
         y[i] = sh_basis(i, n);
+        yr[i] = sh_basis(i, r);
     }
     vec4 acc = vec4(0.0);
+    vec3 acc_r = vec3(0.0);
     for (int k = 0; k < 8; k++) {
         ivec3 o = ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1);
         vec3 w3 = mix(1.0 - f, f, vec3(o));
         float w = w3.x * w3.y * w3.z;
         uint b = probe_base(c0 + o);
         vec3 e = vec3(0.0);
+        vec3 e_r = vec3(0.0);
         for (int i = 0; i < 9; i++) {
-            e += y[i] * vec3(probes.data[b + 3u * uint(i)], probes.data[b + 3u * uint(i) + 1u], probes.data[b + 3u * uint(i) + 2u]);
+            vec3 c = vec3(probes.data[b + 3u * uint(i)], probes.data[b + 3u * uint(i) + 1u], probes.data[b + 3u * uint(i) + 2u]);
+            e += y[i] * c;
+            e_r += yr[i] * c;
         }
         acc += w * vec4(e, probes.data[b + 27u]);
+        acc_r += w * e_r;
     }
     // L2 SH rings below zero next to strong lobes: clamp.
+    at_r = max(acc_r, 0.0);
     return vec4(max(acc.rgb, 0.0), acc.w);
 }
 
@@ -132,28 +153,101 @@ float sun_visibility(vec3 p, vec3 n, float probe_vis) {
 // turn that into NaN).
 const float HALF_MAX = 65504.0;
 
+// The shading normal: the interpolated normal tilted by the normal map in the frame of the
+// interpolated tangent (Gram-Schmidt against the normal; B = cross(N, T) * w, glTF), the map's
+// xy scaled by normalTexture.scale (0 without a map: the white texel then leaves N as it is).
+// Double-sided faces seen from behind shade with the whole frame flipped.
+vec3 shading_normal(float scale) {
+    vec3 n = normalize(in_normal);
+    vec3 t = in_tangent.xyz - n * dot(n, in_tangent.xyz);
+    vec3 ts = texture(normal_tex, in_normal_uv).xyz * 2.0 - 1.0;
+    ts.xy *= scale;
+    float tl = dot(t, t);
+    if (scale != 0.0 && tl > 1e-12) {
+        t *= inversesqrt(tl);
+        vec3 b = cross(n, t) * (in_tangent.w < 0.0 ? -1.0 : 1.0);
+        n = normalize(ts.x * t + ts.y * b + ts.z * n);
+    }
+    return gl_FrontFacing ? n : -n;
+}
+
+// Filament's fp16-safe floor on roughness (alpha >= 0.002).
+const float MIN_ROUGHNESS = 0.045;
+
+// GGX / Trowbridge-Reitz.
+float d_ggx(float nh, float a) {
+    float a2 = a * a;
+    float d = nh * nh * (a2 - 1.0) + 1.0;
+    return a2 / (PI * d * d);
+}
+
+// Height-correlated Smith visibility G / (4 n.l n.v).
+float vis_smith(float nl, float nv, float a) {
+    float a2 = a * a;
+    float gv = nl * sqrt(a2 + (1.0 - a2) * nv * nv);
+    float gl = nv * sqrt(a2 + (1.0 - a2) * nl * nl);
+    return 0.5 / max(gv + gl, 1e-12);
+}
+
 // The fragment's linear radiance for the HDR target; alpha 1 marks it covered (the tone-map pass
-// leaves alpha-0 pixels, the clear colour, as they are).
+// leaves alpha-0 pixels, the clear colour, as they are). glTF metallic-roughness
+// (engine/shading is the same model on the CPU, ../shared/notes/shading.md 2.2 and 5):
+//   sun:      [(1 - m)(1 - F_d) base / pi + F D Vis] E n.l visibility   (dynamic objects)
+//   indirect: (1 - m) base w_d B ao + env (f0 A + B) ao,  w_d = 1 - (0.04 A + B)
+// B is the lightmap (static: it holds the sun's diffuse light too, not its highlight, which
+// the directional lightmaps of the next issue bring) or the probes (dynamic); env, until
+// reflection probes exist, is a rough environment: the probes' B in the reflected direction, or
+// the lightmap's B on lightmapped surfaces.
 vec4 shade(vec4 a) {
-    // Double-sided faces seen from behind shade with the flipped normal.
-    vec3 n = normalize(gl_FrontFacing ? in_normal : -in_normal);
-    float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
+    MaterialConstants mat = materials[uint(draw.material.y)];
+    vec3 n = shading_normal(mat.pbr.z);
     if (frame.exposure.y < 0.5) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
+        float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    // Physical: B = H/pi from the lightmap (baked static instances: it holds the sun too) or
-    // from the probes plus the sun where the shadow map sees it (dynamic objects).
+    vec4 mr = texture(metallic_roughness_tex, in_metallic_roughness_uv);
+    float metallic = clamp(mat.pbr.x * mr.b, 0.0, 1.0);
+    float rough = clamp(mat.pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
+    float alpha = rough * rough;
+    float ao = 1.0 + mat.pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0);
+    vec3 v = normalize(frame.camera_pos.xyz - in_world);
+    float nv = max(dot(n, v), 1e-4);
+    vec3 f0 = mix(vec3(0.04), a.rgb, metallic);
+    vec2 dfg = texture(dfg_lut, vec2(nv, rough)).xy;
+    vec3 kd = a.rgb * (1.0 - metallic);
+    // Rough lobes lean toward the normal (Frostbite's dominant direction).
+    vec3 r = reflect(-v, n);
+    float s = 1.0 - alpha;
+    vec3 r_dom = normalize(mix(n, r, s * (sqrt(s) + alpha)));
+
     vec3 b;
+    vec3 env;
+    vec3 l = vec3(0.0);
     if (LIGHTMAPPED) {
         b = texture(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
+        // The lightmap's B stands for the environment too (no probe code in this variant: it
+        // is most of the screen).
+        env = b;
     } else {
-        vec4 pl = probe_light(in_world, n);
-        b = pl.rgb + frame.sun_color.rgb * ndotl * sun_visibility(in_world, n, pl.w) / PI;
+        vec4 pl = probe_light(in_world, n, r_dom, env);
+        b = pl.rgb;
+        vec3 sun_l = frame.sun_dir.xyz;
+        float nl = dot(n, sun_l);
+        if (nl > 0.0) {
+            vec3 h = normalize(v + sun_l);
+            float vh = max(dot(v, h), 0.0);
+            float w = pow(1.0 - vh, 5.0);
+            vec3 f = f0 + (1.0 - f0) * w;
+            float fd = 0.04 + 0.96 * w;
+            vec3 brdf = kd * (1.0 - fd) / PI + f * (d_ggx(max(dot(n, h), 0.0), alpha) * vis_smith(nl, nv, alpha));
+            l += brdf * frame.sun_color.rgb * nl * sun_visibility(in_world, n, pl.w);
+        }
     }
+    float wd = 1.0 - (0.04 * dfg.x + dfg.y);
+    l += (kd * wd * b + env * (f0 * dfg.x + dfg.y)) * ao;
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
-    vec3 emission = materials[uint(draw.material.y)].emission.rgb * texture(emissive_tex, in_emissive_uv).rgb;
-    vec3 l = a.rgb * b + emission;
+    l += mat.emission.rgb * texture(emissive_tex, in_emissive_uv).rgb;
     return vec4(min(l, HALF_MAX), 1.0);
 }

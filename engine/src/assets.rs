@@ -18,8 +18,28 @@ use pack::{Pack, TextureFormat, TextureTransform};
 struct MaterialConstants {
     /// rgb: emitted radiance factor (multiplies the emissive texture).
     emission: [f32; 4],
+    /// metallic, roughness, normalTexture.scale (0 without a normal map), occlusion strength.
+    pbr: [f32; 4],
     base_color_uv: [[f32; 4]; 2],
     emissive_uv: [[f32; 4]; 2],
+    normal_uv: [[f32; 4]; 2],
+    metallic_roughness_uv: [[f32; 4]; 2],
+    occlusion_uv: [[f32; 4]; 2],
+}
+
+/// Texture slots of a material's descriptor set (set 1), in binding order.
+const MATERIAL_SLOTS: u32 = 5;
+
+/// Size of the (A, B) table: 32 x 32 texels over (n.v, roughness), as the brief's tests.
+const DFG_LUT_SIZE: u32 = 32;
+
+/// The table as R16G16_SFLOAT texels, computed once a process (it is the same for every scene).
+fn dfg_lut_texels() -> &'static [u8] {
+    static TEXELS: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    TEXELS.get_or_init(|| {
+        let lut = shading::DfgLut::new(DFG_LUT_SIZE);
+        lut.texels.iter().flat_map(|t| t.map(half::f16::from_f32)).flat_map(|h| h.to_le_bytes()).collect()
+    })
 }
 
 /// A slot's transform as two rows `(a, b, c, tex_coord)`, `(d, e, f, 0)`: `uv' = (a u + b v + c,
@@ -121,7 +141,7 @@ impl GpuScene {
 
         let material_count = m.materials.len() as u32;
         let pool_sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: 2 * material_count + 1 },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: MATERIAL_SLOTS * material_count + 2 },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 },
         ];
         let pool = gpu.own(unsafe {
@@ -144,9 +164,15 @@ impl GpuScene {
                 let sampler = samplers.for_texture(gpu, state, image.mip_levels)?;
                 Ok([vk::DescriptorImageInfo { sampler, image_view: image.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }])
             };
-            let (base_color, emissive) = (slot(mat.base_color_texture)?, slot(mat.emissive_texture)?);
-            let write = |binding: u32, info| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(binding).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(info);
-            unsafe { gpu.device.update_descriptor_sets(&[write(0, &base_color), write(1, &emissive)], &[]) };
+            // Binding order: base colour, emissive, normal, metallic-roughness, occlusion.
+            let infos = [mat.base_color_texture, mat.emissive_texture, mat.normal_texture, mat.metallic_roughness_texture, mat.occlusion_texture].map(&mut slot);
+            let infos = infos.into_iter().collect::<Result<Vec<_>>>()?;
+            let writes: Vec<_> = infos
+                .iter()
+                .enumerate()
+                .map(|(binding, info)| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(binding as u32).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(info))
+                .collect();
+            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
             materials.push(GpuMaterial {
                 base_color: mat.base_color,
                 alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
@@ -172,8 +198,13 @@ impl GpuScene {
             .iter()
             .map(|mt| MaterialConstants {
                 emission: [mt.emissive[0], mt.emissive[1], mt.emissive[2], 0.0],
+                // Scale 0 leaves the normal alone where the slot samples the white stand-in.
+                pbr: [mt.metallic, mt.roughness, if mt.normal_texture.is_some() { mt.normal_scale } else { 0.0 }, mt.occlusion_strength],
                 base_color_uv: uv_rows(&mt.base_color_uv),
                 emissive_uv: uv_rows(&mt.emissive_uv),
+                normal_uv: uv_rows(&mt.normal_uv),
+                metallic_roughness_uv: uv_rows(&mt.metallic_roughness_uv),
+                occlusion_uv: uv_rows(&mt.occlusion_uv),
             })
             .collect();
         if constants.is_empty() {
@@ -188,12 +219,16 @@ impl GpuScene {
         let scene_layout = [layouts.scene];
         let scene_set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&scene_layout))?[0] };
         let image_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmaps.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+        let lut_extent = vk::Extent2D { width: DFG_LUT_SIZE, height: DFG_LUT_SIZE };
+        let dfg_lut = gpu.own(Image::sampled_with_mips(gpu, "dfg lut", vk::Format::R16G16_SFLOAT, lut_extent, &[dfg_lut_texels()])?);
+        let lut_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: dfg_lut.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         let constants_info = [vk::DescriptorBufferInfo { buffer: material_constants.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         let writes = [
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&image_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&probe_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&constants_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(3).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&lut_info),
         ];
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
@@ -217,6 +252,7 @@ impl GpuScene {
             textures: textures.keep(),
             white: white.keep(),
             lightmaps: lightmaps.keep(),
+            dfg_lut: dfg_lut.keep(),
             samplers: samplers.keep(),
             pool: pool.keep(),
             scene_set,

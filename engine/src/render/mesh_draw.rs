@@ -101,11 +101,12 @@ impl MeshKit {
         let frag = vk::ShaderStageFlags::FRAGMENT;
         // Set 0: the frame's uniforms, the fragment counter and the sun's shadow map.
         let frame_binding = [binding(0, ubo, MESH_STAGES), binding(1, storage, frag), binding(2, sampled, frag)];
-        // Set 1: the material's base colour (0) and emissive (1) textures.
-        let material_binding = [binding(0, sampled, frag), binding(1, sampled, frag)];
-        // Set 2: the lightmap array, the probes, and the material constants (their UV
-        // transforms are applied per vertex).
-        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES)];
+        // Set 1: the material's textures: base colour (0), emissive (1), normal (2),
+        // metallic-roughness (3), occlusion (4).
+        let material_binding = [0, 1, 2, 3, 4].map(|b| binding(b, sampled, frag));
+        // Set 2: the lightmap array, the probes, the material constants (their UV transforms
+        // are applied per vertex) and the specular (A, B) table.
+        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES), binding(3, sampled, frag)];
         let layout = |b: &[vk::DescriptorSetLayoutBinding]| unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(b), None) };
         // Everything is owned until the kit is whole: an error frees what was made before it.
         let frame_layout = gpu.own(layout(&frame_binding)?);
@@ -269,8 +270,8 @@ fn create_mesh_pipeline(
     let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }, vk::SpecializationMapEntry { constant_id: 1, offset: 4, size: 4 }];
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
-    // attributes this shader reads are declared (tangent arrives with normal mapping).
-    const MESH_SHADER_INPUTS: [u32; 6] = [0, 1, 3, 4, 5, 13];
+    // attributes this shader reads are declared.
+    const MESH_SHADER_INPUTS: [u32; 7] = [0, 1, 2, 3, 4, 5, 13];
     // Binding 1: the instance stream (batches.rs).
     let bindings = [
         vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX },

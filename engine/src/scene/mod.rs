@@ -99,6 +99,8 @@ pub struct GpuScene {
     /// Every baked lightmap page as one layer of a 2D array (pages have one size), so instances
     /// on different pages still draw in one instanced call; one black layer without a bake.
     pub(crate) lightmaps: Image,
+    /// The specular lobe's (A, B) table the mesh shaders read (`shading::DfgLut`).
+    pub(crate) dfg_lut: Image,
     pub(crate) samplers: SamplerCache,
     pub(crate) pool: vk::DescriptorPool,
     /// Set 2, bound once per pass: the lightmap array, the probe grid and every material's
@@ -221,6 +223,7 @@ impl GpuScene {
         }
         self.white.destroy(gpu);
         self.lightmaps.destroy(gpu);
+        self.dfg_lut.destroy(gpu);
         self.probes.destroy(gpu);
         self.material_constants.destroy(gpu);
         self.vertex_buffer.destroy(gpu);
