@@ -302,11 +302,12 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
         }
     }
     let log_average = if count > 0 { (sum / count as f64).exp() as f32 } else { 1.0 };
-    let (sun_dir, sun_lux) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
-        Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity),
-        None => (Vec3::Y, Vec3::ZERO),
+    let (sun_dir, sun_lux, sun_angular_radius) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
+        Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity, sun.angular_radius),
+        None => (Vec3::Y, Vec3::ZERO, 0.0),
     };
-    BakedLighting { sun_dir, sun_lux, exposure: 0.18 / log_average }
+    let sky = m.sky.map_or(Vec3::ZERO, |s| Vec3::from(s.color) * s.intensity);
+    BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: 0.18 / log_average }
 }
 
 /// Mesh `mesh`'s full detail as a flock mesh (see `scene::FlockMesh`).

@@ -43,6 +43,10 @@ impl Buffer {
         let mut staging = gpu.own(Buffer::new(gpu, "staging", bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?);
         staging.mapped()[..bytes.len()].copy_from_slice(bytes);
         let dst = gpu.own(Buffer::new(gpu, name, bytes.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?);
+        // An empty pack's vertex and index buffers: nothing to copy (a copy of 0 bytes is invalid).
+        if bytes.is_empty() {
+            return Ok(dst.keep());
+        }
         gpu.one_shot(|cb| unsafe {
             gpu.device.cmd_copy_buffer(cb, staging.buffer, dst.buffer, &[vk::BufferCopy::default().size(bytes.len() as u64)]);
         })?;

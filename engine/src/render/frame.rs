@@ -9,12 +9,12 @@ use crate::gpu::Gpu;
 use crate::render::particles_draw::ParticlePass;
 use crate::render::graph::ResourceId;
 use crate::render::mesh_draw::MeshKit;
-use crate::scene::GpuScene;
+use crate::scene::{BakedLighting, GpuScene};
 use crate::render::shadow::SunShadow;
 use crate::render::tonemap::ToneMap;
 use crate::render::visibility::Draw;
 use ash::vk;
-use glam::Vec3;
+use glam::{Mat4, Vec3, Vec4};
 
 /// The HDR colour target the shading pass renders (transient, the output's size).
 pub const HDR: ResourceId = ResourceId("hdr");
@@ -69,6 +69,23 @@ pub struct FrameData {
     pub tone_map: bool,
     pub camera_right: Vec3,
     pub camera_up: Vec3,
+    /// The background's radiance for the sky pass (a baked level with a sky or a sun).
+    pub sky: Option<SkyParams>,
+}
+
+/// The sky pass's push constants (mirrors shaders/sky.frag).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SkyParams {
+    pub inv_view_proj: Mat4,
+    /// rgb: the sky's radiance (nits).
+    pub sky: Vec4,
+    /// xyz: toward the sun; w: the cosine of its angular radius.
+    pub sun: Vec4,
+    /// rgb: the radiance of the sun's disc (nits).
+    pub sun_disc: Vec4,
+    /// xy: the output's size in pixels.
+    pub viewport: Vec4,
 }
 
 /// What every pass records with.
@@ -88,4 +105,28 @@ pub struct FrameCx<'a> {
     pub animation: Option<&'a mut AnimatedScene>,
     /// Draw calls the mesh passes made (passes add theirs).
     pub draw_calls: u32,
+}
+
+/// The Sun's angular radius (0.265 degrees), for a sun the level gives as a point.
+pub const SUN_ANGULAR_RADIUS: f32 = 0.004_625;
+
+impl SkyParams {
+    /// The background of a baked level seen through `view_proj` into an output of `extent`:
+    /// its sky radiance and the sun's disc, whose radiance spreads the sun's illuminance E over
+    /// the disc's solid angle 2 pi (1 - cos r). None for a level with neither.
+    pub fn of(baked: &BakedLighting, view_proj: Mat4, extent: vk::Extent2D) -> Option<SkyParams> {
+        if baked.sky.max_element() <= 0.0 && baked.sun_lux.max_element() <= 0.0 {
+            return None;
+        }
+        let r = if baked.sun_angular_radius > 0.0 { baked.sun_angular_radius } else { SUN_ANGULAR_RADIUS };
+        // 1 - cos r without the cancellation: 2 sin^2(r / 2).
+        let solid_angle = 2.0 * std::f32::consts::PI * 2.0 * (r * 0.5).sin().powi(2);
+        Some(SkyParams {
+            inv_view_proj: view_proj.inverse(),
+            sky: baked.sky.extend(0.0),
+            sun: baked.sun_dir.extend(r.cos()),
+            sun_disc: (baked.sun_lux / solid_angle).extend(0.0),
+            viewport: Vec4::new(extent.width as f32, extent.height as f32, 0.0, 0.0),
+        })
+    }
 }

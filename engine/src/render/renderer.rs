@@ -11,7 +11,7 @@ use crate::render::boids_draw::BoidsDraw;
 use crate::scene::camera::Camera;
 use crate::gpu::{Buffer, Gpu, SlotBuffers};
 use crate::render::particles_draw::ParticlePass;
-use crate::render::frame::{FrameCx, FrameData, Settings, FRAGMENT_COUNTER};
+use crate::render::frame::{FrameCx, FrameData, Settings, SkyParams, FRAGMENT_COUNTER};
 use crate::render::graph::{Access, FrameProfile, Graph, ImageRef, Pass, ResourceId};
 use crate::render::mesh_draw::MeshKit;
 use crate::render::passes;
@@ -318,6 +318,7 @@ impl Renderer {
             shadow: shadow_params,
         };
         (f.exposure, f.tone_map) = (exposure.x, scene.baked.is_some());
+        f.sky = scene.baked.and_then(|b| SkyParams::of(&b, view_proj, extent));
         self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(bytemuck::bytes_of(&uniforms));
         if f.draw_shadow {
             // The shadow passes run mesh.vert with the sun's transform as its view_proj.

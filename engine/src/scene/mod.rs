@@ -77,6 +77,10 @@ pub struct BakedLighting {
     /// Unit vector towards the sun, and its illuminance (lux, linear RGB); zero without a sun.
     pub sun_dir: Vec3,
     pub sun_lux: Vec3,
+    /// The sun's angular radius (radians) as the baker's soft shadows used it; 0 for a point.
+    pub sun_angular_radius: f32,
+    /// The sky's uniform radiance (nits, linear RGB) the level was baked under; zero without.
+    pub sky: Vec3,
     /// Exposure that maps the lightmaps' log-average luminance (times a typical albedo of 0.5)
     /// to the key 0.18 (textures.md §5.4), before the Reinhard operator.
     pub exposure: f32,

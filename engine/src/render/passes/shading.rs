@@ -40,8 +40,8 @@ impl Pass for Shading {
         let [r, g, b, _] = CLEAR_COLOR;
         let color = Rendering::color(hdr, Some([r, g, b, 0.0]));
         // After a pre-pass depth is only tested (and kept as it is); alone, the pass clears and
-        // writes it, and stores it when boids or particles test against it next.
-        let later = f.draw_particles || f.draw_boids;
+        // writes it, and stores it when the sky, boids or particles test against it next.
+        let later = f.draw_particles || f.draw_boids || f.sky.is_some();
         let rendering = match prepass {
             true => color.depth(depth, None, vk::AttachmentStoreOp::NONE),
             false => color.depth(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
