@@ -177,6 +177,7 @@ impl GpuScene {
                 base_color: mat.base_color,
                 alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
                 double_sided: mat.double_sided,
+                blend: mat.alpha_mode == pack::AlphaMode::Blend,
                 descriptor_set: set,
             });
         }

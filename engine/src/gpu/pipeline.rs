@@ -37,6 +37,19 @@ pub fn opaque() -> vk::PipelineColorBlendAttachmentState {
     vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)
 }
 
+/// Porter-Duff "over" for premultiplied colour, alpha likewise: dst = src + (1 - src.a) dst.
+pub fn premultiplied_over() -> vk::PipelineColorBlendAttachmentState {
+    vk::PipelineColorBlendAttachmentState::default()
+        .blend_enable(true)
+        .src_color_blend_factor(vk::BlendFactor::ONE)
+        .dst_color_blend_factor(vk::BlendFactor::ONE_MINUS_SRC_ALPHA)
+        .color_blend_op(vk::BlendOp::ADD)
+        .src_alpha_blend_factor(vk::BlendFactor::ONE)
+        .dst_alpha_blend_factor(vk::BlendFactor::ONE_MINUS_SRC_ALPHA)
+        .alpha_blend_op(vk::BlendOp::ADD)
+        .color_write_mask(vk::ColorComponentFlags::RGBA)
+}
+
 impl<'a> GraphicsPipeline<'a> {
     pub fn new(name: &'a str, vert: &'a [u8]) -> Self {
         Self {

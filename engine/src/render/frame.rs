@@ -59,6 +59,9 @@ pub struct FrameData {
     /// The slot's instance stream every batch indexes.
     pub instances: vk::Buffer,
     pub view_batches: Vec<Batch>,
+    /// The transparent phase: the camera's draws with a BLEND material, one batch each, far to
+    /// near (their instances follow the camera's in the stream).
+    pub transparent_batches: Vec<Batch>,
     pub shadow: ShadowBatches,
     /// The shadow map is drawn this frame (dynamic objects in view under a physical sun).
     pub draw_shadow: bool,

@@ -2,7 +2,7 @@
 //! pipeline layout, the pipelines (all with mesh.vert), and the draw loop over batches.
 
 use crate::render::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
-use crate::gpu::{opaque, Gpu, GraphicsPipeline};
+use crate::gpu::{opaque, premultiplied_over, Gpu, GraphicsPipeline};
 use crate::render::graph::{Rec, Rendering};
 use crate::scene::{GpuMaterial, GpuScene};
 use crate::render::shaders;
@@ -90,6 +90,9 @@ pub struct MeshKit {
     /// sun), no culling, with depth bias.
     pub shadow: vk::Pipeline,
     pub shadow_masked: vk::Pipeline,
+    /// The transparent phase, not lit by a lightmap [0] and lit by one [1]: premultiplied over,
+    /// depth tested against the opaque depth, not written.
+    pub blend: [vk::Pipeline; 2],
 }
 
 impl MeshKit {
@@ -126,14 +129,19 @@ impl MeshKit {
             let make = |equal: bool, count_fragments| {
                 let variant = Variant { count_fragments, lightmapped };
                 pipeline(match equal {
-                    false => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None),
-                    true => create_mesh_pipeline(gpu, pl, Some(HDR_FORMAT), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
+                    false => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None),
+                    true => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
                 })
             };
             Shading::new(make, gpu.caps.fragment_atomics)
         };
         let plain = Variant::default();
         let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
+        let blended = |lightmapped| {
+            let variant = Variant { lightmapped, ..plain };
+            pipeline(create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None))
+        };
+        let blend = [blended(false)?, blended(true)?];
         let kit = MeshKit {
             frame_layout: *frame_layout,
             material_layout: *material_layout,
@@ -144,6 +152,7 @@ impl MeshKit {
             depth_masked: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, plain, None))?,
             shadow: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
             shadow_masked: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
+            blend,
         };
         // The kit owns them all now.
         made.into_inner().keep();
@@ -151,19 +160,23 @@ impl MeshKit {
         Ok(kit)
     }
 
-    /// The depth-only pipeline for a material: with the alpha-test discard when it is masked.
-    pub fn depth_for(&self, mat: &GpuMaterial, shadow: bool) -> vk::Pipeline {
-        match (shadow, mat.alpha_cutoff >= 0.0) {
+    /// The depth-only pipeline for a material: with the alpha-test discard when it is masked;
+    /// none for a BLEND material (it writes no depth and casts no shadow).
+    pub fn depth_for(&self, mat: &GpuMaterial, shadow: bool) -> Option<vk::Pipeline> {
+        if mat.blend {
+            return None;
+        }
+        Some(match (shadow, mat.alpha_cutoff >= 0.0) {
             (false, false) => self.depth,
             (false, true) => self.depth_masked,
             (true, false) => self.shadow,
             (true, true) => self.shadow_masked,
-        }
+        })
     }
 
     /// One rendering instance drawing `setup.batches`, each submesh with the pipeline
     /// `pipeline_for(material, lightmapped)` gives. Returns the draw calls it made.
-    pub fn draw(&self, rec: &Rec, scene: &GpuScene, rendering: &Rendering, setup: &DrawSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> vk::Pipeline) -> u32 {
+    pub fn draw(&self, rec: &Rec, scene: &GpuScene, rendering: &Rendering, setup: &DrawSetup, pipeline_for: impl Fn(&GpuMaterial, bool) -> Option<vk::Pipeline>) -> u32 {
         let (d, cb) = (&rec.gpu.device, rec.cb);
         let mut calls = 0;
         rec.begin_rendering(rendering);
@@ -191,7 +204,8 @@ impl MeshKit {
                     let mat = &scene.materials[material as usize];
                     // Instances with a lightmap region read it where the submesh has a block;
                     // the rest the probes and the sun.
-                    let pipeline = pipeline_for(mat, batch.lightmapped && sm.lightmap_block.is_some());
+                    // None: the submesh is not this pass's (a BLEND material in an opaque pass).
+                    let Some(pipeline) = pipeline_for(mat, batch.lightmapped && sm.lightmap_block.is_some()) else { continue };
                     if pipeline != bound {
                         d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
                         bound = pipeline;
@@ -256,7 +270,7 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
 fn create_mesh_pipeline(
     gpu: &Gpu,
     layout: vk::PipelineLayout,
-    color_format: Option<vk::Format>,
+    color: Option<(vk::Format, vk::PipelineColorBlendAttachmentState)>,
     depth_format: vk::Format,
     frag: Option<&[u8]>,
     depth_write: bool,
@@ -296,8 +310,8 @@ fn create_mesh_pipeline(
     if let Some(f) = frag {
         pipeline = pipeline.fragment(f, Some(spec));
     }
-    if let Some(format) = color_format {
-        pipeline = pipeline.color(format, opaque());
+    if let Some((format, blend)) = color {
+        pipeline = pipeline.color(format, blend);
     }
     pipeline.build(gpu, layout)
 }

@@ -18,7 +18,7 @@ use crate::render::passes;
 use crate::scene::{GpuScene, SceneLayouts};
 use crate::render::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
 use crate::render::tonemap::ToneMap;
-use crate::render::visibility::Visibility;
+use crate::render::visibility::{Draw, Visibility};
 use anyhow::Result;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -261,7 +261,8 @@ impl Renderer {
         f.draw_shadow = match sun {
             Some(b) if dynamic_in_view && !scene.instances.is_empty() => {
                 self.shadow.prepare(scene, b.sun_dir);
-                true
+                // Nothing casts (only BLEND surfaces): no map (and no rendering without draws).
+                !self.shadow.casters.is_empty()
             }
             _ => false,
         };
@@ -277,7 +278,18 @@ impl Renderer {
         // Lightmaps are read when there are baked pages and they are switched on.
         let mode = BatchMode { instancing: self.instancing, lightmaps: self.lightmaps && scene.baked.is_some() };
         let anim = self.animation.as_ref();
-        self.batcher.batch(scene, anim, slot, &self.visibility.draws, mode, &mut f.view_batches);
+        // The opaque phase draws the draws with an opaque submesh; the transparent phase those
+        // with a BLEND one, one call each, far to near by the view depth of their bounding
+        // sphere's centre. (Only a scene with a BLEND material pays for the split.)
+        if scene.materials.iter().any(|m| m.blend) {
+            let opaque: Vec<Draw> = self.visibility.draws.iter().filter(|d| has_submesh(scene, d, false)).copied().collect();
+            self.batcher.batch(scene, anim, slot, &opaque, mode, &mut f.view_batches);
+            let blended = sort_back_to_front(scene, &self.visibility.draws, camera);
+            self.batcher.batch(scene, anim, slot, &blended, BatchMode { instancing: false, ..mode }, &mut f.transparent_batches);
+        } else {
+            self.batcher.batch(scene, anim, slot, &self.visibility.draws, mode, &mut f.view_batches);
+            f.transparent_batches.clear();
+        }
         // Depth only: lightmapped or not, the casters of one mesh share a call.
         let casters_mode = BatchMode { lightmaps: false, ..mode };
         let sb = &mut f.shadow;
@@ -336,7 +348,7 @@ impl Renderer {
     pub fn record_prepared(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, target: &FrameTarget, extra: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
-        let settings = Settings { prepass: self.prepass && !self.visibility.draws.is_empty(), count_fragments: self.count_fragments, depth_test: self.depth_test, depth_view: self.depth_view };
+        let settings = Settings { prepass: self.prepass && !self.frame.view_batches.is_empty(), count_fragments: self.count_fragments, depth_test: self.depth_test, depth_view: self.depth_view };
         let counting = settings.count_fragments && self.mesh.shade[0].can_count();
         self.slot_counted[slot] = counting;
         let mut finals = finals.to_vec();
@@ -440,4 +452,21 @@ fn write_shadow_map_descriptor(gpu: &Gpu, set: vk::DescriptorSet, shadow: &SunSh
     let info = [vk::DescriptorImageInfo { sampler: shadow.sampler, image_view: shadow.view(), image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
     let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(2).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&info);
     unsafe { gpu.device.update_descriptor_sets(&[write], &[]) };
+}
+
+/// The draws of `draws` whose mesh has a BLEND material (or whose instance overrides its
+/// material with one), far to near along the camera's view direction.
+fn sort_back_to_front(scene: &GpuScene, draws: &[Draw], camera: &Camera) -> Vec<Draw> {
+    let forward = camera.forward();
+    let spheres = scene.instances.spheres();
+    let mut out: Vec<(f32, Draw)> = draws.iter().filter(|d| has_submesh(scene, d, true)).map(|d| ((Vec3::new(spheres.x[d.instance as usize], spheres.y[d.instance as usize], spheres.z[d.instance as usize]) - camera.position).dot(forward), *d)).collect();
+    out.sort_by(|a, b| b.0.total_cmp(&a.0));
+    out.into_iter().map(|(_, d)| d).collect()
+}
+
+/// Whether draw `d` has a submesh whose material is BLEND (`blend`) or not.
+fn has_submesh(scene: &GpuScene, d: &Draw, blend: bool) -> bool {
+    let inst = &scene.instances[d.instance as usize];
+    let mesh = &scene.meshes[inst.mesh as usize];
+    mesh.lods[d.lod as usize].submeshes.iter().any(|sm| scene.materials[inst.material.unwrap_or(sm.material) as usize].blend == blend)
 }

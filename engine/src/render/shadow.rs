@@ -220,13 +220,19 @@ impl SunShadow {
             let inst = &scene.instances[i as usize];
             Draw { instance: i, lod: shadow_lod(&scene.meshes[inst.mesh as usize].errors, inst.scale, self.texel_m) as u8 }
         };
+        // BLEND surfaces cast no shadow (a glass pane would cast a full one): an instance with
+        // nothing else is no caster, and no depth-only rendering is left without draws.
+        let casts = |i: &u32| {
+            let inst = &scene.instances[*i as usize];
+            scene.meshes[inst.mesh as usize].lods[0].submeshes.iter().any(|sm| !scene.materials[inst.material.unwrap_or(sm.material) as usize].blend)
+        };
         let statics_changed = key != self.static_key;
         if statics_changed {
             self.static_casters.clear();
-            self.static_casters.extend((0..scene.instances.len() as u32).filter(|&i| scene.instances[i as usize].is_static).map(caster));
+            self.static_casters.extend((0..scene.instances.len() as u32).filter(|&i| scene.instances[i as usize].is_static).filter(casts).map(caster));
         }
         self.dynamic_casters.clear();
-        self.dynamic_casters.extend(scene.instances.dynamic().iter().map(|&i| caster(i)));
+        self.dynamic_casters.extend(scene.instances.dynamic().iter().copied().filter(casts).map(caster));
         self.casters.clear();
         self.casters.extend_from_slice(&self.static_casters);
         self.casters.extend_from_slice(&self.dynamic_casters);

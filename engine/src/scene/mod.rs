@@ -50,6 +50,9 @@ pub struct GpuMaterial {
     /// Alpha-test threshold, or a negative value for "no alpha test".
     pub alpha_cutoff: f32,
     pub double_sided: bool,
+    /// glTF BLEND: drawn in the transparent phase (sorted, over, no depth writes), not in the
+    /// opaque passes or the shadow map.
+    pub blend: bool,
     pub descriptor_set: vk::DescriptorSet,
 }
 

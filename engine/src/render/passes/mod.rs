@@ -12,6 +12,7 @@ mod shadow_static;
 mod skinning;
 mod sky;
 mod tonemap;
+mod transparent;
 
 pub use depth_view::DepthView;
 
@@ -32,6 +33,7 @@ pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) ->
     passes.push(Box::new(shading::Shading));
     passes.push(Box::new(sky::Sky::new(gpu)?));
     passes.push(Box::new(boids::Boids));
+    passes.push(Box::new(transparent::Transparent));
     passes.push(Box::new(particles::Particles));
     passes.push(Box::new(tonemap::ToneMapPass));
     passes.push(Box::new(DepthView::new(gpu, color_format, frames_in_flight)?));

@@ -40,8 +40,9 @@ impl Pass for Shading {
         let [r, g, b, _] = CLEAR_COLOR;
         let color = Rendering::color(hdr, Some([r, g, b, 0.0]));
         // After a pre-pass depth is only tested (and kept as it is); alone, the pass clears and
-        // writes it, and stores it when the sky, boids or particles test against it next.
-        let later = f.draw_particles || f.draw_boids || f.sky.is_some();
+        // writes it, and stores it when the sky, boids, particles or the transparent phase test
+        // against it next.
+        let later = f.draw_particles || f.draw_boids || f.sky.is_some() || !f.transparent_batches.is_empty();
         let rendering = match prepass {
             true => color.depth(depth, None, vk::AttachmentStoreOp::NONE),
             false => color.depth(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
@@ -49,7 +50,7 @@ impl Pass for Shading {
         let count = counts(cx);
         let shade = [0, 1].map(|lightmapped| cx.mesh.shade[lightmapped].pick(prepass, count));
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };
-        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |_, lightmapped| shade[lightmapped as usize]);
+        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then_some(shade[lightmapped as usize]));
         Ok(())
     }
 }
