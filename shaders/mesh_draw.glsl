@@ -13,8 +13,9 @@ struct MaterialConstants {
     // z: normalTexture.scale, w: occlusion strength.
     vec4 pbr;
     // A texture slot's UV transform (glTF texCoord and KHR_texture_transform) as two rows
-    // (a, b, c, tex_coord) and (d, e, f, 0): uv' = (a u + b v + c, d u + e v + f) of uv0
-    // (tex_coord 0) or texcoord1 (1).
+    // (a, b, c, tex_coord) and (d, e, f, has): uv' = (a u + b v + c, d u + e v + f) of uv0
+    // (tex_coord 0) or texcoord1 (1); has = 1 when the slot has a texture (else the shader
+    // skips the sample: the factor alone).
     vec4 base_color_uv[2];
     vec4 emissive_uv[2];
     vec4 normal_uv[2];

@@ -56,7 +56,8 @@ void count_fragment() {
 }
 
 vec4 albedo() {
-    return texture(base_color_tex, in_base_color_uv) * draw.base_color * in_color;
+    vec4 t = materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? texture(base_color_tex, in_base_color_uv) : vec4(1.0);
+    return t * draw.base_color * in_color;
 }
 
 bool alpha_tested_away(vec4 a) {
@@ -160,10 +161,10 @@ const float HALF_MAX = 65504.0;
 vec3 shading_normal(float scale) {
     vec3 n = normalize(in_normal);
     vec3 t = in_tangent.xyz - n * dot(n, in_tangent.xyz);
-    vec3 ts = texture(normal_tex, in_normal_uv).xyz * 2.0 - 1.0;
-    ts.xy *= scale;
     float tl = dot(t, t);
     if (scale != 0.0 && tl > 1e-12) {
+        vec3 ts = texture(normal_tex, in_normal_uv).xyz * 2.0 - 1.0;
+        ts.xy *= scale;
         t *= inversesqrt(tl);
         vec3 b = cross(n, t) * (in_tangent.w < 0.0 ? -1.0 : 1.0);
         n = normalize(ts.x * t + ts.y * b + ts.z * n);
@@ -199,18 +200,20 @@ float vis_smith(float nl, float nv, float a) {
 // reflection probes exist, is a rough environment: the probes' B in the reflected direction, or
 // the lightmap's B on lightmapped surfaces.
 vec4 shade(vec4 a) {
-    MaterialConstants mat = materials[uint(draw.material.y)];
-    vec3 n = shading_normal(mat.pbr.z);
+    // Read member by member: copying the whole block costs every field's load on lavapipe.
+    uint m = uint(draw.material.y);
+    vec4 pbr = materials[m].pbr;
+    vec3 n = shading_normal(pbr.z);
     if (frame.exposure.y < 0.5) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
         float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    vec4 mr = texture(metallic_roughness_tex, in_metallic_roughness_uv);
-    float metallic = clamp(mat.pbr.x * mr.b, 0.0, 1.0);
-    float rough = clamp(mat.pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
+    vec4 mr = materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
+    float metallic = clamp(pbr.x * mr.b, 0.0, 1.0);
+    float rough = clamp(pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
     float alpha = rough * rough;
-    float ao = 1.0 + mat.pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0);
+    float ao = materials[m].occlusion_uv[1].w > 0.5 ? 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0) : 1.0;
     vec3 v = normalize(frame.camera_pos.xyz - in_world);
     float nv = max(dot(n, v), 1e-4);
     vec3 f0 = mix(vec3(0.04), a.rgb, metallic);
@@ -248,6 +251,10 @@ vec4 shade(vec4 a) {
     l += (kd * wd * b + env * (f0 * dfg.x + dfg.y)) * ao;
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
-    l += mat.emission.rgb * texture(emissive_tex, in_emissive_uv).rgb;
+    vec3 emission = materials[m].emission.rgb;
+    if (materials[m].emissive_uv[1].w > 0.5) {
+        emission *= texture(emissive_tex, in_emissive_uv).rgb;
+    }
+    l += emission;
     return vec4(min(l, HALF_MAX), 1.0);
 }

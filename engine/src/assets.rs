@@ -42,11 +42,12 @@ fn dfg_lut_texels() -> &'static [u8] {
     })
 }
 
-/// A slot's transform as two rows `(a, b, c, tex_coord)`, `(d, e, f, 0)`: `uv' = (a u + b v + c,
-/// d u + e v + f)` of the vertex's uv0 (tex_coord 0) or texcoord1 (1).
-fn uv_rows(t: &TextureTransform) -> [[f32; 4]; 2] {
+/// A slot's transform as two rows `(a, b, c, tex_coord)`, `(d, e, f, has)`: `uv' = (a u + b v +
+/// c, d u + e v + f)` of the vertex's uv0 (tex_coord 0) or texcoord1 (1); `has` is 1 when the
+/// slot has a texture (the shader samples only then: on lavapipe every sample costs).
+fn uv_rows(t: &TextureTransform, texture: Option<u32>) -> [[f32; 4]; 2] {
     let [r0, r1] = t.matrix();
-    [[r0[0], r0[1], r0[2], t.tex_coord as f32], [r1[0], r1[1], r1[2], 0.0]]
+    [[r0[0], r0[1], r0[2], t.tex_coord as f32], [r1[0], r1[1], r1[2], texture.is_some() as u32 as f32]]
 }
 
 fn vk_format(f: TextureFormat) -> vk::Format {
@@ -201,11 +202,11 @@ impl GpuScene {
                 emission: [mt.emissive[0], mt.emissive[1], mt.emissive[2], 0.0],
                 // Scale 0 leaves the normal alone where the slot samples the white stand-in.
                 pbr: [mt.metallic, mt.roughness, if mt.normal_texture.is_some() { mt.normal_scale } else { 0.0 }, mt.occlusion_strength],
-                base_color_uv: uv_rows(&mt.base_color_uv),
-                emissive_uv: uv_rows(&mt.emissive_uv),
-                normal_uv: uv_rows(&mt.normal_uv),
-                metallic_roughness_uv: uv_rows(&mt.metallic_roughness_uv),
-                occlusion_uv: uv_rows(&mt.occlusion_uv),
+                base_color_uv: uv_rows(&mt.base_color_uv, mt.base_color_texture),
+                emissive_uv: uv_rows(&mt.emissive_uv, mt.emissive_texture),
+                normal_uv: uv_rows(&mt.normal_uv, mt.normal_texture),
+                metallic_roughness_uv: uv_rows(&mt.metallic_roughness_uv, mt.metallic_roughness_texture),
+                occlusion_uv: uv_rows(&mt.occlusion_uv, mt.occlusion_texture),
             })
             .collect();
         if constants.is_empty() {

@@ -230,7 +230,7 @@ impl MeshKit {
     pub fn destroy(&mut self, gpu: &Gpu) {
         let d = &gpu.device;
         unsafe {
-            for pipeline in [self.depth, self.depth_masked, self.shadow, self.shadow_masked].into_iter().chain(self.shade.iter().flat_map(Shading::all)) {
+            for pipeline in [self.depth, self.depth_masked, self.shadow, self.shadow_masked].into_iter().chain(self.blend).chain(self.shade.iter().flat_map(Shading::all)) {
                 d.destroy_pipeline(pipeline, None);
             }
             d.destroy_pipeline_layout(self.pipeline_layout, None);
