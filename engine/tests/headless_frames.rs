@@ -13,7 +13,7 @@ use pack::{Material, Pack, PackBuilder, TextureFormat, Vertex};
 
 mod common;
 use common::frames::{assert_bytes_near, auto_exposure, looking_down_neg_z, pixel, render, screen_pixel, srgb_decode, srgb_encode, tone_mapped_bytes, Rig};
-use common::packs::{add_lightmap_page, node, push_mesh, push_uniform_probes, quad_vertices, static_node};
+use common::packs::{add_lightmap_page, node, push_mesh, push_uniform_probes, quad_vertices, static_node, sun};
 use common::scenes::{cube_pack, cube_vertices, mesh_pack, screen_triangles_pack, WHITE4};
 use common::{assert_clean, gpu};
 
@@ -123,19 +123,7 @@ fn roof_pack(cube_x: f32, probe_b: f32, sun_lux: f32, towards_sun: Vec3) -> Pack
     b.manifest.nodes.push(static_node("roof", roof_at, roof, 0));
     b.manifest.nodes.push(node("cube", Mat4::from_translation(Vec3::new(cube_x, 0.0, 0.0)), cube));
     push_uniform_probes(&mut b, probe_b, 1.0);
-    b.manifest.lights.push(pack::Light {
-        name: "sun".into(),
-        kind: pack::LightKind::Sun,
-        color: [1.0; 3],
-        intensity: sun_lux,
-        position: [0.0; 3],
-        direction: (-towards_sun.normalize()).to_array(),
-        range: None,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-        size: [0.0; 2],
-        angular_radius: 0.0,
-    });
+    b.manifest.lights.push(sun(sun_lux, towards_sun, 0.0));
     b.finish()
 }
 

@@ -10,7 +10,7 @@ use pack::{Material, Pack, PackBuilder, TextureFormat};
 
 mod common;
 use common::frames::{assert_bytes_near, auto_exposure, looking_down_neg_z, pixel, tone_mapped_bytes, Rig};
-use common::packs::{add_lightmap_page, node, push_mesh, quad_vertices, static_node, texture};
+use common::packs::{add_baked_light, node, push_mesh, quad_vertices, sun, texture};
 use common::{assert_clean, gpu};
 
 /// The lightmap page's B: it sets the exposure (`auto_exposure`) and makes the pack baked
@@ -27,10 +27,7 @@ fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, l
     for v in &mut verts {
         v.tangent = [1.0, 0.0, 0.0, w];
     }
-    b.manifest.materials.push(Material::default());
-    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0));
-    add_lightmap_page(&mut b, LIGHTMAP_B);
-    b.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(Vec3::new(0.0, -50.0, 0.0)), lit, 0));
+    add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -50.0, 0.0));
     let normal_texture = normal_ts.map(|n| {
         let texel: Vec<u8> = [n.x * 0.5 + 0.5, n.y * 0.5 + 0.5, n.z * 0.5 + 0.5, 1.0].iter().flat_map(|c| ((c * 65535.0).round() as u16).to_le_bytes()).collect();
         texture(&mut b, "normal", TextureFormat::Rgba16Unorm, [1, 1], &[&texel])
@@ -39,19 +36,7 @@ fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, l
     let mesh = push_mesh(&mut b, "quad", &verts, &idx, None);
     b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
     b.manifest.nodes.push(node("quad", place, mesh));
-    b.manifest.lights.push(pack::Light {
-        name: "sun".into(),
-        kind: pack::LightKind::Sun,
-        color: [1.0; 3],
-        intensity: lux,
-        position: [0.0; 3],
-        direction: (-towards_sun.normalize()).to_array(),
-        range: None,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-        size: [0.0; 2],
-        angular_radius: 0.0,
-    });
+    b.manifest.lights.push(sun(lux, towards_sun, 0.0));
     b.finish()
 }
 

@@ -7,13 +7,13 @@
 
 use engine::render::renderer::Lighting;
 use engine::scene::camera::Camera;
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use pack::{Material, Pack, PackBuilder};
 use std::path::Path;
 
 mod common;
 use common::frames::Rig;
-use common::packs::{add_lightmap_page, push_mesh, push_uniform_probes, quad_vertices, static_node};
+use common::packs::{add_baked_light, push_uniform_probes, sun};
 use common::{assert_clean, gpu, samples};
 
 const SIZE: u32 = 96;
@@ -27,31 +27,13 @@ fn lit(mut pack: Pack, dark: bool) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
     b.manifest = pack.manifest.clone();
     b.push_bytes(&pack.data);
-    let (verts, idx) = quad_vertices();
-    let material = b.manifest.materials.len() as u32;
-    b.manifest.materials.push(Material::default());
-    let quad = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0));
-    b.manifest.meshes[quad as usize].lods[0].submeshes[0].material = material;
-    add_lightmap_page(&mut b, if dark { 1.0 } else { 200.0 });
-    b.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(Vec3::new(0.0, -1.0e4, 0.0)), quad, 0));
+    add_baked_light(&mut b, if dark { 1.0 } else { 200.0 }, Vec3::new(0.0, -1.0e4, 0.0));
     b.manifest.lights.retain(|l| l.kind != pack::LightKind::Sun);
     if dark {
         return b.finish();
     }
     push_uniform_probes(&mut b, 300.0, 1.0);
-    b.manifest.lights.push(pack::Light {
-        name: "sun".into(),
-        kind: pack::LightKind::Sun,
-        color: [1.0; 3],
-        intensity: 20_000.0,
-        position: [0.0; 3],
-        direction: (-Vec3::new(0.3, 1.0, 0.6).normalize()).to_array(),
-        range: None,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-        size: [0.0; 2],
-        angular_radius: 0.0,
-    });
+    b.manifest.lights.push(sun(20_000.0, Vec3::new(0.3, 1.0, 0.6), 0.0));
     pack = b.finish();
     pack
 }

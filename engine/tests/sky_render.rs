@@ -3,12 +3,12 @@
 
 use engine::render::renderer::Lighting;
 use engine::scene::camera::Camera;
-use glam::{Mat4, Vec3};
-use pack::{Material, Pack, PackBuilder};
+use glam::Vec3;
+use pack::{Pack, PackBuilder};
 
 mod common;
 use common::frames::{assert_bytes_near, auto_exposure, pixel, screen_pixel, tone_mapped_bytes, Rig};
-use common::packs::{add_lightmap_page, push_mesh, quad_vertices, static_node};
+use common::packs::{add_baked_light, sun};
 use common::{assert_clean, gpu};
 
 const LIGHTMAP_B: f32 = 100.0;
@@ -19,25 +19,9 @@ const SKY_NITS: f32 = 300.0;
 /// sky of `SKY` x `SKY_NITS`, and a sun of `lux` toward `towards_sun` with `angular_radius`.
 fn sky_pack(lux: f32, towards_sun: Vec3, angular_radius: f32) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
-    let (verts, idx) = quad_vertices();
-    b.manifest.materials.push(Material::default());
-    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0));
-    add_lightmap_page(&mut b, LIGHTMAP_B);
-    b.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(Vec3::new(0.0, -500.0, 0.0)), lit, 0));
+    add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -500.0, 0.0));
     b.manifest.sky = Some(pack::Sky { color: SKY, intensity: SKY_NITS });
-    b.manifest.lights.push(pack::Light {
-        name: "sun".into(),
-        kind: pack::LightKind::Sun,
-        color: [1.0; 3],
-        intensity: lux,
-        position: [0.0; 3],
-        direction: (-towards_sun.normalize()).to_array(),
-        range: None,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-        size: [0.0; 2],
-        angular_radius,
-    });
+    b.manifest.lights.push(sun(lux, towards_sun, angular_radius));
     b.finish()
 }
 

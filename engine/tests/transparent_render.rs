@@ -9,7 +9,7 @@ use pack::{AlphaMode, Material, Pack, PackBuilder};
 
 mod common;
 use common::frames::{assert_bytes_near, auto_exposure, pixel, screen_pixel, tone_mapped_bytes, Rig};
-use common::packs::{add_lightmap_page, node, push_mesh, quad_vertices, static_node};
+use common::packs::{add_baked_light, node, push_mesh, quad_vertices, sun};
 use common::{assert_clean, gpu};
 
 const LIGHTMAP_B: f32 = 100.0;
@@ -22,10 +22,7 @@ const SIZE: u32 = 48;
 fn glass_pack(panes: &[([f32; 3], f32, f32)]) -> Pack {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = quad_vertices();
-    b.manifest.materials.push(Material::default());
-    let lit = push_mesh(&mut b, "lightmapped", &verts, &idx, Some(0));
-    add_lightmap_page(&mut b, LIGHTMAP_B);
-    b.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(Vec3::new(0.0, -500.0, 0.0)), lit, 0));
+    add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -500.0, 0.0));
     b.manifest.sky = Some(pack::Sky { color: [1.0; 3], intensity: SKY_NITS });
     for (i, &(emission, alpha, z)) in panes.iter().enumerate() {
         b.manifest.materials.push(Material { base_color: [0.0, 0.0, 0.0, alpha], emissive: emission, alpha_mode: AlphaMode::Blend, double_sided: true, ..Material::default() });
@@ -98,19 +95,7 @@ fn glass_casts_no_shadow_and_a_sunlit_pane_alone_renders() {
     // view): the one caster is the level's static quad; the pane casts nothing, and the dynamic
     // part of the map, left without draws, is not rendered.
     let mut pack = glass_pack(&[([0.0, 0.0, 600.0], 0.5, 0.0)]);
-    pack.manifest.lights.push(pack::Light {
-        name: "sun".into(),
-        kind: pack::LightKind::Sun,
-        color: [1.0; 3],
-        intensity: 1000.0,
-        position: [0.0; 3],
-        direction: [0.0, -1.0, 0.0],
-        range: None,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-        size: [0.0; 2],
-        angular_radius: 0.0,
-    });
+    pack.manifest.lights.push(sun(1000.0, Vec3::Y, 0.0));
     let gpu = gpu();
     let mut rig = Rig::new(&gpu, &pack, SIZE, SIZE);
     let cam = Camera { position: Vec3::new(0.0, 0.0, 3.0), yaw: 0.0, pitch: 0.0, fov_y: 60f32.to_radians(), near: 0.1 };

@@ -82,3 +82,33 @@ pub fn add_lightmap_pages(bld: &mut PackBuilder, pages: &[[[f32; 4]; 4]]) {
     }
     bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]; pages.len()], padding: 2, textures });
 }
+
+/// A sun of `lux` (perpendicular illuminance, white) shining toward -`towards_sun`, with
+/// `angular_radius` (radians; 0: a point).
+pub fn sun(lux: f32, towards_sun: Vec3, angular_radius: f32) -> pack::Light {
+    pack::Light {
+        name: "sun".into(),
+        kind: pack::LightKind::Sun,
+        color: [1.0; 3],
+        intensity: lux,
+        position: [0.0; 3],
+        direction: (-towards_sun.normalize()).to_array(),
+        range: None,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+        size: [0.0; 2],
+        angular_radius,
+    }
+}
+
+/// Make the pack baked (physical lighting, exposure 0.18 / (1e-4 + 0.5 b)): a uniform lightmap
+/// page of B = `b` on a static quad at `at`, out of the way, in a default material of its own.
+pub fn add_baked_light(bld: &mut PackBuilder, b: f32, at: Vec3) {
+    let (verts, idx) = quad_vertices();
+    let material = bld.manifest.materials.len() as u32;
+    bld.manifest.materials.push(pack::Material::default());
+    let quad = push_mesh(bld, "lightmapped", &verts, &idx, Some(0));
+    bld.manifest.meshes[quad as usize].lods[0].submeshes[0].material = material;
+    add_lightmap_page(bld, b);
+    bld.manifest.nodes.push(static_node("lightmapped", Mat4::from_translation(at), quad, 0));
+}
