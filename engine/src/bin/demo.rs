@@ -25,7 +25,7 @@ use std::process::ExitCode;
 const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
             [--overlay] [--device auto|cpu|gpu|NAME]
-            [--validation] [--shadow-map-size N]
+            [--validation] [--shadow-map-size N] [--aa off|fxaa]
        demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`);
@@ -48,6 +48,7 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
   --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)
+  --aa MODE            anti-aliasing: off (default) or fxaa (a post-process pass after the tone map)
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
                        world matrices, joint matrices, morph weights, skinned LOD 0 vertices
 
@@ -83,6 +84,7 @@ struct Args {
     device: DevicePreference,
     validation: bool,
     shadow_map_size: u32,
+    aa: engine::render::renderer::AntiAliasing,
     /// `--dump-pose PACK --clip NAME --time T`.
     dump_pose: Option<(PathBuf, Option<String>, Option<f32>)>,
 }
@@ -105,6 +107,7 @@ fn parse_args() -> Result<Args, String> {
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
         shadow_map_size: engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE,
+        aa: Default::default(),
         dump_pose: None,
     };
     let mut it = std::env::args().skip(1);
@@ -144,6 +147,7 @@ fn parse_args() -> Result<Args, String> {
             }
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
             "--shadow-map-size" => a.shadow_map_size = number("--shadow-map-size", value("--shadow-map-size")?)?,
+            "--aa" => a.aa = value("--aa")?.parse().map_err(|e| format!("--aa: {e}"))?,
             "--dump-pose" => a.dump_pose = Some((PathBuf::from(value("--dump-pose")?), None, None)),
             "--clip" => a.dump_pose.as_mut().ok_or("--clip goes with --dump-pose")?.1 = Some(value("--clip")?),
             "--time" => a.dump_pose.as_mut().ok_or("--time goes with --dump-pose")?.2 = Some(number("--time", value("--time")?)?),
@@ -228,6 +232,7 @@ fn main() -> ExitCode {
             height: args.height,
             max_frames: args.frames,
             shadow_map_size: args.shadow_map_size,
+            aa: args.aa,
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
@@ -287,6 +292,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1)?;
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
+    renderer.aa = args.aa;
     // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
     let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;

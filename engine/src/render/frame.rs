@@ -28,6 +28,9 @@ pub const SHADOW_CACHE: ResourceId = ResourceId("shadow cache");
 pub const SKINNED: ResourceId = ResourceId("skinned vertices");
 /// The shading pass's fragment counter, read by the host after the frame.
 pub const FRAGMENT_COUNTER: ResourceId = ResourceId("fragment counter");
+/// The tone-mapped frame before post-process anti-aliasing (transient, the output's size and
+/// format), when FXAA is on.
+pub const LDR: ResourceId = ResourceId("ldr");
 
 /// The renderer's switches, as this frame uses them.
 #[derive(Debug, Clone, Copy)]
@@ -40,6 +43,8 @@ pub struct Settings {
     pub depth_test: bool,
     /// Show the depth buffer instead of the shaded frame (a debug view).
     pub depth_view: bool,
+    /// Post-process anti-aliasing after the tone map.
+    pub fxaa: bool,
 }
 
 /// The shadow map's draw lists as batches.

@@ -132,6 +132,8 @@ pub struct Renderer {
     pub lightmaps: bool,
     /// Show the depth buffer instead of the shaded frame (the `depth view` debug pass).
     pub depth_view: bool,
+    /// Anti-aliasing: off, or FXAA after the tone map (the `fxaa` pass).
+    pub aa: AntiAliasing,
     /// Whether the frame last recorded in each slot counted fragments.
     slot_counted: Vec<bool>,
     /// Culling and LOD state and settings; `visibility.counts` are the last frame's counters.
@@ -211,6 +213,7 @@ impl Renderer {
             depth_test: true,
             lightmaps: true,
             depth_view: false,
+            aa: AntiAliasing::Off,
             slot_counted: vec![false; frames_in_flight],
             visibility: Visibility::default(),
             animation: None,
@@ -348,7 +351,7 @@ impl Renderer {
     pub fn record_prepared(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, target: &FrameTarget, extra: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
-        let settings = Settings { prepass: self.prepass && !self.frame.view_batches.is_empty(), count_fragments: self.count_fragments, depth_test: self.depth_test, depth_view: self.depth_view };
+        let settings = Settings { prepass: self.prepass && !self.frame.view_batches.is_empty(), count_fragments: self.count_fragments, depth_test: self.depth_test, depth_view: self.depth_view, fxaa: self.aa == AntiAliasing::Fxaa };
         let counting = settings.count_fragments && self.mesh.shade[0].can_count();
         self.slot_counted[slot] = counting;
         let mut finals = finals.to_vec();
@@ -469,4 +472,24 @@ fn has_submesh(scene: &GpuScene, d: &Draw, blend: bool) -> bool {
     let inst = &scene.instances[d.instance as usize];
     let mesh = &scene.meshes[inst.mesh as usize];
     mesh.lods[d.lod as usize].submeshes.iter().any(|sm| scene.materials[inst.material.unwrap_or(sm.material) as usize].blend == blend)
+}
+
+/// How the frame is anti-aliased.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AntiAliasing {
+    #[default]
+    Off,
+    /// Lottes' FXAA on the tone-mapped frame (one full-screen pass).
+    Fxaa,
+}
+
+impl std::str::FromStr for AntiAliasing {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "off" => Ok(AntiAliasing::Off),
+            "fxaa" => Ok(AntiAliasing::Fxaa),
+            _ => Err(format!("'{s}' is not an anti-aliasing mode (off, fxaa)")),
+        }
+    }
 }

@@ -31,6 +31,8 @@ struct ToneMapPush {
 pub struct ToneMap {
     /// The saturation exponent `s` (see `DEFAULT_SATURATION`).
     pub saturation: f32,
+    /// The display format it writes (the output's; also the FXAA input's).
+    pub display_format: vk::Format,
     /// The HDR target, per frame slot (the shader reads texels with texelFetch: the sampler only
     /// has to exist).
     input: SampledInput,
@@ -43,7 +45,7 @@ impl ToneMap {
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
         let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?);
         let (layout, pipeline) = fullscreen_pipeline(gpu, "tone-map", input.layout, std::mem::size_of::<ToneMapPush>() as u32, shaders::TONEMAP_FRAG, display_format)?;
-        Ok(ToneMap { saturation: DEFAULT_SATURATION, input: input.keep(), layout, pipeline })
+        Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, input: input.keep(), layout, pipeline })
     }
 
     /// Record the pass: `hdr` is sampled, every pixel of `target` written. `tone_map` false

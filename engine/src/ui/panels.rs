@@ -4,7 +4,7 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
-use crate::render::renderer::Renderer;
+use crate::render::renderer::{AntiAliasing, Renderer};
 use crate::render::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
 
@@ -59,6 +59,9 @@ impl RendererPanel<'_> {
         control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
         control("depth view", ui.checkbox(&mut r.depth_view, "depth view (the depth buffer instead of the frame)"));
+        let mut fxaa = r.aa == AntiAliasing::Fxaa;
+        control("FXAA", ui.checkbox(&mut fxaa, "FXAA (post-process anti-aliasing; its cost is the fxaa pass above)"));
+        r.aa = if fxaa { AntiAliasing::Fxaa } else { AntiAliasing::Off };
         let policy = &mut r.visibility.policy;
         control(
             "LOD threshold",

@@ -3,6 +3,7 @@
 
 mod boids;
 mod depth_view;
+mod fxaa;
 mod particles;
 mod prepass;
 mod shading;
@@ -36,6 +37,7 @@ pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) ->
     passes.push(Box::new(transparent::Transparent));
     passes.push(Box::new(particles::Particles));
     passes.push(Box::new(tonemap::ToneMapPass));
+    passes.push(Box::new(fxaa::Fxaa::new(gpu, color_format, frames_in_flight)?));
     passes.push(Box::new(DepthView::new(gpu, color_format, frames_in_flight)?));
     Ok(passes.keep())
 }

@@ -1,7 +1,7 @@
-//! The tone map: the HDR target into the output (`tonemap`).
+//! The tone map: the HDR target into the output (`tonemap`), or into the FXAA pass's input.
 
-use crate::render::frame::{FrameCx, HDR};
-use crate::render::graph::{Access, Io, Pass, Rec, OUTPUT};
+use crate::render::frame::{FrameCx, HDR, LDR};
+use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, ResourceId, Size, OUTPUT};
 use anyhow::Result;
 
 pub struct ToneMapPass;
@@ -16,13 +16,26 @@ impl Pass for ToneMapPass {
         false
     }
 
-    fn declare(&mut self, _cx: &FrameCx, io: &mut Io) {
-        io.uses(HDR, Access::SampledFragment).uses(OUTPUT, Access::ColorWrite);
+    fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
+        if cx.settings.fxaa {
+            io.create(LDR, ImageDesc { format: cx.tonemap.display_format, size: Size::Output });
+        }
+        io.uses(HDR, Access::SampledFragment).uses(target(cx), Access::ColorWrite);
     }
 
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let f = cx.frame;
-        cx.tonemap.record(rec, rec.image(HDR), rec.image(OUTPUT), f.exposure, f.tone_map);
+        let out = rec.image(target(cx));
+        cx.tonemap.record(rec, rec.image(HDR), out, f.exposure, f.tone_map);
         Ok(())
+    }
+}
+
+/// Where the tone map writes: the output, or FXAA's input.
+fn target(cx: &FrameCx) -> ResourceId {
+    if cx.settings.fxaa {
+        LDR
+    } else {
+        OUTPUT
     }
 }
