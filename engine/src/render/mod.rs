@@ -9,6 +9,7 @@ pub mod batches;
 pub mod boids_draw;
 pub mod cull;
 pub mod frame;
+pub mod fullscreen;
 pub mod graph;
 pub mod lod_select;
 pub mod mesh_draw;

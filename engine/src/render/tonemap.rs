@@ -3,9 +3,9 @@
 //! colour restored (textures.md §5.7; the formula is in shaders/tonemap.frag), written to an
 //! `_SRGB` image so the hardware does the sRGB encode. The one place tone mapping happens.
 
-use crate::gpu::{opaque, Gpu, GraphicsPipeline};
-use crate::render::graph::{ImageRef, Rec, Rendering};
-use crate::render::sampled_input::SampledInput;
+use crate::gpu::Gpu;
+use crate::render::fullscreen::FullscreenFilter;
+use crate::render::graph::{ImageRef, Rec};
 use bytemuck::{Pod, Zeroable};
 use crate::render::shaders;
 use anyhow::Result;
@@ -33,59 +33,26 @@ pub struct ToneMap {
     pub saturation: f32,
     /// The display format it writes (the output's; also the FXAA input's).
     pub display_format: vk::Format,
-    /// The HDR target, per frame slot (the shader reads texels with texelFetch: the sampler only
-    /// has to exist).
-    input: SampledInput,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    /// Reads the HDR target with texelFetch (the sampler only has to exist).
+    filter: FullscreenFilter,
 }
 
 impl ToneMap {
     /// A tone-map pass writing `display_format` (the swapchain's or the offscreen target's).
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
-        let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?);
-        let (layout, pipeline) = fullscreen_pipeline(gpu, "tone-map", input.layout, std::mem::size_of::<ToneMapPush>() as u32, shaders::TONEMAP_FRAG, display_format)?;
-        Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, input: input.keep(), layout, pipeline })
+        let push = std::mem::size_of::<ToneMapPush>() as u32;
+        let filter = FullscreenFilter::new(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST)?;
+        Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, filter })
     }
 
     /// Record the pass: `hdr` is sampled, every pixel of `target` written. `tone_map` false
     /// passes the values through (display-referred input: the stand-in lighting).
     pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool) {
-        let set = self.input.set(rec.gpu, rec.slot, hdr.view);
         let push = ToneMapPush { params: Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0) };
-        draw_fullscreen(rec, target, true, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
+        self.filter.draw(rec, hdr.view, target, bytemuck::bytes_of(&push));
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
-        self.input.destroy(gpu);
-        unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
-            gpu.device.destroy_pipeline_layout(self.layout, None);
-        }
+        self.filter.destroy(gpu);
     }
-}
-
-/// A full-screen pipeline (`fullscreen.vert` + `frag`) with one sampled input set and `push`
-/// bytes of fragment push constants, into one colour attachment of `format`.
-pub fn fullscreen_pipeline(gpu: &Gpu, name: &str, set_layout: vk::DescriptorSetLayout, push: u32, frag: &[u8], format: vk::Format) -> Result<(vk::PipelineLayout, vk::Pipeline)> {
-    let d = &gpu.device;
-    let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(push)];
-    let set_layouts = [set_layout];
-    let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges), None)? });
-    let pipeline = GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, None).color(format, opaque()).build(gpu, *layout)?;
-    Ok((layout.keep(), pipeline))
-}
-
-/// One full-screen triangle into `target` with `pipeline`, its input `set` and `push` bytes;
-/// `overwrite`: every pixel is written, so the old contents are not loaded.
-pub fn draw_fullscreen(rec: &Rec, target: ImageRef, overwrite: bool, pipeline: vk::Pipeline, layout: vk::PipelineLayout, set: vk::DescriptorSet, push: &[u8]) {
-    let (d, cb) = (&rec.gpu.device, rec.cb);
-    rec.begin_rendering(&if overwrite { Rendering::color_overwritten(target) } else { Rendering::color(target, None) });
-    unsafe {
-        d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
-        d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, layout, 0, &[set], &[]);
-        d.cmd_push_constants(cb, layout, vk::ShaderStageFlags::FRAGMENT, 0, push);
-        d.cmd_draw(cb, 3, 1, 0, 0);
-    }
-    rec.end_rendering();
 }

@@ -5,9 +5,8 @@
 use crate::gpu::Gpu;
 use crate::render::frame::{FrameCx, DEPTH};
 use crate::render::graph::{Access, Io, Pass, Rec, OUTPUT};
-use crate::render::sampled_input::SampledInput;
+use crate::render::fullscreen::FullscreenFilter;
 use crate::render::shaders;
-use crate::render::tonemap::{draw_fullscreen, fullscreen_pipeline};
 use anyhow::Result;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -21,16 +20,13 @@ struct DepthViewPush {
 }
 
 pub struct DepthView {
-    input: SampledInput,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    filter: FullscreenFilter,
 }
 
 impl DepthView {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<DepthView> {
-        let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::NEAREST)?);
-        let (layout, pipeline) = fullscreen_pipeline(gpu, "depth view", input.layout, std::mem::size_of::<DepthViewPush>() as u32, shaders::DEPTH_VIEW_FRAG, color_format)?;
-        Ok(DepthView { input: input.keep(), layout, pipeline })
+        let push = std::mem::size_of::<DepthViewPush>() as u32;
+        Ok(DepthView { filter: FullscreenFilter::new(gpu, "depth view", shaders::DEPTH_VIEW_FRAG, push, color_format, frames_in_flight, vk::Filter::NEAREST)? })
     }
 }
 
@@ -51,17 +47,12 @@ impl Pass for DepthView {
     }
 
     fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
-        let set = self.input.set(rec.gpu, rec.slot, rec.image(DEPTH).view);
         let push = DepthViewPush { params: Vec4::new(1.0, 0.0, 0.0, 0.0) };
-        draw_fullscreen(rec, rec.image(OUTPUT), true, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
+        self.filter.draw(rec, rec.image(DEPTH).view, rec.image(OUTPUT), bytemuck::bytes_of(&push));
         Ok(())
     }
 
     fn destroy(&mut self, gpu: &Gpu) {
-        self.input.destroy(gpu);
-        unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
-            gpu.device.destroy_pipeline_layout(self.layout, None);
-        }
+        self.filter.destroy(gpu);
     }
 }

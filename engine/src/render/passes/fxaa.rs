@@ -6,9 +6,8 @@
 use crate::gpu::Gpu;
 use crate::render::frame::{FrameCx, LDR};
 use crate::render::graph::{Access, Io, Pass, Rec, OUTPUT};
-use crate::render::sampled_input::SampledInput;
+use crate::render::fullscreen::FullscreenFilter;
 use crate::render::shaders;
-use crate::render::tonemap::{draw_fullscreen, fullscreen_pipeline};
 use anyhow::Result;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -22,17 +21,14 @@ struct FxaaPush {
 }
 
 pub struct Fxaa {
-    input: SampledInput,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    filter: FullscreenFilter,
 }
 
 impl Fxaa {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Fxaa> {
         // Bilinear: the taps along the edge fall between pixels.
-        let input = gpu.own(SampledInput::new(gpu, frames_in_flight, vk::Filter::LINEAR)?);
-        let (layout, pipeline) = fullscreen_pipeline(gpu, "fxaa", input.layout, std::mem::size_of::<FxaaPush>() as u32, shaders::FXAA_FRAG, color_format)?;
-        Ok(Fxaa { input: input.keep(), layout, pipeline })
+        let push = std::mem::size_of::<FxaaPush>() as u32;
+        Ok(Fxaa { filter: FullscreenFilter::new(gpu, "fxaa", shaders::FXAA_FRAG, push, color_format, frames_in_flight, vk::Filter::LINEAR)? })
     }
 }
 
@@ -54,18 +50,13 @@ impl Pass for Fxaa {
 
     fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let (input, output) = (rec.image(LDR), rec.image(OUTPUT));
-        let set = self.input.set(rec.gpu, rec.slot, input.view);
         let e = output.extent;
         let push = FxaaPush { params: Vec4::new(1.0 / e.width as f32, 1.0 / e.height as f32, 0.0, 0.0) };
-        draw_fullscreen(rec, output, true, self.pipeline, self.layout, set, bytemuck::bytes_of(&push));
+        self.filter.draw(rec, input.view, output, bytemuck::bytes_of(&push));
         Ok(())
     }
 
     fn destroy(&mut self, gpu: &Gpu) {
-        self.input.destroy(gpu);
-        unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
-            gpu.device.destroy_pipeline_layout(self.layout, None);
-        }
+        self.filter.destroy(gpu);
     }
 }
