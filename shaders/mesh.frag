@@ -1,6 +1,6 @@
 #version 450
 // The shading pass without a depth pre-pass: depth is tested and written here, so alpha-tested
-// (MASK) materials discard here.
+// (MASK) materials discard here (or, multisampled, give their coverage as alpha).
 #include "mesh_shading.glsl"
 
 layout(location = 0) out vec4 out_color;
@@ -11,5 +11,5 @@ void main() {
         discard;
     }
     count_fragment();
-    out_color = shade(a);
+    out_color = vec4(shade(a).rgb, ALPHA_TO_COVERAGE ? coverage(a) : 1.0);
 }

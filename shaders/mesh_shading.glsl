@@ -48,6 +48,9 @@ layout(constant_id = 0) const bool COUNT_FRAGMENTS = false;
 // shading pass took about a third less time than with the branch (relative to the tone-map
 // pass in the same frames).
 layout(constant_id = 1) const bool LIGHTMAPPED = false;
+// Set by the renderer's multisampled pipelines that turn alpha into coverage: an alpha-tested
+// (MASK) fragment gives its coverage as alpha instead of discarding.
+layout(constant_id = 2) const bool ALPHA_TO_COVERAGE = false;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -60,10 +63,40 @@ vec4 albedo() {
     return t * draw.base_color * in_color;
 }
 
+// Alpha at texture coordinate `uv` with vertex colour `color`, at this pixel's mip level.
+float alpha_at(vec2 uv, vec4 color) {
+    float t = materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? textureGrad(base_color_tex, uv, dFdx(in_base_color_uv), dFdy(in_base_color_uv)).a : 1.0;
+    return t * draw.base_color.a * color.a;
+}
+
+// The share of the pixel's samples an alpha-tested fragment covers: the cutoff's edge
+// sharpened to one pixel's width, so a MASK edge ramps over one pixel like a geometric edge
+// instead of blurring over the texture's texels or stepping at the cutoff. 1 for opaque
+// materials. Alpha's change over a pixel comes from sampling one pixel over in x and in y (the
+// inputs' derivatives), not from fwidth(alpha): on lavapipe the helper invocations of a quad a
+// triangle edge crosses give the texture's alpha wrongly, and fwidth(alpha) there reads a
+// whole unit, which spread a triangle's diagonal as a line of half-covered pixels.
+float coverage(vec4 a) {
+    float cutoff = draw.material.x;
+    if (cutoff < 0.0) {
+        return 1.0;
+    }
+    vec2 uv = in_base_color_uv;
+    float ax = alpha_at(uv + dFdx(uv), in_color + dFdx(in_color)) - a.a;
+    float ay = alpha_at(uv + dFdy(uv), in_color + dFdy(in_color)) - a.a;
+    return clamp((a.a - cutoff) / max(abs(ax) + abs(ay), 1e-4) + 0.5, 0.0, 1.0);
+}
+
+// Alpha tested against the material's cutoff. With ALPHA_TO_COVERAGE only a fragment that
+// covers no sample is discarded; the rest are kept with their coverage (`coverage`).
 bool alpha_tested_away(vec4 a) {
     float cutoff = draw.material.x;
+    if (ALPHA_TO_COVERAGE) {
+        return coverage(a) <= 0.0;
+    }
     return cutoff >= 0.0 && a.a < cutoff;
 }
+
 
 const float PI = 3.14159265;
 

@@ -25,7 +25,7 @@ use std::process::ExitCode;
 const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
             [--overlay] [--device auto|cpu|gpu|NAME]
-            [--validation] [--shadow-map-size N] [--aa off|fxaa]
+            [--validation] [--shadow-map-size N] [--aa off|msaa|fxaa]
        demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`);
@@ -48,14 +48,16 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
   --shadow-map-size N  texels per side of the sun's shadow map for dynamic objects (default 2048)
-  --aa MODE            anti-aliasing: off (default) or fxaa (a post-process pass after the tone map)
+  --aa MODE            anti-aliasing: off (default); msaa (4 samples a pixel, alpha-to-coverage
+                       for alpha-tested materials, resolved before the tone map); or fxaa (a
+                       post-process pass after the tone map, cheaper)
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
                        world matrices, joint matrices, morph weights, skinned LOD 0 vertices
 
 The debug overlay (F1; hidden at start unless --overlay): frame-time graph (CPU frame and GPU
 ms, median and p99), culling/LOD counters, shader invocations and GPU ms per pass, and switches
-for the depth pre-pass, frustum culling, LOD selection and freezing, fragment counting and the
-LOD pixel error; its \"simulation\" section has sliders for every flock's and particle
+for the depth pre-pass, frustum culling, LOD selection and freezing, fragment counting,
+anti-aliasing (off, MSAA, FXAA) and the LOD pixel error; its \"simulation\" section has sliders for every flock's and particle
 emitter's parameters, applied to the running simulation at once. While the pointer is over the
 overlay, the mouse works it, not the camera.";
 

@@ -96,6 +96,9 @@ pub struct Capabilities {
     pub fragment_atomics: bool,
     pub sampler_anisotropy: Option<f32>,
     pub depth_format: vk::Format,
+    /// The sample count MSAA renders with: 4 where the device renders the HDR format and the
+    /// depth format with 4 samples (lavapipe does), else 1 (MSAA unavailable).
+    pub msaa_samples: vk::SampleCountFlags,
 }
 
 pub struct Gpu {
@@ -209,6 +212,13 @@ impl Gpu {
             fragment_atomics: features.fragment_stores_and_atomics == vk::TRUE,
             sampler_anisotropy: (features.sampler_anisotropy == vk::TRUE).then_some(props.limits.max_sampler_anisotropy),
             depth_format: pick_depth_format(&instance, physical_device)?,
+            msaa_samples: if props.limits.framebuffer_color_sample_counts.contains(vk::SampleCountFlags::TYPE_4)
+                && props.limits.framebuffer_depth_sample_counts.contains(vk::SampleCountFlags::TYPE_4)
+            {
+                vk::SampleCountFlags::TYPE_4
+            } else {
+                vk::SampleCountFlags::TYPE_1
+            },
         };
 
         let priorities = [1.0f32];

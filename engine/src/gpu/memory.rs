@@ -130,22 +130,38 @@ impl Image {
         usage: vk::ImageUsageFlags,
         aspect: vk::ImageAspectFlags,
     ) -> Result<Image> {
+        Image::with_samples(gpu, name, format, extent, mip_levels, vk::SampleCountFlags::TYPE_1, usage, aspect)
+    }
+
+    /// `new` with `samples` samples per texel (a multisampled render target has one level).
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_samples(
+        gpu: &Gpu,
+        name: &str,
+        format: vk::Format,
+        extent: vk::Extent2D,
+        mip_levels: u32,
+        samples: vk::SampleCountFlags,
+        usage: vk::ImageUsageFlags,
+        aspect: vk::ImageAspectFlags,
+    ) -> Result<Image> {
         let info = vk::ImageCreateInfo::default()
             .format(format)
             .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
             .mip_levels(mip_levels)
             .array_layers(1)
+            .samples(samples)
             .usage(usage);
         Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D, aspect)
     }
 
-    /// A 2D image as `info` describes it (type, samples, tiling and initial layout are set
-    /// here), in device memory, with a view of `view_type` over all its levels and layers.
+    /// A 2D image as `info` describes it (type, tiling and initial layout are set here; samples
+    /// default to one), in device memory, with a view of `view_type` over all its levels and layers.
     fn create(gpu: &Gpu, name: &str, info: &vk::ImageCreateInfo, view_type: vk::ImageViewType, aspect: vk::ImageAspectFlags) -> Result<Image> {
         let d = &gpu.device;
         let info = info
             .image_type(vk::ImageType::TYPE_2D)
-            .samples(vk::SampleCountFlags::TYPE_1)
+            .samples(if info.samples.is_empty() { vk::SampleCountFlags::TYPE_1 } else { info.samples })
             .tiling(vk::ImageTiling::OPTIMAL)
             .initial_layout(vk::ImageLayout::UNDEFINED);
         let image = unsafe { d.create_image(&info, None)? };

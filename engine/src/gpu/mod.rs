@@ -11,5 +11,5 @@ mod validation;
 pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};
 pub use memory::{barrier, full_range, Buffer, Image, SlotBuffers, Transition};
 pub use owned::{Destroy, Owned};
-pub use pipeline::{opaque, premultiplied_over, GraphicsPipeline};
+pub use pipeline::{opaque, premultiplied_over, GraphicsPipeline, PerSamples};
 pub use validation::ValidationLog;

@@ -1,7 +1,7 @@
 //! One place that builds graphics pipelines. Every pass (meshes, shadows, particles, boids, tone
-//! map) differs only in its shaders, vertex layout, topology, depth state, blending and
-//! attachment formats; the rest (dynamic rendering, dynamic viewport and scissor, one sample,
-//! fill mode, shader module lifetime) is the same and lives here once.
+//! map) differs only in its shaders, vertex layout, topology, depth state, blending, attachment
+//! formats and sample count; the rest (dynamic rendering, dynamic viewport and scissor, fill
+//! mode, shader module lifetime) is the same and lives here once.
 
 use crate::render::shaders;
 use anyhow::{Context, Result};
@@ -30,6 +30,9 @@ pub struct GraphicsPipeline<'a> {
     color: Option<(vk::Format, vk::PipelineColorBlendAttachmentState)>,
     /// Dynamic state beyond viewport and scissor (which every pipeline has dynamic).
     extra_dynamic: &'a [vk::DynamicState],
+    /// Rasterisation samples (the attachments'), and alpha-to-coverage.
+    samples: vk::SampleCountFlags,
+    alpha_to_coverage: bool,
 }
 
 /// Writes all four channels, no blending.
@@ -65,7 +68,17 @@ impl<'a> GraphicsPipeline<'a> {
             depth: None,
             color: None,
             extra_dynamic: &[],
+            samples: vk::SampleCountFlags::TYPE_1,
+            alpha_to_coverage: false,
         }
+    }
+
+    /// Render into attachments of `samples` samples; with `alpha_to_coverage`, the fragment's
+    /// alpha (output 0) decides how many of a pixel's samples it covers.
+    pub fn multisample(mut self, samples: vk::SampleCountFlags, alpha_to_coverage: bool) -> Self {
+        self.samples = samples;
+        self.alpha_to_coverage = alpha_to_coverage;
+        self
     }
 
     /// The fragment shader (none: a depth-only pass).
@@ -140,7 +153,7 @@ impl<'a> GraphicsPipeline<'a> {
         if let Some((constant, slope)) = self.depth_bias {
             raster = raster.depth_bias_enable(true).depth_bias_constant_factor(constant).depth_bias_slope_factor(slope);
         }
-        let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+        let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(self.samples).alpha_to_coverage_enable(self.alpha_to_coverage);
         let depth_stencil = self
             .depth
             .map(|(_, write, compare)| vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(write).depth_compare_op(compare));
@@ -171,5 +184,39 @@ impl<'a> GraphicsPipeline<'a> {
         let result = unsafe { device.create_graphics_pipelines(gpu.pipeline_cache, &[info], None) };
         let pipelines = result.map_err(|(_, e)| anyhow::anyhow!("creating the {} pipeline: {e}", self.name))?;
         Ok(pipelines[0])
+    }
+}
+
+/// Pipelines a pass builds once per sample count of the camera's targets, the first time a
+/// frame uses it: switching MSAA on builds the multisampled set without waiting for the device
+/// (frames in flight keep theirs), switching back reuses the single-sampled one.
+pub struct PerSamples<T> {
+    sets: Vec<(vk::SampleCountFlags, T)>,
+}
+
+impl<T> Default for PerSamples<T> {
+    fn default() -> Self {
+        PerSamples { sets: Vec::new() }
+    }
+}
+
+impl<T> PerSamples<T> {
+    /// The set for `samples`, made by `make` if this is its first use.
+    pub fn ensure(&mut self, samples: vk::SampleCountFlags, make: impl FnOnce(vk::SampleCountFlags) -> Result<T>) -> Result<&T> {
+        if let Some(i) = self.sets.iter().position(|s| s.0 == samples) {
+            return Ok(&self.sets[i].1);
+        }
+        self.sets.push((samples, make(samples)?));
+        Ok(&self.sets.last().unwrap().1)
+    }
+
+    /// The set for `samples` (`ensure` made it before the frame).
+    pub fn get(&self, samples: vk::SampleCountFlags) -> &T {
+        self.sets.iter().find(|s| s.0 == samples).map(|s| &s.1).unwrap_or_else(|| panic!("no pipelines were made for {samples:?} samples"))
+    }
+
+    /// Every set made, emptied out (to destroy them).
+    pub fn drain(&mut self) -> impl Iterator<Item = T> + '_ {
+        self.sets.drain(..).map(|s| s.1)
     }
 }

@@ -11,7 +11,7 @@
 //! on the ground is a few pixels.
 
 use crate::render::cull::{Class, CullCounts, Frustum};
-use crate::gpu::{opaque, Gpu, GraphicsPipeline, SlotBuffers};
+use crate::gpu::{opaque, Gpu, GraphicsPipeline, PerSamples, SlotBuffers};
 use crate::render::graph::{ImageRef, Rec, Rendering};
 use crate::scene::GpuScene;
 use crate::render::shaders;
@@ -31,7 +31,9 @@ struct Group {
 
 pub struct BoidsDraw {
     layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    depth_format: vk::Format,
+    /// The bird pipeline per sample count of the camera's targets.
+    pipelines: PerSamples<vk::Pipeline>,
     /// Instance buffers (model matrices) per frame slot, with their capacity in instances.
     instances: SlotBuffers,
     /// Every drawn boid's model matrix this frame (`fill`), and the ones in view (`cull`).
@@ -50,11 +52,11 @@ impl BoidsDraw {
         let set_layouts = [frame_layout];
         // The submesh's base colour (linear RGBA) for the fragment shader.
         let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(16)];
-        let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
-        let pipeline = create_pipeline(gpu, *layout, depth_format)?;
+        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
         Ok(BoidsDraw {
-            layout: layout.keep(),
-            pipeline,
+            layout,
+            depth_format,
+            pipelines: PerSamples::default(),
             instances: SlotBuffers::new("boid instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 64 * 64),
             boids: Vec::new(),
             groups: Vec::new(),
@@ -125,15 +127,23 @@ impl BoidsDraw {
         self.instances.write(gpu, slot, bytemuck::cast_slice(&self.visible))
     }
 
+    /// Make the pipeline for targets of `samples` samples if no frame has used it yet.
+    pub fn prepare_samples(&mut self, gpu: &Gpu, samples: vk::SampleCountFlags) -> Result<()> {
+        let (layout, depth_format) = (self.layout, self.depth_format);
+        self.pipelines.ensure(samples, |samples| create_pipeline(gpu, layout, depth_format, samples))?;
+        Ok(())
+    }
+
     /// Draw the uploaded visible boids with `scene`'s flock meshes into `hdr` over `depth` (loaded
-    /// and stored). Call only with boids in view: lavapipe 22.3 crashes on a depth-writing rendering
-    /// without draws.
-    pub fn record(&self, rec: &Rec, scene: &GpuScene, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef) {
+    /// and stored; both of `samples` samples, which `prepare_samples` made a pipeline for). Call
+    /// only with boids in view: lavapipe 22.3 crashes on a depth-writing rendering without draws.
+    pub fn record(&self, rec: &Rec, scene: &GpuScene, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef, samples: vk::SampleCountFlags) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
+        let pipeline = *self.pipelines.get(samples);
         let Some(buffer) = self.instances.get(rec.slot) else { return };
         rec.begin_rendering(&Rendering::color(hdr, None).depth(depth, None, vk::AttachmentStoreOp::STORE));
         unsafe {
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.layout, 0, &[frame_set], &[]);
             for g in &self.visible_groups {
                 let Some(mesh) = scene.flock_mesh(g.mesh) else { continue };
@@ -150,7 +160,9 @@ impl BoidsDraw {
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.instances.destroy(gpu);
         unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
+            for pipeline in self.pipelines.drain() {
+                gpu.device.destroy_pipeline(pipeline, None);
+            }
             gpu.device.destroy_pipeline_layout(self.layout, None);
         }
     }
@@ -159,7 +171,7 @@ impl BoidsDraw {
 /// The bird pipeline: the flock mesh's (position, normal) corners (binding 0) and per-instance
 /// model matrices (binding 1), no culling (single-triangle wings), reversed-Z depth test and
 /// write.
-fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format) -> Result<vk::Pipeline> {
+fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, samples: vk::SampleCountFlags) -> Result<vk::Pipeline> {
     let bindings = [
         vk::VertexInputBindingDescription {
             binding: 0,
@@ -217,5 +229,6 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .vertex_input(&bindings, &attributes)
         .depth(depth_format, true, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, opaque())
+        .multisample(samples, false)
         .build(gpu, layout)
 }

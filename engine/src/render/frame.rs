@@ -7,7 +7,8 @@ use crate::render::batches::Batch;
 use crate::render::boids_draw::BoidsDraw;
 use crate::gpu::Gpu;
 use crate::render::particles_draw::ParticlePass;
-use crate::render::graph::ResourceId;
+use crate::render::graph::{ImageDesc, ResourceId};
+use crate::render::tonemap::HDR_FORMAT;
 use crate::render::mesh_draw::MeshKit;
 use crate::scene::{BakedLighting, GpuScene};
 use crate::render::shadow::SunShadow;
@@ -16,9 +17,13 @@ use crate::render::visibility::Draw;
 use ash::vk;
 use glam::{Mat4, Vec3, Vec4};
 
-/// The HDR colour target the shading pass renders (transient, the output's size).
+/// The HDR colour target the camera's passes draw (transient, the output's size; with MSAA,
+/// multisampled).
 pub const HDR: ResourceId = ResourceId("hdr");
-/// The camera's depth buffer (transient, the output's size).
+/// With MSAA: HDR with each pixel's samples averaged (the `resolve` pass), what the tone map
+/// reads.
+pub const HDR_RESOLVED: ResourceId = ResourceId("hdr resolved");
+/// The camera's depth buffer (transient, the output's size and HDR's samples).
 pub const DEPTH: ResourceId = ResourceId("depth");
 /// The sun's shadow map (owned by `SunShadow`, imported).
 pub const SHADOW_MAP: ResourceId = ResourceId("shadow map");
@@ -45,6 +50,33 @@ pub struct Settings {
     pub depth_view: bool,
     /// Post-process anti-aliasing after the tone map.
     pub fxaa: bool,
+    /// Samples per pixel of the camera's targets (HDR and DEPTH): 1, or 4 with MSAA.
+    pub samples: vk::SampleCountFlags,
+}
+
+impl Settings {
+    pub fn multisampled(&self) -> bool {
+        self.samples != vk::SampleCountFlags::TYPE_1
+    }
+
+    /// The camera's colour target as the passes drawing it describe it.
+    pub fn hdr_desc(&self) -> ImageDesc {
+        ImageDesc::output(HDR_FORMAT).samples(self.samples)
+    }
+
+    /// The camera's depth buffer as the passes drawing it describe it.
+    pub fn depth_desc(&self, gpu: &Gpu) -> ImageDesc {
+        ImageDesc::output(gpu.caps.depth_format).samples(self.samples)
+    }
+
+    /// The single-sampled HDR image the tone map reads: HDR, or its resolve.
+    pub fn tone_map_input(&self) -> ResourceId {
+        if self.multisampled() {
+            HDR_RESOLVED
+        } else {
+            HDR
+        }
+    }
 }
 
 /// The shadow map's draw lists as batches.

@@ -2,7 +2,7 @@
 //! pipeline layout, the pipelines (all with mesh.vert), and the draw loop over batches.
 
 use crate::render::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
-use crate::gpu::{opaque, premultiplied_over, Gpu, GraphicsPipeline};
+use crate::gpu::{opaque, premultiplied_over, Gpu, GraphicsPipeline, PerSamples};
 use crate::render::graph::{Rec, Rendering};
 use crate::scene::{GpuMaterial, GpuScene};
 use crate::render::shaders;
@@ -71,6 +71,30 @@ struct Variant {
     count_fragments: bool,
     /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
     lightmapped: bool,
+    /// ALPHA_TO_COVERAGE: alpha-tested (MASK) fragments give their coverage as alpha instead of
+    /// discarding (the pipeline turns it into sample coverage).
+    alpha_to_coverage: bool,
+}
+
+/// The pipelines drawing into the camera's targets, for one sample count.
+pub struct CameraPipelines {
+    /// The shading pipelines of dynamic objects (probes and sun) and of lightmapped static
+    /// geometry: two variants of one shader (LIGHTMAPPED, mesh_shading.glsl), so neither runs
+    /// the other's lighting code.
+    pub shade: [Shading; 2],
+    /// Pre-pass: depth only, no fragment shader; and with the alpha test (a discard, or
+    /// alpha-to-coverage when multisampled).
+    pub depth: vk::Pipeline,
+    pub depth_masked: vk::Pipeline,
+    /// The transparent phase, not lit by a lightmap [0] and lit by one [1]: premultiplied over,
+    /// depth tested against the opaque depth, not written.
+    pub blend: [vk::Pipeline; 2],
+}
+
+impl CameraPipelines {
+    fn all(&self) -> impl Iterator<Item = vk::Pipeline> + '_ {
+        [self.depth, self.depth_masked].into_iter().chain(self.blend).chain(self.shade.iter().flat_map(Shading::all))
+    }
 }
 
 /// Layouts and pipelines of the mesh passes.
@@ -79,26 +103,17 @@ pub struct MeshKit {
     pub material_layout: vk::DescriptorSetLayout,
     pub scene_layout: vk::DescriptorSetLayout,
     pub pipeline_layout: vk::PipelineLayout,
-    /// The shading pipelines of dynamic objects (probes and sun) and of lightmapped static
-    /// geometry: two variants of one shader (LIGHTMAPPED, mesh_shading.glsl), so neither runs
-    /// the other's lighting code.
-    pub shade: [Shading; 2],
-    /// Pre-pass: depth only, no fragment shader; and with the alpha-test discard.
-    pub depth: vk::Pipeline,
-    pub depth_masked: vk::Pipeline,
-    /// The shadow pass: the same two into the shadow map's format, standard depth (0 nearest the
-    /// sun), no culling, with depth bias.
+    /// The camera's pipelines per sample count (`prepare_samples`).
+    camera: PerSamples<CameraPipelines>,
+    /// The shadow pass: depth only, and with the alpha-test discard, into the shadow map's
+    /// format, standard depth (0 nearest the sun), no culling, with depth bias.
     pub shadow: vk::Pipeline,
     pub shadow_masked: vk::Pipeline,
-    /// The transparent phase, not lit by a lightmap [0] and lit by one [1]: premultiplied over,
-    /// depth tested against the opaque depth, not written.
-    pub blend: [vk::Pipeline; 2],
 }
 
 impl MeshKit {
     pub fn new(gpu: &Gpu, shadow_format: vk::Format) -> Result<MeshKit> {
         let d = &gpu.device;
-        let depth_format = gpu.caps.depth_format;
         let binding = |binding: u32, ty, stages| vk::DescriptorSetLayoutBinding::default().binding(binding).descriptor_type(ty).descriptor_count(1).stage_flags(stages);
         let (ubo, storage, sampled) = (vk::DescriptorType::UNIFORM_BUFFER, vk::DescriptorType::STORAGE_BUFFER, vk::DescriptorType::COMBINED_IMAGE_SAMPLER);
         let frag = vk::ShaderStageFlags::FRAGMENT;
@@ -119,58 +134,54 @@ impl MeshKit {
         let push = [vk::PushConstantRange::default().stage_flags(MESH_STAGES).size(std::mem::size_of::<DrawPush>() as u32)];
         let pipeline_layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
         let pl = *pipeline_layout;
-        let made = std::cell::RefCell::new(gpu.own(Vec::<vk::Pipeline>::new()));
-        let pipeline = |p: Result<vk::Pipeline>| -> Result<vk::Pipeline> {
-            let p = p?;
-            made.borrow_mut().push(p);
-            Ok(p)
-        };
-        let shading = |lightmapped| {
-            let make = |equal: bool, count_fragments| {
-                let variant = Variant { count_fragments, lightmapped };
-                pipeline(match equal {
-                    false => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None),
-                    true => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None),
-                })
-            };
-            Shading::new(make, gpu.caps.fragment_atomics)
-        };
-        let plain = Variant::default();
         let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
-        let blended = |lightmapped| {
-            let variant = Variant { lightmapped, ..plain };
-            pipeline(create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None))
-        };
-        let blend = [blended(false)?, blended(true)?];
-        let kit = MeshKit {
-            frame_layout: *frame_layout,
-            material_layout: *material_layout,
-            scene_layout: *scene_layout,
-            pipeline_layout: pl,
-            shade: [shading(false)?, shading(true)?],
-            depth: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, plain, None))?,
-            depth_masked: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, plain, None))?,
-            shadow: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
-            shadow_masked: pipeline(create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, plain, bias))?,
-            blend,
-        };
-        // The kit owns them all now.
-        made.into_inner().keep();
-        (frame_layout.keep(), material_layout.keep(), scene_layout.keep(), pipeline_layout.keep());
-        Ok(kit)
+        let one = vk::SampleCountFlags::TYPE_1;
+        let shadow = gpu.own(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?);
+        let shadow_masked = create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?;
+        let mut kit = gpu.own(MeshKit {
+            frame_layout: frame_layout.keep(),
+            material_layout: material_layout.keep(),
+            scene_layout: scene_layout.keep(),
+            pipeline_layout: pipeline_layout.keep(),
+            camera: PerSamples::default(),
+            shadow: shadow.keep(),
+            shadow_masked,
+        });
+        kit.prepare_samples(gpu, one)?;
+        Ok(kit.keep())
     }
 
-    /// The depth-only pipeline for a material: with the alpha-test discard when it is masked;
-    /// none for a BLEND material (it writes no depth and casts no shadow).
-    pub fn depth_for(&self, mat: &GpuMaterial, shadow: bool) -> Option<vk::Pipeline> {
+    /// Make the camera's pipelines for `samples` if no frame has used them yet.
+    pub fn prepare_samples(&mut self, gpu: &Gpu, samples: vk::SampleCountFlags) -> Result<()> {
+        let pl = self.pipeline_layout;
+        self.camera.ensure(samples, |samples| camera_pipelines(gpu, pl, samples))?;
+        Ok(())
+    }
+
+    /// The camera's pipelines for `samples` (made by `prepare_samples`).
+    pub fn camera(&self, samples: vk::SampleCountFlags) -> &CameraPipelines {
+        self.camera.get(samples)
+    }
+
+    /// Whether the device can count the shading pass's fragments.
+    pub fn can_count(&self) -> bool {
+        self.camera(vk::SampleCountFlags::TYPE_1).shade[0].can_count()
+    }
+
+    /// The depth-only pipeline for a material: with the alpha test when it is masked; none for
+    /// a BLEND material (it writes no depth and casts no shadow). `samples`: the camera's
+    /// (the pre-pass); None: the shadow map.
+    pub fn depth_for(&self, mat: &GpuMaterial, samples: Option<vk::SampleCountFlags>) -> Option<vk::Pipeline> {
         if mat.blend {
             return None;
         }
-        Some(match (shadow, mat.alpha_cutoff >= 0.0) {
-            (false, false) => self.depth,
-            (false, true) => self.depth_masked,
-            (true, false) => self.shadow,
-            (true, true) => self.shadow_masked,
+        let masked = mat.alpha_cutoff >= 0.0;
+        Some(match samples {
+            Some(s) => {
+                let c = self.camera(s);
+                if masked { c.depth_masked } else { c.depth }
+            }
+            None => if masked { self.shadow_masked } else { self.shadow },
         })
     }
 
@@ -230,7 +241,12 @@ impl MeshKit {
     pub fn destroy(&mut self, gpu: &Gpu) {
         let d = &gpu.device;
         unsafe {
-            for pipeline in [self.depth, self.depth_masked, self.shadow, self.shadow_masked].into_iter().chain(self.blend).chain(self.shade.iter().flat_map(Shading::all)) {
+            for set in self.camera.drain() {
+                for pipeline in set.all() {
+                    d.destroy_pipeline(pipeline, None);
+                }
+            }
+            for pipeline in [self.shadow, self.shadow_masked] {
                 d.destroy_pipeline(pipeline, None);
             }
             d.destroy_pipeline_layout(self.pipeline_layout, None);
@@ -262,10 +278,48 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     }
 }
 
+/// The camera's mesh pipelines for targets of `samples` samples. Multisampled, the opaque
+/// shading without a pre-pass and the masked pre-pass turn alpha into coverage (opaque
+/// fragments give alpha 1: every sample); after a pre-pass the EQUAL test already keeps the
+/// samples the pre-pass covered.
+fn camera_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags) -> Result<CameraPipelines> {
+    let depth_format = gpu.caps.depth_format;
+    let a2c = samples != vk::SampleCountFlags::TYPE_1;
+    let made = std::cell::RefCell::new(gpu.own(Vec::<vk::Pipeline>::new()));
+    let pipeline = |p: Result<vk::Pipeline>| -> Result<vk::Pipeline> {
+        let p = p?;
+        made.borrow_mut().push(p);
+        Ok(p)
+    };
+    let shading = |lightmapped| {
+        let make = |equal: bool, count_fragments| {
+            let variant = Variant { count_fragments, lightmapped, alpha_to_coverage: a2c && !equal };
+            pipeline(match equal {
+                false => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None, samples),
+                true => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None, samples),
+            })
+        };
+        Shading::new(make, gpu.caps.fragment_atomics)
+    };
+    let blended = |lightmapped| {
+        let variant = Variant { lightmapped, ..Variant::default() };
+        pipeline(create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples))
+    };
+    let masked = Variant { alpha_to_coverage: a2c, ..Variant::default() };
+    let set = CameraPipelines {
+        shade: [shading(false)?, shading(true)?],
+        depth: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, Variant::default(), None, samples))?,
+        depth_masked: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, masked, None, samples))?,
+        blend: [blended(false)?, blended(true)?],
+    };
+    made.into_inner().keep();
+    Ok(set)
+}
+
 /// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
 /// (None: no colour attachment) and `depth_format` with the given depth write and compare, and
-/// a rasteriser depth bias (constant, slope factor) when given; `variant` specialises the
-/// fragment shader.
+/// a rasteriser depth bias (constant, slope factor) when given, into attachments of `samples`
+/// samples; `variant` specialises the fragment shader (and alpha-to-coverage turns on with it).
 #[allow(clippy::too_many_arguments)]
 fn create_mesh_pipeline(
     gpu: &Gpu,
@@ -277,11 +331,13 @@ fn create_mesh_pipeline(
     compare: vk::CompareOp,
     variant: Variant,
     depth_bias: Option<(f32, f32)>,
+    samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0 and 1: COUNT_FRAGMENTS and LIGHTMAPPED (mesh_shading.glsl).
-    let values = [variant.count_fragments, variant.lightmapped].map(|b| vk::Bool32::from(b).to_le_bytes());
+    // Specialisation constants 0, 1 and 2: COUNT_FRAGMENTS, LIGHTMAPPED and ALPHA_TO_COVERAGE
+    // (mesh_shading.glsl).
+    let values = [variant.count_fragments, variant.lightmapped, variant.alpha_to_coverage].map(|b| vk::Bool32::from(b).to_le_bytes());
     let bytes = values.concat();
-    let entries = [vk::SpecializationMapEntry { constant_id: 0, offset: 0, size: 4 }, vk::SpecializationMapEntry { constant_id: 1, offset: 4, size: 4 }];
+    let entries: [vk::SpecializationMapEntry; 3] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.
@@ -306,6 +362,7 @@ fn create_mesh_pipeline(
         .cull_back()
         .depth_bias(depth_bias)
         .depth(depth_format, depth_write, compare)
+        .multisample(samples, variant.alpha_to_coverage)
         .dynamic(&dynamic);
     if let Some(f) = frag {
         pipeline = pipeline.fragment(f, Some(spec));

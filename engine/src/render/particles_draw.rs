@@ -13,7 +13,7 @@
 //!   comes out brighter than over a surface; accepted for now (it would need the depth as a
 //!   texture to tell the two apart).
 
-use crate::gpu::{Gpu, GraphicsPipeline, SlotBuffers};
+use crate::gpu::{Gpu, GraphicsPipeline, PerSamples, SlotBuffers};
 use crate::render::graph::{ImageRef, Rec, Rendering};
 use crate::render::shaders;
 use crate::sim::particles::{Billboard, BillboardScratch, Blend, ParticleSystem};
@@ -40,8 +40,9 @@ pub struct ParticleBatch {
 
 pub struct ParticlePass {
     layout: vk::PipelineLayout,
-    alpha: vk::Pipeline,
-    additive: vk::Pipeline,
+    depth_format: vk::Format,
+    /// The soft-alpha and additive pipelines per sample count of the camera's targets.
+    pipelines: PerSamples<[vk::Pipeline; 2]>,
     /// Instance buffers per frame slot, with their capacity in billboards.
     buffers: SlotBuffers,
     /// This frame's billboards and how they split into batches (filled before `record`).
@@ -59,14 +60,11 @@ impl ParticlePass {
             .stage_flags(vk::ShaderStageFlags::VERTEX)
             .size(std::mem::size_of::<ParticlePush>() as u32)];
         let set_layouts = [frame_layout];
-        // Owned until the pass is whole: an error frees what was made before it.
-        let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? });
-        let alpha = gpu.own(create_pipeline(gpu, *layout, depth_format, vk::BlendFactor::ONE_MINUS_SRC_ALPHA)?);
-        let additive = create_pipeline(gpu, *layout, depth_format, vk::BlendFactor::ONE)?;
+        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)? };
         Ok(ParticlePass {
-            layout: layout.keep(),
-            alpha: alpha.keep(),
-            additive,
+            layout,
+            depth_format,
+            pipelines: PerSamples::default(),
             buffers: SlotBuffers::new("particle instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 256 * std::mem::size_of::<Billboard>()),
             billboards: Vec::new(),
             batches: Vec::new(),
@@ -131,10 +129,24 @@ impl ParticlePass {
         self.buffers.write(gpu, slot, bytes)
     }
 
-    /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass left.
-    /// Call only with a non-empty queue uploaded to the slot (an empty pass is skipped).
-    pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef, camera_right: Vec3, camera_up: Vec3) {
+    /// Make the pipelines for targets of `samples` samples if no frame has used them yet.
+    pub fn prepare_samples(&mut self, gpu: &Gpu, samples: vk::SampleCountFlags) -> Result<()> {
+        let (layout, depth_format) = (self.layout, self.depth_format);
+        self.pipelines.ensure(samples, |samples| {
+            let alpha = gpu.own(create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE_MINUS_SRC_ALPHA, samples)?);
+            let additive = create_pipeline(gpu, layout, depth_format, vk::BlendFactor::ONE, samples)?;
+            Ok([alpha.keep(), additive])
+        })?;
+        Ok(())
+    }
+
+    /// Record the pass into the HDR target `hdr` over the depth `depth` the shading pass left
+    /// (both of `samples` samples, which `prepare_samples` made pipelines for). Call only with
+    /// a non-empty queue uploaded to the slot (an empty pass is skipped).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(&self, rec: &Rec, frame_set: vk::DescriptorSet, hdr: ImageRef, depth: ImageRef, samples: vk::SampleCountFlags, camera_right: Vec3, camera_up: Vec3) {
         let (d, cb) = (&rec.gpu.device, rec.cb);
+        let [alpha, additive] = *self.pipelines.get(samples);
         let Some(buffer) = self.buffers.get(rec.slot) else { return };
         let push = ParticlePush { right: camera_right.extend(0.0), up: camera_up.extend(0.0) };
         // Depth tested, not written: kept as it is (store NONE).
@@ -146,8 +158,8 @@ impl ParticlePass {
             let mut bound = vk::Pipeline::null();
             for b in &self.batches {
                 let pipeline = match b.blend {
-                    Blend::Alpha => self.alpha,
-                    Blend::Additive => self.additive,
+                    Blend::Alpha => alpha,
+                    Blend::Additive => additive,
                 };
                 if pipeline != bound {
                     d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
@@ -162,8 +174,9 @@ impl ParticlePass {
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.buffers.destroy(gpu);
         unsafe {
-            gpu.device.destroy_pipeline(self.alpha, None);
-            gpu.device.destroy_pipeline(self.additive, None);
+            for pipeline in self.pipelines.drain().flatten() {
+                gpu.device.destroy_pipeline(pipeline, None);
+            }
             gpu.device.destroy_pipeline_layout(self.layout, None);
         }
     }
@@ -171,7 +184,7 @@ impl ParticlePass {
 
 /// A particle pipeline: colour = src * src_alpha + dst * `dst_factor` (ONE_MINUS_SRC_ALPHA for
 /// soft alpha, ONE for additive), RGB only; reversed-Z depth test, no depth writes.
-fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, dst_factor: vk::BlendFactor) -> Result<vk::Pipeline> {
+fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, dst_factor: vk::BlendFactor, samples: vk::SampleCountFlags) -> Result<vk::Pipeline> {
     let bindings = [vk::VertexInputBindingDescription {
         binding: 0,
         stride: std::mem::size_of::<Billboard>() as u32,
@@ -207,5 +220,6 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .topology(vk::PrimitiveTopology::TRIANGLE_STRIP)
         .depth(depth_format, false, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, blend)
+        .multisample(samples, false)
         .build(gpu, layout)
 }

@@ -132,7 +132,8 @@ pub struct Renderer {
     pub lightmaps: bool,
     /// Show the depth buffer instead of the shaded frame (the `depth view` debug pass).
     pub depth_view: bool,
-    /// Anti-aliasing: off, or FXAA after the tone map (the `fxaa` pass).
+    /// Anti-aliasing: off, MSAA (multisampled camera targets, `resolve` pass) or FXAA after the
+    /// tone map (the `fxaa` pass).
     pub aa: AntiAliasing,
     /// Whether the frame last recorded in each slot counted fragments.
     slot_counted: Vec<bool>,
@@ -351,8 +352,19 @@ impl Renderer {
     pub fn record_prepared(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, target: &FrameTarget, extra: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
-        let settings = Settings { prepass: self.prepass && !self.frame.view_batches.is_empty(), count_fragments: self.count_fragments, depth_test: self.depth_test, depth_view: self.depth_view, fxaa: self.aa == AntiAliasing::Fxaa };
-        let counting = settings.count_fragments && self.mesh.shade[0].can_count();
+        let settings = Settings {
+            prepass: self.prepass && !self.frame.view_batches.is_empty(),
+            count_fragments: self.count_fragments,
+            depth_test: self.depth_test,
+            depth_view: self.depth_view,
+            fxaa: self.aa == AntiAliasing::Fxaa,
+            samples: self.samples(gpu),
+        };
+        // A sample count's pipelines are made the first time a frame uses it.
+        self.mesh.prepare_samples(gpu, settings.samples)?;
+        self.particles.prepare_samples(gpu, settings.samples)?;
+        self.boids.prepare_samples(gpu, settings.samples)?;
+        let counting = settings.count_fragments && self.mesh.can_count();
         self.slot_counted[slot] = counting;
         let mut finals = finals.to_vec();
         if counting {
@@ -379,6 +391,15 @@ impl Renderer {
         self.graph.run(gpu, cb, slot, output, &mut cx, &mut passes, &finals)?;
         self.draw_calls = cx.draw_calls;
         Ok(())
+    }
+
+    /// Samples per pixel of the camera's targets: MSAA's where the device has it (1 without). The
+    /// depth view shows a single-sampled depth buffer (it samples it as a texture).
+    pub fn samples(&self, gpu: &Gpu) -> vk::SampleCountFlags {
+        match self.aa {
+            AntiAliasing::Msaa if !self.depth_view => gpu.caps.msaa_samples,
+            _ => vk::SampleCountFlags::TYPE_1,
+        }
     }
 
     /// `prepare` and `record_prepared` with no passes of the caller's, leaving the output a
@@ -479,17 +500,29 @@ fn has_submesh(scene: &GpuScene, d: &Draw, blend: bool) -> bool {
 pub enum AntiAliasing {
     #[default]
     Off,
+    /// 4x MSAA: the camera's passes draw multisampled colour and depth (alpha-tested materials
+    /// with alpha-to-coverage), resolved before the tone map.
+    Msaa,
     /// Lottes' FXAA on the tone-mapped frame (one full-screen pass).
     Fxaa,
+}
+
+impl AntiAliasing {
+    pub const ALL: [AntiAliasing; 3] = [AntiAliasing::Off, AntiAliasing::Msaa, AntiAliasing::Fxaa];
+
+    /// The name the command line and the overlay use.
+    pub fn name(self) -> &'static str {
+        match self {
+            AntiAliasing::Off => "off",
+            AntiAliasing::Msaa => "msaa",
+            AntiAliasing::Fxaa => "fxaa",
+        }
+    }
 }
 
 impl std::str::FromStr for AntiAliasing {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "off" => Ok(AntiAliasing::Off),
-            "fxaa" => Ok(AntiAliasing::Fxaa),
-            _ => Err(format!("'{s}' is not an anti-aliasing mode (off, fxaa)")),
-        }
+        AntiAliasing::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| format!("'{s}' is not an anti-aliasing mode (off, msaa, fxaa)"))
     }
 }

@@ -59,9 +59,19 @@ impl RendererPanel<'_> {
         control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
         control("depth view", ui.checkbox(&mut r.depth_view, "depth view (the depth buffer instead of the frame)"));
-        let mut fxaa = r.aa == AntiAliasing::Fxaa;
-        control("FXAA", ui.checkbox(&mut fxaa, "FXAA (post-process anti-aliasing; its cost is the fxaa pass above)"));
-        r.aa = if fxaa { AntiAliasing::Fxaa } else { AntiAliasing::Off };
+        // Each mode's cost shows in the pass list above: MSAA's in every camera pass and the
+        // resolve pass, FXAA's as the fxaa pass.
+        ui.horizontal(|ui| {
+            ui.label("anti-aliasing:");
+            for aa in AntiAliasing::ALL {
+                let label = match aa {
+                    AntiAliasing::Off => "off",
+                    AntiAliasing::Msaa => "MSAA 4x",
+                    AntiAliasing::Fxaa => "FXAA",
+                };
+                control(aa.name(), ui.radio_value(&mut r.aa, aa, label));
+            }
+        });
         let policy = &mut r.visibility.policy;
         control(
             "LOD threshold",

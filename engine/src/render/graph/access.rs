@@ -25,6 +25,10 @@ pub enum Access {
     TransferSrc,
     /// Copied into, previous contents not needed.
     TransferDst,
+    /// Resolved from (a multisampled image averaged by vkCmdResolveImage).
+    ResolveSrc,
+    /// Resolved into, previous contents not needed.
+    ResolveDst,
     /// Handed to the presentation engine after the frame.
     Present,
     /// Buffer written by compute shaders (storage).
@@ -78,6 +82,8 @@ impl Access {
             Access::SampledCompute => u(S::COMPUTE_SHADER, A::SHADER_SAMPLED_READ, L::SHADER_READ_ONLY_OPTIMAL, false, true),
             Access::TransferSrc => u(S::COPY, A::TRANSFER_READ, L::TRANSFER_SRC_OPTIMAL, false, true),
             Access::TransferDst => u(S::COPY, A::TRANSFER_WRITE, L::TRANSFER_DST_OPTIMAL, true, false),
+            Access::ResolveSrc => u(S::RESOLVE, A::TRANSFER_READ, L::TRANSFER_SRC_OPTIMAL, false, true),
+            Access::ResolveDst => u(S::RESOLVE, A::TRANSFER_WRITE, L::TRANSFER_DST_OPTIMAL, true, false),
             // Presentation is ordered by the semaphore the submit signals: nothing to wait on here.
             Access::Present => u(S::BOTTOM_OF_PIPE, A::NONE, L::PRESENT_SRC_KHR, false, true),
             Access::StorageWriteCompute => u(S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE, L::UNDEFINED, true, true),
@@ -96,8 +102,8 @@ impl Access {
             Access::ColorWrite | Access::ColorBlend => U::COLOR_ATTACHMENT,
             Access::DepthWrite | Access::DepthReadWrite | Access::DepthTest => U::DEPTH_STENCIL_ATTACHMENT,
             Access::SampledFragment | Access::SampledCompute => U::SAMPLED,
-            Access::TransferSrc => U::TRANSFER_SRC,
-            Access::TransferDst => U::TRANSFER_DST,
+            Access::TransferSrc | Access::ResolveSrc => U::TRANSFER_SRC,
+            Access::TransferDst | Access::ResolveDst => U::TRANSFER_DST,
             _ => U::empty(),
         }
     }

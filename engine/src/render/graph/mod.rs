@@ -54,6 +54,19 @@ pub enum Size {
 pub struct ImageDesc {
     pub format: vk::Format,
     pub size: Size,
+    /// Samples per pixel (TYPE_1 but for multisampled render targets).
+    pub samples: vk::SampleCountFlags,
+}
+
+impl ImageDesc {
+    /// A single-sampled image of the output's size.
+    pub fn output(format: vk::Format) -> ImageDesc {
+        ImageDesc { format, size: Size::Output, samples: vk::SampleCountFlags::TYPE_1 }
+    }
+
+    pub fn samples(self, samples: vk::SampleCountFlags) -> ImageDesc {
+        ImageDesc { samples, ..self }
+    }
 }
 
 /// What one pass declares for this frame.
@@ -276,7 +289,7 @@ impl Graph {
             if !keep {
                 // Usage only grows, so a pass switched on and off does not re-create the image.
                 let usage = usage | self.transients.get(&id).filter(|t| t.desc == desc).map_or(vk::ImageUsageFlags::empty(), |t| t.usage);
-                let image = Image::new(gpu, id.0, desc.format, extent, 1, usage, view_aspect_of(desc.format))?;
+                let image = Image::with_samples(gpu, id.0, desc.format, extent, 1, desc.samples, usage, view_aspect_of(desc.format))?;
                 if let Some(old) = self.transients.insert(id, Transient { desc, usage, image }) {
                     self.retired.push((self.frame + self.frames_in_flight as u64, old.image));
                 }

@@ -24,7 +24,7 @@ impl Pass for Boids {
     }
 
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
-        cx.boids.record(rec, cx.scene, cx.frame.frame_set, rec.image(HDR), rec.image(DEPTH));
+        cx.boids.record(rec, cx.scene, cx.frame.frame_set, rec.image(HDR), rec.image(DEPTH), cx.settings.samples);
         Ok(())
     }
 }

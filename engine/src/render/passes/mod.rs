@@ -6,6 +6,7 @@ mod depth_view;
 mod fxaa;
 mod particles;
 mod prepass;
+mod resolve;
 mod shading;
 mod shadow_copy;
 mod shadow_dynamic;
@@ -36,6 +37,7 @@ pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) ->
     passes.push(Box::new(boids::Boids));
     passes.push(Box::new(transparent::Transparent));
     passes.push(Box::new(particles::Particles));
+    passes.push(Box::new(resolve::Resolve));
     passes.push(Box::new(tonemap::ToneMapPass));
     passes.push(Box::new(fxaa::Fxaa::new(gpu, color_format, frames_in_flight)?));
     passes.push(Box::new(DepthView::new(gpu, color_format, frames_in_flight)?));

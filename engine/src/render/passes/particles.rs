@@ -24,7 +24,7 @@ impl Pass for Particles {
 
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let f = cx.frame;
-        cx.particles.record(rec, f.frame_set, rec.image(HDR), rec.image(DEPTH), f.camera_right, f.camera_up);
+        cx.particles.record(rec, f.frame_set, rec.image(HDR), rec.image(DEPTH), cx.settings.samples, f.camera_right, f.camera_up);
         Ok(())
     }
 }

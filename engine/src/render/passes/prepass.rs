@@ -2,7 +2,7 @@
 //! shading pass shades each pixel once (depth EQUAL).
 
 use crate::render::frame::{FrameCx, DEPTH, SKINNED};
-use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Rendering, Size};
+use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
 use crate::render::mesh_draw::DrawSetup;
 use anyhow::Result;
 use ash::vk;
@@ -16,7 +16,7 @@ impl Pass for Prepass {
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         if cx.settings.prepass {
-            io.create(DEPTH, ImageDesc { format: cx.gpu.caps.depth_format, size: Size::Output }).uses(DEPTH, Access::DepthWrite);
+            io.create(DEPTH, cx.settings.depth_desc(cx.gpu)).uses(DEPTH, Access::DepthWrite);
             if cx.animation.is_some() {
                 io.uses(SKINNED, Access::VertexInput);
             }
@@ -29,7 +29,7 @@ impl Pass for Prepass {
         let rendering = Rendering::depth_only(depth, Some(0.0), vk::AttachmentStoreOp::STORE);
         let f = cx.frame;
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: true, cull: true };
-        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, false));
+        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, Some(cx.settings.samples)));
         Ok(())
     }
 }

@@ -3,10 +3,9 @@
 //! with a depth test of its own.
 
 use crate::render::frame::{FrameCx, DEPTH, FRAGMENT_COUNTER, HDR, SHADOW_MAP, SKINNED};
-use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, Rendering, Size};
+use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
 use crate::render::mesh_draw::DrawSetup;
 use crate::render::renderer::CLEAR_COLOR;
-use crate::render::tonemap::HDR_FORMAT;
 use anyhow::Result;
 use ash::vk;
 
@@ -18,8 +17,8 @@ impl Pass for Shading {
     }
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
-        io.create(HDR, ImageDesc { format: HDR_FORMAT, size: Size::Output }).uses(HDR, Access::ColorWrite);
-        io.create(DEPTH, ImageDesc { format: cx.gpu.caps.depth_format, size: Size::Output });
+        io.create(HDR, cx.settings.hdr_desc()).uses(HDR, Access::ColorWrite);
+        io.create(DEPTH, cx.settings.depth_desc(cx.gpu));
         io.uses(DEPTH, if cx.settings.prepass { Access::DepthTest } else { Access::DepthWrite });
         // Bound in set 0 whether or not this frame drew it.
         io.import(SHADOW_MAP, cx.shadow.map_ref()).uses(SHADOW_MAP, Access::SampledFragment);
@@ -48,7 +47,7 @@ impl Pass for Shading {
             false => color.depth(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
         };
         let count = counts(cx);
-        let shade = [0, 1].map(|lightmapped| cx.mesh.shade[lightmapped].pick(prepass, count));
+        let shade = [0, 1].map(|lightmapped| cx.mesh.camera(cx.settings.samples).shade[lightmapped].pick(prepass, count));
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };
         cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then_some(shade[lightmapped as usize]));
         Ok(())
@@ -57,5 +56,5 @@ impl Pass for Shading {
 
 /// Whether this frame counts the fragments it shades.
 fn counts(cx: &FrameCx) -> bool {
-    cx.settings.count_fragments && cx.mesh.shade[0].can_count()
+    cx.settings.count_fragments && cx.mesh.can_count()
 }

@@ -35,5 +35,5 @@ impl Pass for ShadowStatic {
 pub(super) fn draw_casters(cx: &FrameCx, rec: &Rec, target: crate::render::graph::ResourceId, clear: Option<f32>, batches: &[crate::render::batches::Batch]) -> u32 {
     let rendering = Rendering::depth_only(rec.image(target), clear, vk::AttachmentStoreOp::STORE);
     let setup = DrawSetup { frame_set: cx.shadow.sets[cx.slot], batches, instances: cx.frame.instances, depth_test: true, cull: false };
-    cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, true))
+    cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, None))
 }

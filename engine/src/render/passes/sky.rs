@@ -3,7 +3,7 @@
 //! particles and the tone map, so the background goes through the same exposure and operator
 //! as every surface. Runs only for a baked level with a sky or a sun (`FrameData::sky`).
 
-use crate::gpu::{opaque, Gpu, GraphicsPipeline};
+use crate::gpu::{opaque, Gpu, GraphicsPipeline, PerSamples};
 use crate::render::frame::{FrameCx, SkyParams, DEPTH, HDR};
 use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
 use crate::render::shaders;
@@ -13,23 +13,29 @@ use ash::vk;
 
 pub struct Sky {
     layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
+    /// Made for a sample count when a frame first draws the sky with it.
+    pipelines: PerSamples<vk::Pipeline>,
 }
 
 impl Sky {
     pub fn new(gpu: &Gpu) -> Result<Sky> {
         let d = &gpu.device;
         let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::FRAGMENT).size(std::mem::size_of::<SkyParams>() as u32)];
-        let layout = gpu.own(unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges), None)? });
-        // The full-screen triangle lies at depth 0, the reverse-Z far plane the depth buffer is
-        // cleared to: EQUAL passes exactly the pixels no surface covered.
-        let pipeline = GraphicsPipeline::new("sky", shaders::FULLSCREEN_VERT)
-            .fragment(shaders::SKY_FRAG, None)
-            .depth(gpu.caps.depth_format, false, vk::CompareOp::EQUAL)
-            .color(HDR_FORMAT, opaque())
-            .build(gpu, *layout)?;
-        Ok(Sky { layout: layout.keep(), pipeline })
+        let layout = unsafe { d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges), None)? };
+        Ok(Sky { layout, pipelines: PerSamples::default() })
     }
+}
+
+/// The sky's pipeline for targets of `samples` samples. The full-screen triangle lies at depth
+/// 0, the reverse-Z far plane the depth buffer is cleared to: EQUAL passes exactly the pixels
+/// (or samples) no surface covered.
+fn pipeline(gpu: &Gpu, layout: vk::PipelineLayout, samples: vk::SampleCountFlags) -> Result<vk::Pipeline> {
+    GraphicsPipeline::new("sky", shaders::FULLSCREEN_VERT)
+        .fragment(shaders::SKY_FRAG, None)
+        .depth(gpu.caps.depth_format, false, vk::CompareOp::EQUAL)
+        .color(HDR_FORMAT, opaque())
+        .multisample(samples, false)
+        .build(gpu, layout)
 }
 
 impl Pass for Sky {
@@ -52,10 +58,12 @@ impl Pass for Sky {
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let Some(params) = cx.frame.sky else { return Ok(()) };
         let (d, cb) = (&rec.gpu.device, rec.cb);
+        let layout = self.layout;
+        let pipeline = *self.pipelines.ensure(cx.settings.samples, |s| pipeline(rec.gpu, layout, s))?;
         let rendering = Rendering::color(rec.image(HDR), None).depth(rec.image(DEPTH), None, vk::AttachmentStoreOp::NONE);
         rec.begin_rendering(&rendering);
         unsafe {
-            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
+            d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline);
             d.cmd_push_constants(cb, self.layout, vk::ShaderStageFlags::FRAGMENT, 0, bytemuck::bytes_of(&params));
             d.cmd_draw(cb, 3, 1, 0, 0);
         }
@@ -65,7 +73,9 @@ impl Pass for Sky {
 
     fn destroy(&mut self, gpu: &Gpu) {
         unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
+            for pipeline in self.pipelines.drain() {
+                gpu.device.destroy_pipeline(pipeline, None);
+            }
             gpu.device.destroy_pipeline_layout(self.layout, None);
         }
     }

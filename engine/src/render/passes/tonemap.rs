@@ -1,7 +1,7 @@
 //! The tone map: the HDR target into the output (`tonemap`), or into the FXAA pass's input.
 
-use crate::render::frame::{FrameCx, HDR, LDR};
-use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, ResourceId, Size, OUTPUT};
+use crate::render::frame::{FrameCx, LDR};
+use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, ResourceId, OUTPUT};
 use anyhow::Result;
 
 pub struct ToneMapPass;
@@ -18,15 +18,15 @@ impl Pass for ToneMapPass {
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         if cx.settings.fxaa {
-            io.create(LDR, ImageDesc { format: cx.tonemap.display_format, size: Size::Output });
+            io.create(LDR, ImageDesc::output(cx.tonemap.display_format));
         }
-        io.uses(HDR, Access::SampledFragment).uses(target(cx), Access::ColorWrite);
+        io.uses(cx.settings.tone_map_input(), Access::SampledFragment).uses(target(cx), Access::ColorWrite);
     }
 
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let f = cx.frame;
         let out = rec.image(target(cx));
-        cx.tonemap.record(rec, rec.image(HDR), out, f.exposure, f.tone_map);
+        cx.tonemap.record(rec, rec.image(cx.settings.tone_map_input()), out, f.exposure, f.tone_map);
         Ok(())
     }
 }

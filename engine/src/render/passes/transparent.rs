@@ -32,7 +32,7 @@ impl Pass for Transparent {
         let f = cx.frame;
         let rendering = Rendering::color(rec.image(HDR), None).depth(rec.image(DEPTH), None, vk::AttachmentStoreOp::NONE);
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.transparent_batches, instances: f.instances, depth_test: true, cull: true };
-        let blend = cx.mesh.blend;
+        let blend = cx.mesh.camera(cx.settings.samples).blend;
         cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| mat.blend.then_some(blend[lightmapped as usize]));
         Ok(())
     }
