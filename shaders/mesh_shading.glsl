@@ -236,21 +236,25 @@ vec4 shade(vec4 a) {
     // Read member by member: copying the whole block costs every field's load on lavapipe.
     uint m = uint(draw.material.y);
     vec4 pbr = materials[m].pbr;
-    vec3 n = shading_normal(pbr.z);
+    // The renderer's switches (uniform: every invocation takes the same branch).
+    bool maps = frame.features.x > 0.5;
+    bool specular = frame.features.y > 0.5;
+    vec3 n = shading_normal(maps ? pbr.z : 0.0);
     if (frame.exposure.y < 0.5) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
         float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    vec4 mr = materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
+    vec4 mr = maps && materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
     float metallic = clamp(pbr.x * mr.b, 0.0, 1.0);
     float rough = clamp(pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
     float alpha = rough * rough;
-    float ao = materials[m].occlusion_uv[1].w > 0.5 ? 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0) : 1.0;
+    float ao = maps && materials[m].occlusion_uv[1].w > 0.5 ? 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0) : 1.0;
     vec3 v = normalize(frame.camera_pos.xyz - in_world);
     float nv = max(dot(n, v), 1e-4);
     vec3 f0 = mix(vec3(0.04), a.rgb, metallic);
-    vec2 dfg = texture(dfg_lut, vec2(nv, rough)).xy;
+    // Without specular the table's (A, B) are 0: w_d = 1 and no environment reflection.
+    vec2 dfg = specular ? texture(dfg_lut, vec2(nv, rough)).xy : vec2(0.0);
     vec3 kd = a.rgb * (1.0 - metallic);
     // Rough lobes lean toward the normal (Frostbite's dominant direction).
     vec3 r = reflect(-v, n);
@@ -270,7 +274,9 @@ vec4 shade(vec4 a) {
         b = pl.rgb;
         vec3 sun_l = frame.sun_dir.xyz;
         float nl = dot(n, sun_l);
-        if (nl > 0.0) {
+        if (nl > 0.0 && !specular) {
+            l += kd / PI * frame.sun_color.rgb * nl * sun_visibility(in_world, n, pl.w);
+        } else if (nl > 0.0) {
             vec3 h = normalize(v + sun_l);
             float vh = max(dot(v, h), 0.0);
             float w = pow(1.0 - vh, 5.0);
@@ -285,7 +291,7 @@ vec4 shade(vec4 a) {
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
     vec3 emission = materials[m].emission.rgb;
-    if (materials[m].emissive_uv[1].w > 0.5) {
+    if (maps && materials[m].emissive_uv[1].w > 0.5) {
         emission *= texture(emissive_tex, in_emissive_uv).rgb;
     }
     l += emission;

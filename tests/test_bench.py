@@ -54,7 +54,9 @@ def results(tmp_path_factory) -> tuple[Path, dict[str, dict], str]:
 def test_times_are_reported_not_gated(results, capsys):
     """Print the short run's frame times into the CI log (past pytest's capture)."""
     lines = [line for line in results[2].splitlines() if "cpu_frame_ms" in line or line.startswith(("bench:", "floor"))]
-    assert len(lines) == 2 + len(SCENARIOS) + 2  # header, floor, a line per scenario, pre-pass off, instancing off
+    # Header, floor, a line per scenario, and one per variant: pre-pass off, instancing off and
+    # demo-flythrough's five.
+    assert len(lines) == 2 + len(SCENARIOS) + 2 + len(DEMO_VARIANTS)
     with capsys.disabled():
         print("\nbench short run (times are not checked):\n" + "\n".join(lines))
 
@@ -138,6 +140,24 @@ def test_demo_flythrough_draws_the_level_with_its_life(results):
     assert pinned == DEMO_COUNTERS
 
 
+def test_demo_flythrough_measures_each_look_feature_against_the_default(results):
+    """Its frames cycle through the default and a variant per feature; each variant's passes show
+    the feature switched: MSAA resolves, FXAA filters, no sky pass without the sky. Every variant
+    draws the same content (the counters but the fragments, which MSAA's edges add to)."""
+    doc = results[1]["demo-flythrough"]
+    variants = doc["variants"]
+    assert set(variants) == set(DEMO_VARIANTS)
+    ran = lambda v, p: v["pass_gpu_ms"][p]["p50"] > 0  # noqa: E731 (a pass that did not run has 0 ms)
+    assert ran(doc, "sky") and not ran(doc, "resolve") and not ran(doc, "fxaa")
+    assert ran(variants["aa_msaa"], "resolve") and not ran(variants["aa_msaa"], "fxaa")
+    assert ran(variants["aa_fxaa"], "fxaa") and not ran(variants["aa_fxaa"], "resolve")
+    assert not ran(variants["sky_off"], "sky")
+    same = {k: v for k, v in doc["counters"].items() if "fragment" not in k}
+    for name, v in variants.items():
+        assert v["cpu_frame_ms"]["count"] == FRAMES, name
+        assert {k: x for k, x in v["counters"].items() if k in same} == same, name
+
+
 def test_bad_arguments_exit_2_with_a_clear_message():
     r = run_bench("--scenario", "culling-1m")
     assert r.returncode == 2 and "unknown scenario 'culling-1m'" in r.stderr and "culling-100k" in r.stderr, r.stderr
@@ -184,12 +204,13 @@ def test_report_writes_plots_and_summary(results):
         assert f"| {name} |" in summary
         svg = ET.fromstring((out / f"{name}.svg").read_text())  # well-formed, or it raises
         lines = svg.findall("{http://www.w3.org/2000/svg}polyline")
-        # One point per measured frame; the overdraw and culling plots have their switch-off
-        # frames too.
-        assert len(lines) == (2 if name in ("prepass-overdraw", "culling-100k") else 1), name
+        # One point per measured frame; a line for the default and one per variant (the overdraw
+        # and culling plots' switch-off frames, the flythrough's look features).
+        assert len(lines) == 1 + len(results[1][name].get("variants", {})), name
         assert all(len(line.get("points").split()) == FRAMES for line in lines), name
     assert "| prepass-overdraw (prepass off) |" in summary
     assert "| culling-100k (instancing off) |" in summary
+    assert "| demo-flythrough (aa msaa) |" in summary
 
 
 def test_compare_prints_ratios_and_rejects_bad_input(results, tmp_path):
@@ -229,6 +250,7 @@ OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # build/temple.pack from the camera flight's last measured frame (2/3 of the loop: above the
 # roofs, the whole level in view): 8 level instances plus 32 doves, the priest's and the
 # pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
+DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off"]
 DEMO_COUNTERS = {
     "instances": 8,
     "drawn": 40,

@@ -61,7 +61,7 @@ def fmt(v, digits: int = 2) -> str:
 # ---- plots ---------------------------------------------------------------------------------------
 
 WIDTH, HEIGHT, MARGIN = 720, 300, 56
-COLOURS = ("#1f77b4", "#d62728", "#2ca02c")
+COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2")
 
 
 def polyline(values: list[float], y_max: float, colour: str) -> str:
@@ -89,13 +89,12 @@ def axes(title: str, y_max: float, frames: int) -> list[str]:
 
 
 def plot_svg(doc: dict) -> str:
-    """Frame time over the run: CPU frame time (and the pre-pass-off variant), with the floor."""
-    series = [("CPU frame (wall, fence wait included)", doc["samples"]["cpu_frame_ms"])]
-    for key, feature in (("prepass_off", "pre-pass"), ("instancing_off", "instancing")):
-        off = doc.get("variants", {}).get(key)
-        if off:
-            series[0] = (f"CPU frame, {feature} on", series[0][1])
-            series.append((f"CPU frame, {feature} off", off["samples"]["cpu_frame_ms"]))
+    """Frame time over the run: CPU frame time (and each variant's: pre-pass off, MSAA...), with
+    the floor."""
+    variants = doc.get("variants", {})
+    series = [("CPU frame, default" if variants else "CPU frame (wall, fence wait included)", doc["samples"]["cpu_frame_ms"])]
+    for key, v in variants.items():
+        series.append((f"CPU frame, {v.get('label', key.replace('_', ' '))}", v["samples"]["cpu_frame_ms"]))
     floor = doc.get("floor_ms", {}).get("p50") or 0.0
     y_max = max([floor] + [max(v) for _, v in series if v]) * 1.1 or 1.0
     parts = axes(f"{doc['scenario']} ({doc['width']}x{doc['height']}, {doc['device']})", y_max, doc["frames"])
@@ -127,7 +126,7 @@ def counters_cell(doc: dict) -> str:
 
 
 def summary_rows(doc: dict) -> list[list[str]]:
-    """The scenario's row (and one for the pre-pass-off variant, when it has one)."""
+    """The scenario's row (and one for each of its variants)."""
     rows = []
     variants = [("", doc)] + [(f" ({name.replace('_', ' ')})", v) for name, v in doc.get("variants", {}).items()]
     for suffix, v in variants:

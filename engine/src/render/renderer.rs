@@ -43,6 +43,9 @@ pub struct FrameUniforms {
     /// x: 1 when this frame drew the shadow map (dynamic objects read it; otherwise the probes'
     /// sun visibility); y: one map texel in metres; z: 1 / map size in texels.
     pub shadow: Vec4,
+    /// The shading's switches (`Renderer::material_maps`, `Renderer::specular`): x: 1 to
+    /// sample the normal, metallic-roughness, occlusion and emissive maps; y: 1 for specular.
+    pub features: Vec4,
 }
 
 /// Lighting that stands in until lightmaps and probes land.
@@ -132,6 +135,15 @@ pub struct Renderer {
     pub lightmaps: bool,
     /// Show the depth buffer instead of the shaded frame (the `depth view` debug pass).
     pub depth_view: bool,
+    /// Draw a baked level's sky and sun disc as the background (on by default; off, the clear
+    /// colour, to measure the sky pass).
+    pub sky: bool,
+    /// Sample the materials' normal, metallic-roughness, occlusion and emissive maps (on by
+    /// default; off, their factors alone, to see and measure what the maps add).
+    pub material_maps: bool,
+    /// Specular reflection, of the sun and of the environment (on by default; off, diffuse
+    /// only: the look and the cost before the glTF material model).
+    pub specular: bool,
     /// Anti-aliasing: off, MSAA (multisampled camera targets, `resolve` pass) or FXAA after the
     /// tone map (the `fxaa` pass).
     pub aa: AntiAliasing,
@@ -214,6 +226,9 @@ impl Renderer {
             depth_test: true,
             lightmaps: true,
             depth_view: false,
+            sky: true,
+            material_maps: true,
+            specular: true,
             aa: AntiAliasing::Off,
             slot_counted: vec![false; frames_in_flight],
             visibility: Visibility::default(),
@@ -332,9 +347,10 @@ impl Renderer {
             ambient: ambient.extend(0.0),
             exposure,
             shadow: shadow_params,
+            features: Vec4::new(self.material_maps as u32 as f32, self.specular as u32 as f32, 0.0, 0.0),
         };
         (f.exposure, f.tone_map) = (exposure.x, scene.baked.is_some());
-        f.sky = scene.baked.and_then(|b| SkyParams::of(&b, view_proj, extent));
+        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj, extent));
         self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(bytemuck::bytes_of(&uniforms));
         if f.draw_shadow {
             // The shadow passes run mesh.vert with the sun's transform as its view_proj.

@@ -59,6 +59,9 @@ impl RendererPanel<'_> {
         control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
         control("depth view", ui.checkbox(&mut r.depth_view, "depth view (the depth buffer instead of the frame)"));
+        control("sky", ui.checkbox(&mut r.sky, "sky (the baked level's sky and sun disc as the background)"));
+        control("material maps", ui.checkbox(&mut r.material_maps, "material maps (normal, metallic-roughness, occlusion, emissive)"));
+        control("specular", ui.checkbox(&mut r.specular, "specular (off: diffuse only)"));
         // Each mode's cost shows in the pass list above: MSAA's in every camera pass and the
         // resolve pass, FXAA's as the fxaa pass.
         ui.horizontal(|ui| {

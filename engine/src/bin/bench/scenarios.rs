@@ -20,7 +20,7 @@ use crate::flight::{self, Flight};
 use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image, Transition};
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::render::graph::FrameProfile;
-use engine::render::renderer::{Lighting, Renderer};
+use engine::render::renderer::{AntiAliasing, Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::sim::boids::{Aabb, BoidParams, Flock, FlockState};
 use engine::sim::clock::{ClockParams, FixedClock};
@@ -65,7 +65,8 @@ pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frame
 
 Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
-                    animating at a fixed step
+                    animating at a fixed step; frames cycle through the default (no anti-aliasing)
+                    and the variants aa_msaa, aa_fxaa, sky_off, material_maps_off, specular_off
   culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection;
                     frames alternate with instancing on (the scenario's times) and off, one draw
                     call per cube (its `variants.instancing_off`)
@@ -77,7 +78,8 @@ Scenarios:
 
 Each scenario writes DIR/<scenario>.json: CPU frame time (wall time of the whole frame, fence
 wait included) and per-pass GPU time (p50/p95/p99/max), the floor (clear and wait for an empty
-frame of the same size) and each percentile as a multiple of it, and the last frame's counters.
+frame of the same size) and each percentile as a multiple of it, and the last frame's counters;
+its `variants` hold the same for each variant.
 Exit status: 0 ok, 1 a scenario failed, 2 bad arguments, 3 Vulkan validation errors.";
 
 pub struct Options {
@@ -173,41 +175,73 @@ struct Setup {
     /// The camera of frame k (warm-up frames included).
     camera: Box<dyn Fn(usize) -> Camera>,
     lighting: Lighting,
-    /// A renderer switch the frames alternate on and off (prepass-overdraw, culling-100k).
-    alternate: Option<Switch>,
+    /// Renderer switches measured against the scenario's default: frames cycle through the
+    /// default and each variant (demo-flythrough, prepass-overdraw, culling-100k).
+    variants: Vec<Switch>,
     /// Facts about the scenario's content for the JSON (counts it was built with).
     content: Map<String, Value>,
 }
 
-/// A renderer feature a scenario measures with and without: its frames alternate the two, so
-/// both see the same content on the same machine at the same moment.
+/// A renderer setting a scenario measures against its default: frames cycle through the
+/// default and the variants, so all see the same content on the same machine at the same moment.
 #[derive(Debug, Clone, Copy)]
 enum Switch {
-    Prepass,
-    Instancing,
+    PrepassOff,
+    InstancingOff,
+    Msaa,
+    Fxaa,
+    SkyOff,
+    MaterialMapsOff,
+    SpecularOff,
 }
 
 impl Switch {
-    /// The JSON key of the off variant.
+    /// The variant's JSON key.
     fn key(self) -> &'static str {
         match self {
-            Switch::Prepass => "prepass_off",
-            Switch::Instancing => "instancing_off",
+            Switch::PrepassOff => "prepass_off",
+            Switch::InstancingOff => "instancing_off",
+            Switch::Msaa => "aa_msaa",
+            Switch::Fxaa => "aa_fxaa",
+            Switch::SkyOff => "sky_off",
+            Switch::MaterialMapsOff => "material_maps_off",
+            Switch::SpecularOff => "specular_off",
         }
     }
 
     fn label(self) -> &'static str {
         match self {
-            Switch::Prepass => "pre-pass off",
-            Switch::Instancing => "instancing off",
+            Switch::PrepassOff => "pre-pass off",
+            Switch::InstancingOff => "instancing off",
+            Switch::Msaa => "MSAA 4x",
+            Switch::Fxaa => "FXAA",
+            Switch::SkyOff => "sky off",
+            Switch::MaterialMapsOff => "material maps off",
+            Switch::SpecularOff => "specular off",
         }
     }
 
+    /// Set the renderer as the variant has it (`on`) or as the default has it.
     fn set(self, r: &mut Renderer, on: bool) {
         match self {
-            Switch::Prepass => r.prepass = on,
-            Switch::Instancing => r.instancing = on,
+            Switch::PrepassOff => r.prepass = !on,
+            Switch::InstancingOff => r.instancing = !on,
+            Switch::Msaa => r.aa = if on { AntiAliasing::Msaa } else { AntiAliasing::Off },
+            Switch::Fxaa => r.aa = if on { AntiAliasing::Fxaa } else { AntiAliasing::Off },
+            Switch::SkyOff => r.sky = !on,
+            Switch::MaterialMapsOff => r.material_maps = !on,
+            Switch::SpecularOff => r.specular = !on,
         }
+    }
+}
+
+/// Put the renderer in series `index`'s setting: 0 the default, i the variant i - 1.
+fn select(r: &mut Renderer, variants: &[Switch], index: usize) {
+    for v in variants {
+        v.set(r, false);
+    }
+    if index > 0 {
+        variants[index - 1].set(r, true);
     }
 }
 
@@ -291,12 +325,12 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
     let result = setup(gpu, o, name, &mut renderer).and_then(|mut s| {
         let r = measure(gpu, o, &mut renderer, &mut target, &mut s);
         s.scene.destroy(gpu);
-        r.map(|series| (series, s.content, s.alternate))
+        r.map(|series| (series, s.content, s.variants))
     });
     let pass_names: Vec<&'static str> = renderer.pass_names().collect();
     renderer.destroy(gpu);
     target.destroy(gpu);
-    let (series, content, alternated) = result?;
+    let (series, content, variants) = result?;
     let main = &series[0];
     let mut doc = json!({
         "scenario": name,
@@ -318,24 +352,28 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
         "samples": { "cpu_frame_ms": main.cpu_ms, "gpu_frame_ms": main.gpu_ms },
         "note": "cpu_frame_ms is the wall time of a whole frame including the wait for the GPU fence; GPU timestamps on lavapipe do not capture compute work reliably (skinning_ms understates the skinning pass)",
     });
-    if let Some(switch) = alternated {
-        let off = &series[1];
-        doc["variants"] = json!({ switch.key(): {
-            "cpu_frame_ms": summary(&off.cpu_ms),
-            "floor_ratio": ratios(&off.cpu_ms, floor),
-            "gpu_frame_ms": summary(&off.gpu_ms),
-            "pass_gpu_ms": pass_summary(&off.passes, &pass_names),
-            "counters": off.counters,
-            "samples": { "cpu_frame_ms": off.cpu_ms, "gpu_frame_ms": off.gpu_ms },
-        }});
+    if !variants.is_empty() {
+        let mut all = Map::new();
+        for (switch, v) in variants.iter().zip(&series[1..]) {
+            all.insert(switch.key().into(), json!({
+                "label": switch.label(),
+                "cpu_frame_ms": summary(&v.cpu_ms),
+                "floor_ratio": ratios(&v.cpu_ms, floor),
+                "gpu_frame_ms": summary(&v.gpu_ms),
+                "pass_gpu_ms": pass_summary(&v.passes, &pass_names),
+                "counters": v.counters,
+                "samples": { "cpu_frame_ms": v.cpu_ms, "gpu_frame_ms": v.gpu_ms },
+            }));
+        }
+        doc["variants"] = Value::Object(all);
     }
-    print_summary(o, name, &doc, alternated);
+    print_summary(o, name, &doc, &variants);
     let path = o.json_dir.join(format!("{name}.json"));
     write_atomic(&path, &serde_json::to_vec_pretty(&doc)?)?;
     Ok(path)
 }
 
-fn print_summary(o: &Options, name: &str, doc: &Value, alternated: Option<Switch>) {
+fn print_summary(o: &Options, name: &str, doc: &Value, variants: &[Switch]) {
     let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let cpu = &doc["cpu_frame_ms"];
     let ratio = &doc["floor_ratio"];
@@ -348,9 +386,10 @@ fn print_summary(o: &Options, name: &str, doc: &Value, alternated: Option<Switch
         f(&ratio["p50"]),
         f(&ratio["p95"])
     );
-    if let Some(switch) = alternated {
+    for switch in variants {
         let c = &doc["variants"][switch.key()]["cpu_frame_ms"];
-        println!("{:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} ({})", "", f(&c["p50"]), f(&c["p95"]), switch.label());
+        let ratio = f(&c["p50"]) / f(&cpu["p50"]);
+        println!("{:<17} cpu_frame_ms p50 {:8.3} p95 {:8.3} ({}: p50 x{ratio:.2} of the default)", "", f(&c["p50"]), f(&c["p95"]), switch.label());
     }
     if !o.quiet {
         println!("{:<17} counters {}", "", doc["counters"]);
@@ -365,16 +404,14 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Warm-up frames, then measured ones; series 1 holds the switch-off frames when alternating.
+/// Warm-up frames, then measured ones; series i > 0 holds variant i - 1's frames.
 fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscreen, s: &mut Setup) -> anyhow::Result<Vec<Series>> {
-    let mut series: Vec<Series> = (0..1 + s.alternate.is_some() as usize).map(|_| Series::default()).collect();
+    let mut series: Vec<Series> = (0..1 + s.variants.len()).map(|_| Series::default()).collect();
     let per_frame = series.len();
     for k in 0..(o.warmup + o.frames) * per_frame {
-        // Alternating frames share a simulation step, so both variants see the same content.
+        // A frame's variants share its simulation step, so all see the same content.
         let (frame, variant) = (k / per_frame, k % per_frame);
-        if let Some(switch) = s.alternate {
-            switch.set(renderer, variant == 0);
-        }
+        select(renderer, &s.variants, variant);
         let t = Instant::now();
         if variant == 0 {
             renderer.animate(&mut s.scene, FRAME_S as f32);
@@ -394,7 +431,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         out.counters = counters(gpu, renderer, &s.scene, &s.world);
     }
     for (variant, out) in series.iter_mut().enumerate() {
-        let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant == 0)?;
+        let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant)?;
         out.counters.insert("fragments_shaded".into(), json!(shaded));
     }
     Ok(series)
@@ -404,19 +441,15 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
 /// one more frame, not timed, with the shader's fragment counter on: the counter costs an atomic
 /// per fragment, and lavapipe's pipeline statistics count fragments the depth test then rejects,
 /// so they cannot show what the pre-pass saves.
-fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, on: bool) -> anyhow::Result<Option<u32>> {
+fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, variant: usize) -> anyhow::Result<Option<u32>> {
     let camera = (s.camera)(last);
-    if let Some(switch) = s.alternate {
-        switch.set(renderer, on);
-    }
+    select(renderer, &s.variants, variant);
     renderer.count_fragments = true;
     level::prepare_frame(&s.world, renderer, &s.scene, &camera);
     let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
     let shaded = renderer.fragment_count(0);
     renderer.count_fragments = false;
-    if let Some(switch) = s.alternate {
-        switch.set(renderer, true);
-    }
+    select(renderer, &s.variants, 0);
     frame?;
     Ok(shaded)
 }

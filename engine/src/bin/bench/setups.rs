@@ -1,4 +1,4 @@
-//! The scenarios' setups: the scene, world, camera and alternate switch each one measures.
+//! The scenarios' setups: the scene, world, camera and variant switches each one measures.
 
 use super::*;
 
@@ -47,7 +47,8 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
         world,
         camera: Box::new(camera),
         lighting: Lighting::for_pack(&pack.manifest),
-        alternate: None,
+        // The look's features, each off (or, for anti-aliasing, on) in a variant of its own.
+        variants: vec![Switch::Msaa, Switch::Fxaa, Switch::SkyOff, Switch::MaterialMapsOff, Switch::SpecularOff],
         content,
     })
 }
@@ -82,7 +83,7 @@ fn culling(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate: Some(Switch::Instancing),
+        variants: vec![Switch::InstancingOff],
         content,
     })
 }
@@ -115,7 +116,7 @@ fn boids(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> 
         world,
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate: None,
+        variants: Vec::new(),
         content,
     })
 }
@@ -155,7 +156,7 @@ fn particles(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Set
         world,
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate: None,
+        variants: Vec::new(),
         content,
     })
 }
@@ -191,7 +192,7 @@ fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow:
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate: None,
+        variants: Vec::new(),
         content,
     })
 }
@@ -215,7 +216,7 @@ fn overdraw(gpu: &Gpu, renderer: &mut Renderer, layers: usize) -> anyhow::Result
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        alternate: Some(Switch::Prepass),
+        variants: vec![Switch::PrepassOff],
         content,
     })
 }
