@@ -79,11 +79,19 @@ class GltfWriter:
         self.doc["textures"].append({"source": len(self.doc["images"]) - 1, "sampler": 0})
         return len(self.doc["textures"]) - 1
 
-    def material(self, name, color=(1, 1, 1, 1), texture=None, double_sided=False, roughness=0.9) -> int:
+    def material(self, name, color=(1, 1, 1, 1), texture=None, double_sided=False, roughness=0.9, normal=None, occlusion_roughness=None) -> int:
+        """A metallic-roughness material; `normal` a normal map's texture, `occlusion_roughness`
+        one texture as both the occlusion (R) and the metallic-roughness (G, B) map."""
         pbr = {"baseColorFactor": list(color), "metallicFactor": 0.0, "roughnessFactor": roughness}
         if texture is not None:
             pbr["baseColorTexture"] = {"index": texture}
-        self.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": double_sided})
+        material = {"name": name, "pbrMetallicRoughness": pbr, "doubleSided": double_sided}
+        if normal is not None:
+            material["normalTexture"] = {"index": normal}
+        if occlusion_roughness is not None:
+            pbr["metallicRoughnessTexture"] = {"index": occlusion_roughness}
+            material["occlusionTexture"] = {"index": occlusion_roughness}
+        self.doc["materials"].append(material)
         return len(self.doc["materials"]) - 1
 
     def node(self, name, mesh=None, translation=None, rotation=None, scale=None, children=None, root=True) -> int:

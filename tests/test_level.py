@@ -135,7 +135,16 @@ def test_temple_contents(temple):
     assert {s.kind for s in temple.spawns} == {"player", "character", "boids", "particles"}
     assert temple.sky is not None and temple.sky.intensity > 0
     assert any(max(m.emissive) > 0 for m in temple.materials)
-    assert all(t.format == "Rgba8Srgb" and t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
+    assert all(t.mips[0].shape == (t.height, t.width, 4) for t in temple.textures)
+    # Base colours are sRGB; the bricks, flagstones and planks also have a normal map and an
+    # occlusion-roughness map (one texture, the glTF ORM layout), the checker marble none.
+    mats = {m.name: m for m in temple.materials}
+    for name in ("paving", "sandstone", "red_brick", "timber"):
+        m = mats[name]
+        assert temple.textures[m.base_color_texture].format == "Rgba8Srgb", name
+        assert (temple.textures[m.normal_texture].format, temple.textures[m.normal_texture].usage) == ("Rgba8Unorm", "normal"), name
+        assert m.metallic_roughness_texture == m.occlusion_texture and temple.textures[m.occlusion_texture].usage == "data", name
+    assert mats["marble_floor"].normal_texture is None and mats["marble_floor"].metallic_roughness_texture is None
     assert 1_000 < sum(temple.meshes[i].base.triangle_count for i in temple.static_meshes()) < 50_000
     # every level mesh sits at the world origin: positions are world space (characters are placed
     # by their spawn's root node)
@@ -671,6 +680,37 @@ def test_procedural_textures_tile(kind):
     f = img[..., :3].astype(np.int32)
     inner = max(np.abs(np.diff(f, axis=0)).mean(axis=(1, 2)).max(), np.abs(np.diff(f, axis=1)).mean(axis=(0, 2)).max())
     assert np.abs(f[0] - f[-1]).mean() <= inner and np.abs(f[:, 0] - f[:, -1]).mean() <= inner
+
+
+@pytest.mark.parametrize("kind", ["bricks", "planks", "flagstones"])
+def test_procedural_relief_sinks_the_joints(kind):
+    """The normal map is unit, tiles, is flat on the faces' middles and on the joints' floors
+    and tilts at the bevels, away from the joint (glTF: x along +u, y up the image); roughness
+    is highest in the joints and occlusion lowest."""
+    from asset_pipeline.procedural_textures import _pattern, procedural_relief
+
+    p = {"procedural": kind, "size": 128, "count": 4, "mortar": 0.1, "colors": [(0.8, 0.7, 0.6), (0.3, 0.3, 0.3)], "seed": 7, "relief": 1.0}
+    normal, orm = procedural_relief(p)
+    assert normal.shape == orm.shape == (128, 128, 4) and normal.dtype == orm.dtype == np.uint8
+    n = normal[..., :3].astype(np.float64) / 255 * 2 - 1
+    assert np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=0.02)
+    assert (n[..., 2] > 0.3).all(), "no normal points into the surface"
+    # Tiles: the jump across the wrap is no bigger than inside.
+    inner = np.abs(np.diff(n, axis=0)).max()
+    assert np.abs(n[0] - n[-1]).max() <= inner + 1e-9 and np.abs(n[:, 0] - n[:, -1]).max() <= np.abs(np.diff(n, axis=1)).max() + 1e-9
+    _, dist, _, _, half = _pattern(p)
+    joint = dist == 0
+    # A face pixel next to a joint on its left tilts left (-x): the face rises away from it.
+    left_edge = (~joint) & np.roll(joint, 1, axis=1) & ~np.roll(joint, 1, axis=0) & ~np.roll(joint, -1, axis=0)
+    assert left_edge.sum() > 10 and (n[left_edge, 0] < -0.05).mean() > 0.9
+    # A face pixel under a joint tilts up the image (+y).
+    top_edge = (~joint) & np.roll(joint, 1, axis=0) & ~np.roll(joint, 1, axis=1) & ~np.roll(joint, -1, axis=1)
+    assert top_edge.sum() > 10 and (n[top_edge, 1] > 0.05).mean() > 0.9
+    rough, occ = orm[..., 1].astype(int), orm[..., 0].astype(int)
+    assert (rough[joint] == 255).all() and rough[dist > 3].mean() < 230
+    assert occ[joint].max() < occ[dist > 3].min()
+    assert procedural_relief({**p, "relief": 0.0}) is None
+    assert procedural_relief({**p, "procedural": "checker"}) is None
 
 
 def test_real_gltf_prop(tmp_path, gltf_samples):

@@ -70,3 +70,24 @@ def test_sample_normal_maps_get_mikktspace_tangents_through_the_lods(gltf_sample
             assert np.allclose(np.linalg.norm(t[:, :3], axis=1), 1, atol=1e-4), f"{name} {mesh!r} LOD {k}: tangents not unit"
             assert np.isin(t[:, 3], (-1.0, 1.0)).all(), f"{name} {mesh!r} LOD {k}: w is not a sign"
             assert np.abs(np.einsum("ij,ij->i", n, t[:, :3])).max() < 1e-3, f"{name} {mesh!r} LOD {k}: T not perpendicular to N"
+
+
+def test_the_golems_stone_gets_mikktspace_tangents(tmp_path):
+    """Our own normal-mapped character (content/characters/make_creature.py: stone plates from
+    the cooker's procedural flagstones, no TANGENT written): the same checks, on a skinned mesh
+    whose capsules wrap their texture around a seam."""
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    gltf = tmp_path / "golem.gltf"
+    subprocess.run([sys.executable, str(REPO / "content" / "characters" / "make_creature.py"), str(gltf)], check=True, timeout=300)
+    scene = import_gltf(gltf)
+    stone = scene.materials[0]
+    assert stone.normal_texture is not None and stone.metallic_roughness_texture == stone.occlusion_texture is not None
+    found = list(normal_mapped_lods(scene))
+    assert [mesh for mesh, _, _ in found] == ["golem"]
+    for mesh, lod, mask in found:
+        assert mask.all()
+        check_frames(lod, mask, f"golem mesh {mesh!r} LOD 0")

@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from gltf_writer import GltfWriter  # noqa: E402
+from asset_pipeline.procedural_textures import procedural_relief, procedural_texture  # noqa: E402
 
 FLOAT, UBYTE, UINT = 5126, 5121, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -46,6 +47,9 @@ NAMES = [j[0] for j in JOINTS]
 PARENT = [None if p is None else NAMES.index(p) for _, p, _ in JOINTS]
 
 # (bone that owns the capsule, where it ends: a child joint or an offset from the bone, radius).
+# Metres of stone plate per texture repeat (the golem's texture coordinates).
+PLATE = 0.6
+
 CAPSULES = [
     ("hips", "spine", 0.16),
     ("spine", "chest", 0.17),
@@ -73,7 +77,11 @@ def world_positions() -> np.ndarray:
 
 def capsule(a: np.ndarray, b: np.ndarray, r: float, sides: int, cap_rings: int, body_rings: int):
     """A capsule around segment a-b: positions, normals, axis parameter t in [0, 1] (clamped),
-    triangles (counter-clockwise from outside). Poles are single vertices with triangle fans."""
+    texture coordinates, triangles (counter-clockwise from outside). Poles are single vertices
+    with triangle fans. Each ring has a seam vertex (theta = 2 pi, the first one again with u at
+    the end of the repeat); u wraps a whole number of texture repeats of `PLATE` metres around
+    the capsule and v runs PLATE metres a repeat along it, so the stone plates are about the
+    same size on every limb and tile across the seam."""
     axis = b - a
     length = float(np.linalg.norm(axis))
     d = axis / length
@@ -84,25 +92,28 @@ def capsule(a: np.ndarray, b: np.ndarray, r: float, sides: int, cap_rings: int, 
     alpha = np.linspace(0.0, math.pi / 2, cap_rings + 1)[1:]
     s = np.concatenate([-r * np.cos(alpha), np.linspace(0.0, length, body_rings + 2)[1:-1], length + r * np.cos(alpha[::-1])])
     rad = np.concatenate([r * np.sin(alpha), np.full(body_rings, r), r * np.sin(alpha[::-1])])
-    theta = np.linspace(0.0, 2 * math.pi, sides, endpoint=False)
-    ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (sides, 3)
-    pos = a + s[:, None, None] * d + rad[:, None, None] * ring[None]  # (rings, sides, 3)
+    theta = np.linspace(0.0, 2 * math.pi, sides + 1)
+    ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (sides + 1, 3)
+    pos = a + s[:, None, None] * d + rad[:, None, None] * ring[None]  # (rings, sides + 1, 3)
     pos = np.concatenate([pos.reshape(-1, 3), [a - r * d, b + r * d]])
+    repeats = max(1, round(2 * math.pi * r / PLATE))
+    uv = np.stack(np.broadcast_arrays(theta[None, :] / (2 * math.pi) * repeats, s[:, None] / PLATE), -1).reshape(-1, 2)
+    uv = np.concatenate([uv, [[0.5 * repeats, -r / PLATE], [0.5 * repeats, (length + r) / PLATE]]])
     # A capsule's normal points away from the closest point of its axis segment.
     t = np.clip(((pos - a) @ d) / length, 0.0, 1.0)
     nrm = pos - (a + t[:, None] * axis)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    rings = len(s)
-    k = np.arange(rings - 1)[:, None] * sides
+    rings, per_ring = len(s), sides + 1
+    k = np.arange(rings - 1)[:, None] * per_ring
     j = np.arange(sides)[None, :]
-    j1 = (j + 1) % sides
+    j1 = j + 1
     # Rings run from a to b and theta turns from u toward v = d x u, so seen from outside
-    # (k, k + 1, k + sides) is counter-clockwise.
-    quads = np.stack([k + j, k + j1, k + sides + j, k + j1, k + sides + j1, k + sides + j], -1).reshape(-1, 3)
-    pole_a, pole_b, last = rings * sides, rings * sides + 1, (rings - 1) * sides
+    # (k, k + 1, k + per_ring) is counter-clockwise.
+    quads = np.stack([k + j, k + j1, k + per_ring + j, k + j1, k + per_ring + j1, k + per_ring + j], -1).reshape(-1, 3)
+    pole_a, pole_b, last = rings * per_ring, rings * per_ring + 1, (rings - 1) * per_ring
     fan_a = np.stack([np.full(sides, pole_a), j1[0], j[0]], -1)
     fan_b = np.stack([np.full(sides, pole_b), last + j[0], last + j1[0]], -1)
-    return pos, nrm, t, np.concatenate([quads, fan_a, fan_b])
+    return pos, nrm, t, uv, np.concatenate([quads, fan_a, fan_b])
 
 
 def smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
@@ -111,19 +122,19 @@ def smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
 
 
 def build_body(detail: float):
-    """The skinned body: positions, normals, joints (u8 x4), weights (f32 x4), indices, and the
-    breathe target's position deltas."""
+    """The skinned body: positions, normals, texture coordinates, joints (u8 x4), weights (f32
+    x4), indices, and the breathe target's position deltas."""
     world = world_positions()
     sides = max(8, round(24 * detail))
     cap_rings, body_rings = max(2, round(6 * detail)), max(2, round(16 * detail))
-    parts = {k: [] for k in ("pos", "nrm", "joints", "weights", "idx", "breathe")}
+    parts = {k: [] for k in ("pos", "nrm", "uv", "joints", "weights", "idx", "breathe")}
     base = 0
     for owner, end, r in CAPSULES:
         o = NAMES.index(owner)
         a = world[o]
         child = NAMES.index(end) if isinstance(end, str) else None
         b = world[child] if child is not None else a + np.array(end)
-        pos, nrm, t, tri = capsule(a, b, r, sides, cap_rings, body_rings)
+        pos, nrm, t, uv, tri = capsule(a, b, r, sides, cap_rings, body_rings)
         n = len(pos)
         # The owner bone, blended into its parent near the start and into the child near the end
         # (so elbows and knees bend smoothly); the two blends never overlap, so at most 2 influences.
@@ -138,11 +149,11 @@ def build_body(detail: float):
         if owner in BREATHING:
             height = np.exp(-(((pos[:, 1] - 1.35) / 0.12) ** 2))
             swell = 0.03 * height[:, None] * nrm * np.array([1.0, 0.3, 1.2])
-        for key, value in (("pos", pos), ("nrm", nrm), ("joints", j), ("weights", w), ("idx", tri + base), ("breathe", swell)):
+        for key, value in (("pos", pos), ("nrm", nrm), ("uv", uv), ("joints", j), ("weights", w), ("idx", tri + base), ("breathe", swell)):
             parts[key].append(value)
         base += n
     out = {k: np.concatenate(v) for k, v in parts.items()}
-    return (out["pos"].astype(np.float32), out["nrm"].astype(np.float32), out["joints"].astype(np.uint8),
+    return (out["pos"].astype(np.float32), out["nrm"].astype(np.float32), out["uv"].astype(np.float32), out["joints"].astype(np.uint8),
             out["weights"].astype(np.float32), out["idx"].astype(np.uint32).reshape(-1), out["breathe"].astype(np.float32))
 
 
@@ -214,13 +225,26 @@ def idle_clip(g: GltfWriter, node: dict[str, int], mesh_node: int):
     clip.finish()
 
 
+def golem_stone(g: GltfWriter) -> int:
+    """The golem's material: weathered stone plates with dark seams, from the cooker's
+    procedural flagstones: base colour, a normal map (the seams sunk, the plates' edges
+    bevelled) and an occlusion-roughness map (rough seams, smoother worn plates). No tangents
+    are written: the cooker computes MikkTSpace ones, as for any normal-mapped glTF without."""
+    params = {"procedural": "flagstones", "size": 256, "count": 4, "mortar": 0.07, "colors": [[0.62, 0.58, 0.52], [0.2, 0.18, 0.16]],
+              "seed": 11, "relief": 1.5}
+    normal, orm = procedural_relief(params)
+    return g.material("golem stone", texture=g.texture("golem stone", procedural_texture(params)), roughness=0.9,
+                      normal=g.texture("golem stone normal", normal), occlusion_roughness=g.texture("golem stone orm", orm))
+
+
 def build_creature(detail: float = 1.0) -> GltfWriter:
     g = GltfWriter("content/characters/make_creature.py")
-    stone = g.material("golem stone", color=(0.55, 0.5, 0.44, 1.0), roughness=0.85)
-    pos, nrm, joints, weights, idx, breathe = build_body(detail)
+    stone = golem_stone(g)
+    pos, nrm, uv, joints, weights, idx, breathe = build_body(detail)
     attrs = {
         "POSITION": g.accessor(pos, "VEC3", FLOAT, ARRAY_BUFFER, minmax=True),
         "NORMAL": g.accessor(nrm, "VEC3", FLOAT, ARRAY_BUFFER),
+        "TEXCOORD_0": g.accessor(uv, "VEC2", FLOAT, ARRAY_BUFFER),
         "JOINTS_0": g.accessor(joints, "VEC4", UBYTE, ARRAY_BUFFER),
         "WEIGHTS_0": g.accessor(weights, "VEC4", FLOAT, ARRAY_BUFFER),
     }

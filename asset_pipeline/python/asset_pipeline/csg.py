@@ -24,7 +24,7 @@ import numpy as np
 
 from asset_pipeline import gltf_import, ir, obstacles
 from asset_pipeline.level import BrushSpec, LevelSpec
-from asset_pipeline.procedural_textures import procedural_texture
+from asset_pipeline.procedural_textures import procedural_relief, procedural_texture
 
 SMOOTH_DEG = 40.0  # edges sharper than this keep separate normals (boxes crisp, 24+-gon cylinders smooth)
 
@@ -257,19 +257,30 @@ def build_level(spec: LevelSpec, *, import_gltf=None) -> ir.Scene:
     scene = ir.Scene(name=spec.name, source=str(spec.path), sky=spec.sky, lights=list(spec.lights),
                      spawns=list(spec.spawns), lightmap=ir.LightmapLayout(spec.texels_per_metre, pages=[]), files=[str(spec.path)])
 
-    textures: dict[str, int] = {}
+    # A texture table (or path) -> its textures' indices: base colour, and for procedural relief
+    # the normal map and the occlusion-roughness-metalness map.
+    textures: dict[str, tuple[int, int | None, int | None]] = {}
     for i, m in enumerate(spec.materials):
-        tex = None
+        tex = normal = orm = None
         if m.texture is not None:
             k = json.dumps(m.texture, sort_keys=True)
             if k not in textures:
-                textures[k] = len(scene.textures)
-                scene.textures.append(_texture(spec, i, base_dir))
+                tex = len(scene.textures)
+                base = _texture(spec, i, base_dir)
+                scene.textures.append(base)
                 if isinstance(m.texture, str):
                     scene.files.append(str(base_dir / m.texture))
-            tex = textures[k]
+                relief = procedural_relief(m.texture) if isinstance(m.texture, dict) else None
+                if relief is not None:
+                    normal, orm = tex + 1, tex + 2
+                    for suffix, rgba, usage in (("normal", relief[0], "normal"), ("orm", relief[1], "data")):
+                        scene.textures.append(ir.Texture(name=f"{base.name}-{suffix}", width=rgba.shape[1], height=rgba.shape[0],
+                                                         format="Rgba8Unorm", mips=[rgba], usage=usage))
+                textures[k] = (tex, normal, orm)
+            tex, normal, orm = textures[k]
         scene.materials.append(ir.Material(name=m.name, base_color=m.base_color, base_color_texture=tex, metallic=m.metallic,
-                                           roughness=m.roughness, emissive=m.emissive, double_sided=m.double_sided))
+                                           roughness=m.roughness, emissive=m.emissive, double_sided=m.double_sided,
+                                           normal_texture=normal, metallic_roughness_texture=orm, occlusion_texture=orm))
 
     brushes = {b.name: i for i, b in enumerate(spec.brushes)}
     solids: dict[str, m3.Manifold] = {}

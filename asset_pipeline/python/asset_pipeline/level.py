@@ -20,7 +20,9 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
     texture = "stone.png"           # a PNG beside the toml, or a procedural texture (sRGB colours):
     # texture = { procedural = "checker"|"bricks"|"planks"|"flagstones", size = 256 (pixels, power
     #             of two), count = 8 (cells/rows/planks per repeat), mortar = 0.06 (joint width as a
-    #             fraction of a cell), colors = [[r,g,b], [r,g,b]] (sRGB; face and joint), seed = 0 }
+    #             fraction of a cell), colors = [[r,g,b], [r,g,b]] (sRGB; face and joint), seed = 0,
+    #             relief = 1.0 (bricks, planks, flagstones: the depth of the joints, which also
+    #             gives the material a normal map and an occlusion-roughness map; 0: none) }
     uv_scale = 1.0                  # metres per texture repeat (world-space box projection)
     roughness = 0.8                 # 0..1
     metallic = 0.0                  # 0..1
@@ -455,6 +457,7 @@ TEXTURE_KEYS = {
     "mortar": (number(0, 0.5), 0.06),
     "colors": (_two_colors, [(0.8, 0.8, 0.8), (0.4, 0.4, 0.4)]),
     "seed": (integer(0), 0),
+    "relief": (number(0, 4), 1.0),
 }
 
 
