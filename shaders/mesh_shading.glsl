@@ -254,7 +254,9 @@ vec4 shade(vec4 a) {
     float nv = max(dot(n, v), 1e-4);
     vec3 f0 = mix(vec3(0.04), a.rgb, metallic);
     // Without specular the table's (A, B) are 0: w_d = 1 and no environment reflection.
-    vec2 dfg = specular ? texture(dfg_lut, vec2(nv, rough)).xy : vec2(0.0);
+    // The table's first and last texels are the ends of both ranges (shading::DfgLut).
+    vec2 lut_size = vec2(textureSize(dfg_lut, 0));
+    vec2 dfg = specular ? texture(dfg_lut, (vec2(nv, rough) * (lut_size - 1.0) + 0.5) / lut_size).xy : vec2(0.0);
     vec3 kd = a.rgb * (1.0 - metallic);
     // Rough lobes lean toward the normal (Frostbite's dominant direction).
     vec3 r = reflect(-v, n);

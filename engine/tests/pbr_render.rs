@@ -1,7 +1,7 @@
 //! The glTF metallic-roughness model in the shading pass against its closed forms
-//! (`../shared/notes/shading.md` §6b, §6e), on the real device with validation: the sun's GGX
-//! peak in nits, and normal maps that tilt the normal like tilted geometry, in the handedness
-//! glTF gives w. Expected bytes come from the CPU model (`shading`), exposed and tone-mapped by
+//! (`../shared/notes/shading.md` §6a, §6b, §6e, §7.9), on the real device with validation: the
+//! runtime white furnace, the sun's GGX peak in nits, normal maps that tilt the normal like
+//! tilted geometry in the handedness glTF gives w, and no inf or NaN from the sharpest lobe. Expected bytes come from the CPU model (`shading`), exposed and tone-mapped by
 //! the formula in `common::frames`.
 
 use engine::render::renderer::Lighting;
@@ -10,7 +10,7 @@ use pack::{Material, Pack, PackBuilder, TextureFormat};
 
 mod common;
 use common::frames::{assert_bytes_near, auto_exposure, looking_down_neg_z, pixel, tone_mapped_bytes, Rig};
-use common::packs::{add_baked_light, node, push_mesh, quad_vertices, sun, texture};
+use common::packs::{add_baked_light, node, push_mesh, push_uniform_probes, quad_vertices, sun, texture};
 use common::{assert_clean, gpu};
 
 /// The lightmap page's B: it sets the exposure (`auto_exposure`) and makes the pack baked
@@ -37,6 +37,19 @@ fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, l
     b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
     b.manifest.nodes.push(node("quad", place, mesh));
     b.manifest.lights.push(sun(lux, towards_sun, 0.0));
+    b.finish()
+}
+
+/// `quad_pack` lit by probes alone: every probe sees a uniform sky of `sky` nits, no sun.
+fn furnace_pack(material: Material, place: Mat4, sky: f32) -> Pack {
+    let mut b = PackBuilder::new("generated", "test");
+    let (verts, idx) = quad_vertices();
+    add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -50.0, 0.0));
+    b.manifest.materials.push(material);
+    let mesh = push_mesh(&mut b, "quad", &verts, &idx, None);
+    b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
+    b.manifest.nodes.push(node("quad", place, mesh));
+    push_uniform_probes(&mut b, sky, 0.0);
     b.finish()
 }
 
@@ -125,4 +138,46 @@ fn the_tangents_w_picks_the_bitangents_side() {
         got.push(px[0]);
     }
     assert!(got[0] > got[1] + 40, "w = +1 must face the sun more: {got:?}");
+}
+
+#[test]
+fn white_furnace_at_runtime() {
+    // §6a runtime furnace: a uniform sky of L nits as the only light (probe B = L, environment
+    // L in every direction). A white dielectric returns L for every roughness and view: its
+    // diffuse weight w_d = 1 - (0.04 A + B) gives up exactly what the specular
+    // (0.04 A + B) L takes. A white metal returns L (A + B), its single-scattering loss. The
+    // sky is dim for the exposure (50 nits, exposed to 0.18, a mid tone), where one byte is
+    // about 2.3 % of radiance: a 1 % error shows within the byte of tolerance.
+    let sky = 50.0;
+    let exposure = auto_exposure(LIGHTMAP_B);
+    let white = tone_mapped_bytes([sky; 3], exposure, 1.0);
+    for r in [0.1f32, 0.5, 1.0] {
+        for view_deg in [0.0f32, 60.0] {
+            let place = Mat4::from_quat(Quat::from_rotation_y(view_deg.to_radians()));
+            let dielectric = Material { base_color: [1.0; 4], metallic: 0.0, roughness: r, ..Material::default() };
+            let got = centre_pixel(&furnace_pack(dielectric, place, sky));
+            eprintln!("dielectric r {r}, view {view_deg} deg: {got:?}, want {white:?} ({sky} nits)");
+            assert_bytes_near(&format!("white dielectric r {r} at {view_deg} deg"), got, white, 1);
+            let metal = Material { base_color: [1.0; 4], metallic: 1.0, roughness: r, ..Material::default() };
+            let (a, b) = shading::dfg((view_deg as f64).to_radians().cos(), r as f64);
+            let l = sky * (a + b) as f32;
+            let want = tone_mapped_bytes([l; 3], exposure, 1.0);
+            let got = centre_pixel(&furnace_pack(metal, place, sky));
+            eprintln!("metal r {r}, view {view_deg} deg: {got:?}, want {want:?} ({l:.1} nits)");
+            assert_bytes_near(&format!("white metal r {r} at {view_deg} deg"), got, want, 1);
+        }
+    }
+}
+
+#[test]
+fn the_sharpest_metal_under_a_strong_sun_stays_finite() {
+    // §7.9: an r = 0.045 (the floor) white metal facing a 100 000 lux sun along the view peaks
+    // at f0 E / (4 pi alpha^2) = 1.9e9 nits, past half precision: the shading pass clamps it to
+    // the HDR target's largest value (65 504) instead of writing inf, and the tone map shows it
+    // as white, not as the black an inf or NaN would give.
+    let lux = 100_000.0;
+    let metal = Material { base_color: [1.0; 4], metallic: 1.0, roughness: 0.0, ..Material::default() };
+    let got = centre_pixel(&quad_pack(metal, None, 1.0, Mat4::IDENTITY, lux, Vec3::Z));
+    let want = tone_mapped_bytes([65_504.0; 3], auto_exposure(LIGHTMAP_B), 1.0);
+    assert_bytes_near("the clamped peak", got, want, 1);
 }

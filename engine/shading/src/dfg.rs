@@ -44,8 +44,12 @@ pub fn specular_albedo(f0: f64, n_v: f64, r: f64) -> f64 {
     f0 * a + b
 }
 
-/// A cooked table of `(A, B)`: texel (i, j) holds n·v = (i + ½)/size, r = (j + ½)/size (x is
-/// n·v, y is roughness), as the shaders sample it with a clamped linear sampler.
+/// A cooked table of `(A, B)`: texel (i, j) holds n·v = i/(size − 1), r = j/(size − 1) (x is
+/// n·v, y is roughness), so its first and last texels are the ends of both ranges: a lookup at
+/// n·v = 1 or r = 1 (a metal seen head-on, the roughest material) reads the value there, not
+/// the one half a texel in (at (i + ½)/size the table's corner is r = 0.984, where a white
+/// metal's A + B is 6 % above its 1 − ln 2 at r = 1). The shaders map x to (x (size − 1) + ½)
+/// / size for their clamped linear sampler.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DfgLut {
     pub size: u32,
@@ -60,8 +64,12 @@ impl DfgLut {
             .into_par_iter()
             .map(|k| {
                 let (i, j) = (k % size, k / size);
-                let (a, b) = dfg((i as f64 + 0.5) / size as f64, (j as f64 + 0.5) / size as f64);
-                [a as f32, b as f32]
+                let last = (size - 1).max(1) as f64;
+                let (a, b) = dfg(i as f64 / last, j as f64 / last);
+                // No lobe reflects more than it receives; the quadrature overshoots by up to
+                // 0.3 % on sharp lobes at grazing view (column 0 is n·v = 0, taken as 1e-4).
+                let k = 1.0 / (a + b).max(1.0);
+                [(a * k) as f32, (b * k) as f32]
             })
             .collect();
         DfgLut { size, texels }

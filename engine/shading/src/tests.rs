@@ -82,13 +82,22 @@ fn the_sun_peak_in_nits() {
 
 #[test]
 fn dfg_lut_points_and_bounds() {
-    // §6c at texel centres of a 32² table, ±2·10⁻³.
-    let lut = DfgLut::new(32);
+    // §6c's points (the texel centres of a 32² table at (i + ½)/32), ±2·10⁻³.
     for ((i, j), (a, b)) in [((15, 15), (0.84034, 0.02596)), ((3, 28), (0.75904, 0.03145)), ((7, 3), (0.73748, 0.26102))] {
-        let t = lut.at(i, j);
-        close(t[0] as f64, a, 2e-3, &format!("A at texel ({i}, {j})"));
-        close(t[1] as f64, b, 2e-3, &format!("B at texel ({i}, {j})"));
+        let (ga, gb) = dfg((i as f64 + 0.5) / 32.0, (j as f64 + 0.5) / 32.0);
+        close(ga, a, 2e-3, &format!("A at §6c point ({i}, {j})"));
+        close(gb, b, 2e-3, &format!("B at §6c point ({i}, {j})"));
     }
+    // The engine's table spans both ranges end to end: texel (i, j) is (i/31, j/31), and its
+    // corner is a white metal at r = 1 seen head-on, 1 − ln 2 in all (§6a).
+    let lut = DfgLut::new(32);
+    for (i, j) in [(0, 0), (15, 15), (3, 28), (31, 31)] {
+        let (a, b) = dfg(i as f64 / 31.0, j as f64 / 31.0);
+        let k = 1.0 / (a + b).max(1.0);
+        assert_eq!(lut.at(i, j), [(a * k) as f32, (b * k) as f32], "texel ({i}, {j})");
+    }
+    let [a, b] = lut.at(31, 31);
+    close((a + b) as f64, 1.0 - std::f64::consts::LN_2, 2e-3, "A + B at n·v = 1, r = 1");
     // And the table's points away from texel centres.
     for (nv, r, a, b) in [(0.5, 0.5, 0.8349, 0.0223), (0.05, 0.1, 0.2425, 0.7337), (0.25, 1.0, 0.5868, 0.0109), (1.0, 0.75, 0.6268, 0.0)] {
         let (ga, gb) = dfg(nv, r);

@@ -150,18 +150,23 @@ impl Overlay {
             // A discarded pass starts over: keep only the rects of the pass that is drawn.
             controls.clear();
             let ctx = ui.ctx().clone();
+            // Never taller than the frame: the panels scroll inside it (the title bar and margins
+            // take the rest).
+            let max_height = (ui.available_rect_before_wrap().height() - 48.0).max(100.0);
             let shown = egui::Window::new("engine").default_pos([8.0, 8.0]).default_width(330.0).resizable(false).show(&ctx, |ui| {
-                let mut own = RendererPanel {
-                    renderer: &mut *renderer,
-                    history,
-                    last,
-                    controls: &mut *controls,
-                };
-                show_panel(ui, &mut own, true);
-                show_panel(ui, &mut PassesPanel { renderer: &*renderer, last }, false);
-                for panel in extra.iter_mut() {
-                    show_panel(ui, &mut **panel, false);
-                }
+                egui::ScrollArea::vertical().max_height(max_height).show(ui, |ui| {
+                    let mut own = RendererPanel {
+                        renderer: &mut *renderer,
+                        history,
+                        last,
+                        controls: &mut *controls,
+                    };
+                    show_panel(ui, &mut own, true);
+                    show_panel(ui, &mut PassesPanel { renderer: &*renderer, last }, false);
+                    for panel in extra.iter_mut() {
+                        show_panel(ui, &mut **panel, false);
+                    }
+                });
             });
             window_rect = shown.map(|s| s.response.rect);
         });
