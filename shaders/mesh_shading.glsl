@@ -249,7 +249,14 @@ vec4 shade(vec4 a) {
     float metallic = clamp(pbr.x * mr.b, 0.0, 1.0);
     float rough = clamp(pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
     float alpha = rough * rough;
-    float ao = maps && materials[m].occlusion_uv[1].w > 0.5 ? 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0) : 1.0;
+    // Occlusion's flag is 2 when it is the metallic-roughness texture's red at the same
+    // coordinates (a packed ORM texture): one sample serves both.
+    float occlusion_flag = materials[m].occlusion_uv[1].w;
+    float ao = 1.0;
+    if (maps && occlusion_flag > 0.5) {
+        float o = occlusion_flag > 1.5 ? mr.r : texture(occlusion_tex, in_occlusion_uv).r;
+        ao = 1.0 + pbr.w * (o - 1.0);
+    }
     vec3 v = normalize(frame.camera_pos.xyz - in_world);
     float nv = max(dot(n, v), 1e-4);
     vec3 f0 = mix(vec3(0.04), a.rgb, metallic);

@@ -50,6 +50,18 @@ fn uv_rows(t: &TextureTransform, texture: Option<u32>) -> [[f32; 4]; 2] {
     [[r0[0], r0[1], r0[2], t.tex_coord as f32], [r1[0], r1[1], r1[2], texture.is_some() as u32 as f32]]
 }
 
+/// The occlusion slot's rows; their flag is 2 when occlusion is the red channel of the
+/// metallic-roughness texture read at the same coordinates (glTF's packed ORM, as the level's
+/// procedural materials and most exported assets have it): the shader then takes it from that
+/// sample instead of sampling the same texel again.
+fn occlusion_rows(mt: &pack::Material) -> [[f32; 4]; 2] {
+    let mut rows = uv_rows(&mt.occlusion_uv, mt.occlusion_texture);
+    if mt.occlusion_texture.is_some() && mt.occlusion_texture == mt.metallic_roughness_texture && mt.occlusion_uv == mt.metallic_roughness_uv {
+        rows[1][3] = 2.0;
+    }
+    rows
+}
+
 fn vk_format(f: TextureFormat) -> vk::Format {
     match f {
         TextureFormat::Rgba8Srgb => vk::Format::R8G8B8A8_SRGB,
@@ -206,7 +218,7 @@ impl GpuScene {
                 emissive_uv: uv_rows(&mt.emissive_uv, mt.emissive_texture),
                 normal_uv: uv_rows(&mt.normal_uv, mt.normal_texture),
                 metallic_roughness_uv: uv_rows(&mt.metallic_roughness_uv, mt.metallic_roughness_texture),
-                occlusion_uv: uv_rows(&mt.occlusion_uv, mt.occlusion_texture),
+                occlusion_uv: occlusion_rows(mt),
             })
             .collect();
         if constants.is_empty() {

@@ -42,6 +42,11 @@ fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, l
 
 /// `quad_pack` lit by probes alone: every probe sees a uniform sky of `sky` nits, no sun.
 fn furnace_pack(material: Material, place: Mat4, sky: f32) -> Pack {
+    furnace_builder(material, place, sky).finish()
+}
+
+/// `furnace_pack`, still open for more (the quad's material is material 1).
+fn furnace_builder(material: Material, place: Mat4, sky: f32) -> PackBuilder {
     let mut b = PackBuilder::new("generated", "test");
     let (verts, idx) = quad_vertices();
     add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -50.0, 0.0));
@@ -50,7 +55,7 @@ fn furnace_pack(material: Material, place: Mat4, sky: f32) -> Pack {
     b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
     b.manifest.nodes.push(node("quad", place, mesh));
     push_uniform_probes(&mut b, sky, 0.0);
-    b.finish()
+    b
 }
 
 /// The centre pixel of the frame from (0, 0, 3) looking down -Z (the quad's centre), with
@@ -180,4 +185,30 @@ fn the_sharpest_metal_under_a_strong_sun_stays_finite() {
     let got = centre_pixel(&quad_pack(metal, None, 1.0, Mat4::IDENTITY, lux, Vec3::Z));
     let want = tone_mapped_bytes([65_504.0; 3], auto_exposure(LIGHTMAP_B), 1.0);
     assert_bytes_near("the clamped peak", got, want, 1);
+}
+
+#[test]
+fn occlusion_darkens_indirect_light_from_a_packed_orm_texture_or_its_own() {
+    // In the furnace (a white dielectric returns the sky's L) an occlusion of 0.5 at strength
+    // 1 returns L / 2: from the red of a packed occlusion-roughness-metalness texture (one
+    // texture in both slots, sampled once) and from an occlusion texture of its own; strength
+    // 0.5 returns 3 L / 4.
+    let sky = 50.0;
+    let exposure = auto_exposure(LIGHTMAP_B);
+    let pack_with = |separate: bool, strength: f32| {
+        let mut b = furnace_builder(Material { base_color: [1.0; 4], metallic: 0.0, roughness: 0.5, ..Material::default() }, Mat4::IDENTITY, sky);
+        let orm = texture(&mut b, "orm", TextureFormat::Rgba8Unorm, [1, 1], &[&[128, 255, 0, 255]]);
+        let occlusion = if separate { texture(&mut b, "occlusion", TextureFormat::Rgba8Unorm, [1, 1], &[&[128, 128, 128, 255]]) } else { orm };
+        let m = &mut b.manifest.materials[1];
+        (m.metallic_roughness_texture, m.occlusion_texture, m.occlusion_strength) = (Some(orm), Some(occlusion), strength);
+        b.finish()
+    };
+    let half = 128.0 / 255.0;
+    for (separate, strength) in [(false, 1.0), (true, 1.0), (false, 0.5)] {
+        let got = centre_pixel(&pack_with(separate, strength));
+        let l = sky * (1.0 + strength * (half - 1.0));
+        let want = tone_mapped_bytes([l; 3], exposure, 1.0);
+        eprintln!("occlusion {half:.3} at strength {strength} ({}): {got:?}, want {want:?} ({l:.1} nits)", if separate { "own texture" } else { "packed ORM" });
+        assert_bytes_near(&format!("occlusion strength {strength}, separate {separate}"), got, want, 1);
+    }
 }
