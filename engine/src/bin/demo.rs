@@ -324,7 +324,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     };
     let mut frame_ms = record();
     let mut gpu_ms = record();
-    let mut pass_ms: [Vec<f64>; 5] = std::array::from_fn(|_| record());
+    // Every pass of the renderer, in frame order, with its GPU ms per frame (0 when it did not run).
+    let pass_names: Vec<&'static str> = renderer.pass_names().collect();
+    let mut pass_ms: Vec<Vec<f64>> = pass_names.iter().map(|_| record()).collect();
     let mut skin_ms = record();
     for f in 0..frames {
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
@@ -353,8 +355,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
         if let Some(p) = renderer.profile(&gpu, 0) {
-            for (v, ms) in pass_ms.iter_mut().zip([p.ms_prefixed("shadow"), p.ms("prepass"), p.ms("shading"), p.ms("particles"), p.ms("tonemap")]) {
-                v.push(ms);
+            for (v, name) in pass_ms.iter_mut().zip(&pass_names) {
+                v.push(p.ms(name));
             }
             skin_ms.push(p.ms("skinning"));
         }
@@ -398,8 +400,14 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
     }
-    if let [Some(s), Some(a), Some(b), Some(pt), Some(t)] = pass_ms.each_ref().map(|v| median(v)) {
-        println!("pass gpu_ms (median): sun shadow {s:.3} ({} casters), depth pre-pass {a:.3}, shading {b:.3}, particles {pt:.3} ({} billboards), tone map {t:.3}", renderer.shadow_casters, renderer.visibility.counts.particles);
+    // The passes that ran in some frame, as the overlay lists them.
+    let ran: Vec<String> = pass_names
+        .iter()
+        .zip(&pass_ms)
+        .filter_map(|(name, ms)| median(ms).filter(|_| ms.iter().any(|&m| m > 0.0)).map(|m| format!("{name} {m:.3}")))
+        .collect();
+    if !ran.is_empty() {
+        println!("pass gpu_ms (median): {} ({} shadow casters, {} billboards)", ran.join(", "), renderer.shadow_casters, renderer.visibility.counts.particles);
     }
     if let Some(o) = overlay.take() {
         o.destroy(&gpu);
