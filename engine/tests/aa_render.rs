@@ -136,3 +136,34 @@ fn alpha_to_coverage_ramps_a_mask_edge() {
         assert!(partial_on >= H as usize / 2, "only {partial_on} partly covered pixels (pre-pass {prepass})");
     }
 }
+
+#[test]
+fn switching_msaa_back_and_forth_keeps_both_targets_and_drops_the_unused_one() {
+    // The graph keeps a transient image per description: frames alternating MSAA on and off
+    // (the overlay's buttons, bench's variants) reuse the 4-sample and the 1-sample targets
+    // instead of re-creating them at every switch; 16 frames after MSAA is last used its
+    // targets go.
+    let gpu = gpu();
+    let pack = cube_pack(&[Mat4::from_scale(Vec3::splat(0.8))], WHITE4, Material::default());
+    let mut rig = Rig::new(&gpu, &pack, W, H);
+    let images = |gpu: &engine::gpu::Gpu| gpu.live_allocations().into_iter().filter(|n| n.starts_with("hdr") || n.starts_with("depth")).collect::<Vec<_>>();
+    let mut frame = |rig: &mut Rig, aa| {
+        rig.renderer.aa = aa;
+        rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(3.0), &Lighting::default(), false).unwrap();
+    };
+    frame(&mut rig, AntiAliasing::Off);
+    frame(&mut rig, AntiAliasing::Msaa);
+    let both = images(&gpu);
+    // hdr and depth at 1 sample, hdr and depth at 4, and the resolve target.
+    assert_eq!(both, ["depth", "depth", "hdr", "hdr", "hdr resolved"], "{both:?}");
+    for k in 0..10 {
+        frame(&mut rig, if k % 2 == 0 { AntiAliasing::Off } else { AntiAliasing::Msaa });
+        assert_eq!(images(&gpu), both, "frame {k} made or freed a target");
+    }
+    for _ in 0..20 {
+        frame(&mut rig, AntiAliasing::Off);
+    }
+    assert_eq!(images(&gpu), ["depth", "hdr"], "the multisampled targets outlived their use");
+    rig.destroy(&gpu);
+    assert_clean(&gpu);
+}

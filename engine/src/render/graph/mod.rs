@@ -42,7 +42,7 @@ pub struct ImageRef {
 }
 
 /// How big a transient image is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Size {
     /// The output's size.
     Output,
@@ -50,7 +50,7 @@ pub enum Size {
 }
 
 /// A transient image a pass asks the graph for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct ImageDesc {
     pub format: vk::Format,
     pub size: Size,
@@ -140,15 +140,25 @@ pub trait Pass {
 }
 
 struct Transient {
-    desc: ImageDesc,
     usage: vk::ImageUsageFlags,
     image: Image,
+    /// The last frame that used it.
+    used: u64,
 }
+
+/// Frames a transient may go unused before it is retired: switching a setting back and forth
+/// (MSAA on and off, FXAA's input; the bench cycles through its variants frame by frame) keeps
+/// each description's image instead of re-creating it at every switch, and one left behind by
+/// a setting switched off goes soon after.
+const UNUSED_FRAMES: u64 = 16;
 
 pub struct Graph {
     states: States,
-    transients: HashMap<ResourceId, Transient>,
-    /// Which image each imported resource was last frame (a different one starts UNDEFINED).
+    /// Transient images by name and description (one name may have several: the HDR target
+    /// with one sample and with four).
+    transients: HashMap<(ResourceId, ImageDesc), Transient>,
+    /// Which image each imported or transient resource was last frame (a different one starts
+    /// UNDEFINED).
     imported: HashMap<ResourceId, vk::Image>,
     /// Replaced transients and the frame after which no frame in flight can use them.
     retired: Vec<(u64, Image)>,
@@ -285,18 +295,29 @@ impl Graph {
                 Size::Output => output,
                 Size::Fixed(e) => e,
             };
-            let keep = self.transients.get(&id).is_some_and(|t| t.desc == desc && t.image.extent == extent && t.usage.contains(usage));
+            let key = (id, desc);
+            let keep = self.transients.get(&key).is_some_and(|t| t.image.extent == extent && t.usage.contains(usage));
             if !keep {
                 // Usage only grows, so a pass switched on and off does not re-create the image.
-                let usage = usage | self.transients.get(&id).filter(|t| t.desc == desc).map_or(vk::ImageUsageFlags::empty(), |t| t.usage);
+                let usage = usage | self.transients.get(&key).map_or(vk::ImageUsageFlags::empty(), |t| t.usage);
                 let image = Image::with_samples(gpu, id.0, desc.format, extent, 1, desc.samples, usage, view_aspect_of(desc.format))?;
-                if let Some(old) = self.transients.insert(id, Transient { desc, usage, image }) {
+                if let Some(old) = self.transients.insert(key, Transient { usage, image, used: self.frame }) {
                     self.retired.push((self.frame + self.frames_in_flight as u64, old.image));
                 }
-                self.states.forget(id);
             }
-            let t = &self.transients[&id];
-            images.insert(id, ImageRef { image: t.image.image, view: t.image.view, format: desc.format, extent });
+            let t = self.transients.get_mut(&key).expect("made above");
+            t.used = self.frame;
+            let (image, view) = (t.image.image, t.image.view);
+            // Another image under this name than last frame: its contents and layout are new.
+            self.track_import(id, image);
+            images.insert(id, ImageRef { image, view, format: desc.format, extent });
+        }
+        // Images no frame has used for a while go once no frame in flight can use them.
+        let (frame, retire_after) = (self.frame, self.frame + self.frames_in_flight as u64);
+        let stale: Vec<_> = self.transients.iter().filter(|(_, t)| t.used + UNUSED_FRAMES < frame).map(|(k, _)| *k).collect();
+        for key in stale {
+            let t = self.transients.remove(&key).expect("listed above");
+            self.retired.push((retire_after, t.image));
         }
         Ok(())
     }
