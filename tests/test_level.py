@@ -145,6 +145,10 @@ def test_temple_contents(temple):
         assert (temple.textures[m.normal_texture].format, temple.textures[m.normal_texture].usage) == ("Rgba8Unorm", "normal"), name
         assert m.metallic_roughness_texture == m.occlusion_texture and temple.textures[m.occlusion_texture].usage == "data", name
     assert mats["marble_floor"].normal_texture is None and mats["marble_floor"].metallic_roughness_texture is None
+    # The two golems (one asset spawned twice) share their stone's three textures.
+    t = temple.textures
+    assert not [(i, j) for i in range(len(t)) for j in range(i) if t[i].same_as(t[j])]
+    assert sum(x.name.startswith("golem stone") for x in t) == 3
     assert 1_000 < sum(temple.meshes[i].base.triangle_count for i in temple.static_meshes()) < 50_000
     # every level mesh sits at the world origin: positions are world space (characters are placed
     # by their spawn's root node)

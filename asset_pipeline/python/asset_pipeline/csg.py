@@ -148,10 +148,17 @@ def _texture(spec: LevelSpec, mat_index: int, base_dir: Path) -> ir.Texture:
 
 def _append_meshes(scene: ir.Scene, prop: ir.Scene) -> int:
     """Append `prop`'s meshes, materials and textures to `scene`, their references remapped;
-    returns the index the prop's first mesh has in `scene`."""
-    mesh0, mat0, tex0 = len(scene.meshes), len(scene.materials), len(scene.textures)
-    scene.textures += prop.textures
-    scene.materials += [mt.with_textures_offset(tex0) for mt in prop.materials]
+    returns the index the prop's first mesh has in `scene`. A texture the scene already holds
+    (the same asset spawned twice, as the level's two golems are) is shared, not copied."""
+    mesh0, mat0 = len(scene.meshes), len(scene.materials)
+    index = []
+    for t in prop.textures:
+        same = next((i for i, u in enumerate(scene.textures) if u.same_as(t)), None)
+        if same is None:
+            same = len(scene.textures)
+            scene.textures.append(t)
+        index.append(same)
+    scene.materials += [mt.with_textures_mapped(index) for mt in prop.materials]
     scene.meshes += [dataclasses.replace(me, lods=[
         dataclasses.replace(l, materials=(l.materials + mat0).astype(np.uint32)) for l in me.lods]) for me in prop.meshes]
     return mesh0

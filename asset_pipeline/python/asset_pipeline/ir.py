@@ -134,9 +134,9 @@ class Material:
         """The UV transform of `slot` ("base_color", "emissive", ...), identity filled in."""
         return texture_transform(getattr(self, f"{slot}_uv"))
 
-    def with_textures_offset(self, offset: int) -> "Material":
-        """The material with every texture index moved by `offset` (scenes being merged)."""
-        return dataclasses.replace(self, **{s: getattr(self, s) + offset for s in TEXTURE_SLOTS if getattr(self, s) is not None})
+    def with_textures_mapped(self, index: list[int]) -> "Material":
+        """The material with every texture index i replaced by index[i] (scenes being merged)."""
+        return dataclasses.replace(self, **{s: index[getattr(self, s)] for s in TEXTURE_SLOTS if getattr(self, s) is not None})
 
 
 # Material fields that hold a texture index.
@@ -184,6 +184,12 @@ class Texture:
     def __post_init__(self):
         if self.usage is None:
             self.usage = USAGE_OF_FORMAT.get(self.format, "color")
+
+    def same_as(self, other: "Texture") -> bool:
+        """Whether `other` holds the same texels, read the same way (a second import of one asset)."""
+        return ((self.name, self.width, self.height, self.format, self.usage, self.sampling) ==
+                (other.name, other.width, other.height, other.format, other.usage, other.sampling)
+                and len(self.mips) == len(other.mips) and all(np.array_equal(a, b) for a, b in zip(self.mips, other.mips)))
 
     @property
     def sampling(self) -> dict:
