@@ -344,26 +344,16 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
         "frame_s": FRAME_S,
         "content": content,
         "floor_ms": floor,
-        "cpu_frame_ms": summary(&main.cpu_ms),
-        "floor_ratio": ratios(&main.cpu_ms, floor),
-        "gpu_frame_ms": summary(&main.gpu_ms),
-        "pass_gpu_ms": pass_summary(&main.passes, &pass_names),
-        "counters": main.counters,
-        "samples": { "cpu_frame_ms": main.cpu_ms, "gpu_frame_ms": main.gpu_ms },
         "note": "cpu_frame_ms is the wall time of a whole frame including the wait for the GPU fence; GPU timestamps on lavapipe do not capture compute work reliably (skinning_ms understates the skinning pass)",
     });
+    let fields = doc.as_object_mut().expect("an object");
+    fields.extend(series_json(main, floor, &pass_names));
     if !variants.is_empty() {
         let mut all = Map::new();
         for (switch, v) in variants.iter().zip(&series[1..]) {
-            all.insert(switch.key().into(), json!({
-                "label": switch.label(),
-                "cpu_frame_ms": summary(&v.cpu_ms),
-                "floor_ratio": ratios(&v.cpu_ms, floor),
-                "gpu_frame_ms": summary(&v.gpu_ms),
-                "pass_gpu_ms": pass_summary(&v.passes, &pass_names),
-                "counters": v.counters,
-                "samples": { "cpu_frame_ms": v.cpu_ms, "gpu_frame_ms": v.gpu_ms },
-            }));
+            let mut variant = series_json(v, floor, &pass_names);
+            variant.insert("label".into(), json!(switch.label()));
+            all.insert(switch.key().into(), Value::Object(variant));
         }
         doc["variants"] = Value::Object(all);
     }
@@ -371,6 +361,22 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
     let path = o.json_dir.join(format!("{name}.json"));
     write_atomic(&path, &serde_json::to_vec_pretty(&doc)?)?;
     Ok(path)
+}
+
+/// One series' times (with the floor's ratios), per-pass GPU ms, counters and samples.
+fn series_json(s: &Series, floor: &Value, pass_names: &[&'static str]) -> Map<String, Value> {
+    let doc = json!({
+        "cpu_frame_ms": summary(&s.cpu_ms),
+        "floor_ratio": ratios(&s.cpu_ms, floor),
+        "gpu_frame_ms": summary(&s.gpu_ms),
+        "pass_gpu_ms": pass_summary(&s.passes, pass_names),
+        "counters": s.counters,
+        "samples": { "cpu_frame_ms": s.cpu_ms, "gpu_frame_ms": s.gpu_ms },
+    });
+    match doc {
+        Value::Object(m) => m,
+        _ => unreachable!("json! of an object"),
+    }
 }
 
 fn print_summary(o: &Options, name: &str, doc: &Value, variants: &[Switch]) {
