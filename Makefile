@@ -42,6 +42,7 @@ cook: cooker
 	@mkdir -p build/content
 	$(PY) content/characters/make_creature.py content/levels/characters/golem.gltf
 	$(PY) content/birds/make_dove.py content/levels/birds/dove.gltf
+	$(PY) content/props/make_lantern.py content/levels/props/lantern.gltf
 	$(VENV)/bin/cook content/levels/temple.toml -o $(LEVEL_PACK)
 	$(VENV)/bin/cook content/levels/characters/golem.gltf -o $(CHARACTER_PACK)
 	$(PY) content/demo/make_scene.py build/content/demo.gltf

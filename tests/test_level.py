@@ -114,10 +114,13 @@ def temple() -> ir.Scene:
 
 def test_temple_meshes_are_closed_and_outward(temple):
     assert {m.name for m in temple.meshes} >= {"ground", "temple", "courtyard", "fountain"}
-    # The character spawns' golems, each skinned by its own skin, and the flock's bird (drawn by
-    # the boids pass, no node) are the only dynamic meshes.
+    # The two glass lanterns' parts (dynamic props), the character spawns' golems, each skinned
+    # by its own skin, and the flock's bird (drawn by the boids pass, no node) are the only
+    # dynamic meshes.
     static = set(temple.static_meshes())
-    assert [m.name for i, m in enumerate(temple.meshes) if i not in static] == ["golem", "golem", "dove"]
+    lantern = ["post", "cap", "flame", "glass"]
+    assert [m.name for i, m in enumerate(temple.meshes) if i not in static] == lantern + lantern + ["golem", "golem", "dove"]
+    assert sum(m.alpha_mode == "Blend" for m in temple.materials) == 2  # the glass of each lantern
     doves = next(s for s in temple.spawns if s.kind == "boids")
     assert temple.meshes[doves.params["mesh"]].name == "dove"
     assert [s.name for s in temple.skins] == ["priest/golem", "pilgrim/golem"]

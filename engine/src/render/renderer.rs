@@ -144,6 +144,9 @@ pub struct Renderer {
     /// Specular reflection, of the sun and of the environment (on by default; off, diffuse
     /// only: the look and the cost before the glTF material model).
     pub specular: bool,
+    /// Draw BLEND materials in the transparent phase (on by default; off, they are not drawn,
+    /// to see and measure the phase).
+    pub transparency: bool,
     /// Anti-aliasing: off, MSAA (multisampled camera targets, `resolve` pass) or FXAA after the
     /// tone map (the `fxaa` pass).
     pub aa: AntiAliasing,
@@ -229,6 +232,7 @@ impl Renderer {
             sky: true,
             material_maps: true,
             specular: true,
+            transparency: true,
             aa: AntiAliasing::Off,
             slot_counted: vec![false; frames_in_flight],
             visibility: Visibility::default(),
@@ -303,8 +307,12 @@ impl Renderer {
         if scene.materials.iter().any(|m| m.blend) {
             let opaque: Vec<Draw> = self.visibility.draws.iter().filter(|d| has_submesh(scene, d, false)).copied().collect();
             self.batcher.batch(scene, anim, slot, &opaque, mode, &mut f.view_batches);
-            let blended = sort_back_to_front(scene, &self.visibility.draws, camera);
-            self.batcher.batch(scene, anim, slot, &blended, BatchMode { instancing: false, ..mode }, &mut f.transparent_batches);
+            if self.transparency {
+                let blended = sort_back_to_front(scene, &self.visibility.draws, camera);
+                self.batcher.batch(scene, anim, slot, &blended, BatchMode { instancing: false, ..mode }, &mut f.transparent_batches);
+            } else {
+                f.transparent_batches.clear();
+            }
         } else {
             self.batcher.batch(scene, anim, slot, &self.visibility.draws, mode, &mut f.view_batches);
             f.transparent_batches.clear();

@@ -66,7 +66,8 @@ pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frame
 Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
                     animating at a fixed step; frames cycle through the default (no anti-aliasing)
-                    and the variants aa_msaa, aa_fxaa, sky_off, material_maps_off, specular_off
+                    and the variants aa_msaa, aa_fxaa, sky_off, material_maps_off, specular_off,
+                    transparency_off
   culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection;
                     frames alternate with instancing on (the scenario's times) and off, one draw
                     call per cube (its `variants.instancing_off`)
@@ -193,6 +194,7 @@ enum Switch {
     SkyOff,
     MaterialMapsOff,
     SpecularOff,
+    TransparencyOff,
 }
 
 impl Switch {
@@ -206,6 +208,7 @@ impl Switch {
             Switch::SkyOff => "sky_off",
             Switch::MaterialMapsOff => "material_maps_off",
             Switch::SpecularOff => "specular_off",
+            Switch::TransparencyOff => "transparency_off",
         }
     }
 
@@ -218,6 +221,7 @@ impl Switch {
             Switch::SkyOff => "sky off",
             Switch::MaterialMapsOff => "material maps off",
             Switch::SpecularOff => "specular off",
+            Switch::TransparencyOff => "transparency off",
         }
     }
 
@@ -231,6 +235,7 @@ impl Switch {
             Switch::SkyOff => r.sky = !on,
             Switch::MaterialMapsOff => r.material_maps = !on,
             Switch::SpecularOff => r.specular = !on,
+            Switch::TransparencyOff => r.transparency = !on,
         }
     }
 }
