@@ -5,6 +5,7 @@ alike. Whichever binary ran first in a pair was faster in both of two back-to-ba
 on the shared 2-core machine, which made those comparisons useless.
 
     tools/bench_ab.py BENCH_A BENCH_B [--rounds 3] [--frames 20] [--warmup 3] [--scenarios a,b]
+                      [--b-args "--no-variants"]
 
 Prints, per scenario, the median over rounds of each binary's p50 CPU frame time, the ratio
 B/A, the spread of the per-round ratios, and the counters that differ (exact counters: a
@@ -25,9 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_report import SCENARIO_ORDER  # noqa: E402
 
 
-def run(binary: Path, scenario: str, out: Path, frames: int, warmup: int) -> dict:
+def run(binary: Path, scenario: str, out: Path, frames: int, warmup: int, extra: list[str]) -> dict:
     out.mkdir(parents=True, exist_ok=True)
-    subprocess.run([str(binary), "--scenario", scenario, "--frames", str(frames), "--warmup", str(warmup), "--json-dir", str(out), "--quiet"],
+    subprocess.run([str(binary), "--scenario", scenario, "--frames", str(frames), "--warmup", str(warmup), "--json-dir", str(out), "--quiet", *extra],
                    check=True, stdout=subprocess.DEVNULL)
     return json.loads((out / f"{scenario}.json").read_text())
 
@@ -40,6 +41,8 @@ def main(argv: list[str]) -> int:
     p.add_argument("--frames", type=int, default=20)
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--scenarios", default=",".join(SCENARIO_ORDER))
+    p.add_argument("--a-args", default="", help="extra arguments for A (split on spaces)")
+    p.add_argument("--b-args", default="", help="extra arguments for B, e.g. --no-variants against a build without them")
     args = p.parse_args(argv)
     for b in (args.a, args.b):
         if not b.is_file():
@@ -54,8 +57,8 @@ def main(argv: list[str]) -> int:
                 # ABBA: each binary runs first in half of the pairs.
                 order = ("A", "B") if r % 2 == 0 else ("B", "A")
                 for who in order:
-                    binary = args.a if who == "A" else args.b
-                    doc = run(binary, scenario, Path(tmp) / f"{who}{r}", args.frames, args.warmup)
+                    binary, extra = (args.a, args.a_args) if who == "A" else (args.b, args.b_args)
+                    doc = run(binary, scenario, Path(tmp) / f"{who}{r}", args.frames, args.warmup, extra.split())
                     p50[who].append(doc["cpu_frame_ms"]["p50"])
                     counters[who] = doc.get("counters", {})
             ratios = [b / a for a, b in zip(p50["A"], p50["B"])]

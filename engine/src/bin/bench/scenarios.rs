@@ -62,6 +62,8 @@ pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frame
   --character PACK  the skinned character for skinned-64 (default build/golem.pack, `make cook`)
   --device D        pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --quiet           only the one-line summary per scenario
+  --no-variants     measure each scenario's default only (no variant frames in between): for
+                    comparing with a build that has fewer or no variants
 
 Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
@@ -94,6 +96,8 @@ pub struct Options {
     pub character: PathBuf,
     pub device: DevicePreference,
     pub quiet: bool,
+    /// Skip the scenarios' variants.
+    pub no_variants: bool,
 }
 
 /// Whether the command line asks for named scenarios (the other forms are the older benches).
@@ -113,6 +117,7 @@ pub fn parse(args: Vec<String>) -> Result<Options, String> {
         character: PathBuf::from("build/golem.pack"),
         device: DevicePreference::from_env(),
         quiet: false,
+        no_variants: false,
     };
     let mut it = args.into_iter();
     while let Some(flag) = it.next() {
@@ -134,6 +139,7 @@ pub fn parse(args: Vec<String>) -> Result<Options, String> {
             "--character" => o.character = value("--character")?.into(),
             "--device" => o.device = DevicePreference::parse(&value("--device")?),
             "--quiet" => o.quiet = true,
+            "--no-variants" => o.no_variants = true,
             "-h" | "--help" => return Err(USAGE.into()),
             other => return Err(format!("unknown argument '{other}' (try --help)")),
         }
@@ -328,6 +334,9 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
     let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1)?;
     let mut target = Offscreen::new(gpu, o.width, o.height)?;
     let result = setup(gpu, o, name, &mut renderer).and_then(|mut s| {
+        if o.no_variants {
+            s.variants.clear();
+        }
         let r = measure(gpu, o, &mut renderer, &mut target, &mut s);
         s.scene.destroy(gpu);
         r.map(|series| (series, s.content, s.variants))
