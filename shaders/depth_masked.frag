@@ -1,14 +1,14 @@
 #version 450
 // Depth pre-pass for alpha-tested (MASK) materials: no colour, only the discard; multisampled,
-// alpha-to-coverage reads output 0's alpha (there is no colour attachment to write).
+// the samples the alpha covers (gl_SampleMask), whose depth the shading pass then matches.
 #include "mesh_shading.glsl"
-
-layout(location = 0) out vec4 out_coverage;
 
 void main() {
     vec4 a = albedo();
     if (alpha_tested_away(a)) {
         discard;
     }
-    out_coverage = vec4(0.0, 0.0, 0.0, coverage(a));
+    // Written on every path (an unwritten sample mask is undefined): all samples unless
+    // alpha to coverage.
+    gl_SampleMask[0] = ALPHA_TO_COVERAGE ? coverage_mask(coverage(a)) : -1;
 }

@@ -1,6 +1,6 @@
 #version 450
 // The shading pass without a depth pre-pass: depth is tested and written here, so alpha-tested
-// (MASK) materials discard here (or, multisampled, give their coverage as alpha).
+// (MASK) materials discard here (or, multisampled, cover the samples their alpha says).
 #include "mesh_shading.glsl"
 
 layout(location = 0) out vec4 out_color;
@@ -11,5 +11,8 @@ void main() {
         discard;
     }
     count_fragment();
-    out_color = vec4(shade(a).rgb, ALPHA_TO_COVERAGE ? coverage(a) : 1.0);
+    // Written on every path (an unwritten sample mask is undefined): all samples unless
+    // alpha to coverage.
+    gl_SampleMask[0] = ALPHA_TO_COVERAGE ? coverage_mask(coverage(a)) : -1;
+    out_color = shade(a);
 }

@@ -48,9 +48,12 @@ layout(constant_id = 0) const bool COUNT_FRAGMENTS = false;
 // shading pass took about a third less time than with the branch (relative to the tone-map
 // pass in the same frames).
 layout(constant_id = 1) const bool LIGHTMAPPED = false;
-// Set by the renderer's multisampled pipelines that turn alpha into coverage: an alpha-tested
-// (MASK) fragment gives its coverage as alpha instead of discarding.
-layout(constant_id = 2) const bool ALPHA_TO_COVERAGE = false;
+// Samples per pixel of the target (1, or 4 with MSAA). Multisampled, an alpha-tested (MASK)
+// fragment covers as many of its pixel's samples as its alpha says (alpha to coverage, done
+// here with gl_SampleMask: the target's alpha stays 1, which the tone map's sky needs, and the
+// depth-only pre-pass needs no colour output for it) instead of discarding.
+layout(constant_id = 2) const int SAMPLES = 1;
+const bool ALPHA_TO_COVERAGE = SAMPLES > 1;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -85,6 +88,13 @@ float coverage(vec4 a) {
     float ax = alpha_at(uv + dFdx(uv), in_color + dFdx(in_color)) - a.a;
     float ay = alpha_at(uv + dFdy(uv), in_color + dFdy(in_color)) - a.a;
     return clamp((a.a - cutoff) / max(abs(ax) + abs(ay), 1e-4) + 0.5, 0.0, 1.0);
+}
+
+// The first round(coverage x SAMPLES) samples: a fixed pattern, so a ramp of coverage over an
+// edge covers one more sample a step (the samples sit at different places in the pixel).
+int coverage_mask(float c) {
+    int n = int(c * float(SAMPLES) + 0.5);
+    return (1 << n) - 1;
 }
 
 // Alpha tested against the material's cutoff. With ALPHA_TO_COVERAGE only a fragment that

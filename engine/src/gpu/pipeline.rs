@@ -30,9 +30,8 @@ pub struct GraphicsPipeline<'a> {
     color: Option<(vk::Format, vk::PipelineColorBlendAttachmentState)>,
     /// Dynamic state beyond viewport and scissor (which every pipeline has dynamic).
     extra_dynamic: &'a [vk::DynamicState],
-    /// Rasterisation samples (the attachments'), and alpha-to-coverage.
+    /// Rasterisation samples (the attachments').
     samples: vk::SampleCountFlags,
-    alpha_to_coverage: bool,
 }
 
 /// Writes all four channels, no blending.
@@ -69,15 +68,12 @@ impl<'a> GraphicsPipeline<'a> {
             color: None,
             extra_dynamic: &[],
             samples: vk::SampleCountFlags::TYPE_1,
-            alpha_to_coverage: false,
         }
     }
 
-    /// Render into attachments of `samples` samples; with `alpha_to_coverage`, the fragment's
-    /// alpha (output 0) decides how many of a pixel's samples it covers.
-    pub fn multisample(mut self, samples: vk::SampleCountFlags, alpha_to_coverage: bool) -> Self {
+    /// Render into attachments of `samples` samples.
+    pub fn multisample(mut self, samples: vk::SampleCountFlags) -> Self {
         self.samples = samples;
-        self.alpha_to_coverage = alpha_to_coverage;
         self
     }
 
@@ -153,7 +149,7 @@ impl<'a> GraphicsPipeline<'a> {
         if let Some((constant, slope)) = self.depth_bias {
             raster = raster.depth_bias_enable(true).depth_bias_constant_factor(constant).depth_bias_slope_factor(slope);
         }
-        let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(self.samples).alpha_to_coverage_enable(self.alpha_to_coverage);
+        let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(self.samples);
         let depth_stencil = self
             .depth
             .map(|(_, write, compare)| vk::PipelineDepthStencilStateCreateInfo::default().depth_test_enable(true).depth_write_enable(write).depth_compare_op(compare));

@@ -229,6 +229,6 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .vertex_input(&bindings, &attributes)
         .depth(depth_format, true, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, opaque())
-        .multisample(samples, false)
+        .multisample(samples)
         .build(gpu, layout)
 }

@@ -71,9 +71,9 @@ struct Variant {
     count_fragments: bool,
     /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
     lightmapped: bool,
-    /// ALPHA_TO_COVERAGE: alpha-tested (MASK) fragments give their coverage as alpha instead of
-    /// discarding (the pipeline turns it into sample coverage).
-    alpha_to_coverage: bool,
+    /// SAMPLES: the target's samples per pixel; above 1 alpha-tested (MASK) fragments cover as
+    /// many samples as their alpha says instead of discarding (alpha to coverage).
+    samples: u32,
 }
 
 /// The pipelines drawing into the camera's targets, for one sample count.
@@ -278,13 +278,13 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     }
 }
 
-/// The camera's mesh pipelines for targets of `samples` samples. Multisampled, the opaque
-/// shading without a pre-pass and the masked pre-pass turn alpha into coverage (opaque
-/// fragments give alpha 1: every sample); after a pre-pass the EQUAL test already keeps the
-/// samples the pre-pass covered.
+/// The camera's mesh pipelines for targets of `samples` samples. Multisampled, the shading
+/// without a pre-pass and the masked pre-pass turn a MASK material's alpha into coverage
+/// (their SAMPLES constant); after a pre-pass the EQUAL test already keeps the samples the
+/// pre-pass covered.
 fn camera_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags) -> Result<CameraPipelines> {
     let depth_format = gpu.caps.depth_format;
-    let a2c = samples != vk::SampleCountFlags::TYPE_1;
+    let sample_count = samples.as_raw();
     let made = std::cell::RefCell::new(gpu.own(Vec::<vk::Pipeline>::new()));
     let pipeline = |p: Result<vk::Pipeline>| -> Result<vk::Pipeline> {
         let p = p?;
@@ -293,7 +293,8 @@ fn camera_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountF
     };
     let shading = |lightmapped| {
         let make = |equal: bool, count_fragments| {
-            let variant = Variant { count_fragments, lightmapped, alpha_to_coverage: a2c && !equal };
+            // After a pre-pass the EQUAL test already keeps the samples it covered.
+            let variant = Variant { count_fragments, lightmapped, samples: if equal { 1 } else { sample_count } };
             pipeline(match equal {
                 false => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None, samples),
                 true => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None, samples),
@@ -305,7 +306,7 @@ fn camera_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountF
         let variant = Variant { lightmapped, ..Variant::default() };
         pipeline(create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples))
     };
-    let masked = Variant { alpha_to_coverage: a2c, ..Variant::default() };
+    let masked = Variant { samples: sample_count, ..Variant::default() };
     let set = CameraPipelines {
         shade: [shading(false)?, shading(true)?],
         depth: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, Variant::default(), None, samples))?,
@@ -333,9 +334,9 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0, 1 and 2: COUNT_FRAGMENTS, LIGHTMAPPED and ALPHA_TO_COVERAGE
+    // Specialisation constants 0, 1 and 2: COUNT_FRAGMENTS, LIGHTMAPPED and SAMPLES
     // (mesh_shading.glsl).
-    let values = [variant.count_fragments, variant.lightmapped, variant.alpha_to_coverage].map(|b| vk::Bool32::from(b).to_le_bytes());
+    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1)].map(u32::to_le_bytes);
     let bytes = values.concat();
     let entries: [vk::SpecializationMapEntry; 3] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
@@ -362,7 +363,7 @@ fn create_mesh_pipeline(
         .cull_back()
         .depth_bias(depth_bias)
         .depth(depth_format, depth_write, compare)
-        .multisample(samples, variant.alpha_to_coverage)
+        .multisample(samples)
         .dynamic(&dynamic);
     if let Some(f) = frag {
         pipeline = pipeline.fragment(f, Some(spec));

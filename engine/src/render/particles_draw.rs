@@ -220,6 +220,6 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .topology(vk::PrimitiveTopology::TRIANGLE_STRIP)
         .depth(depth_format, false, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, blend)
-        .multisample(samples, false)
+        .multisample(samples)
         .build(gpu, layout)
 }

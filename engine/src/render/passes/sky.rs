@@ -34,7 +34,7 @@ fn pipeline(gpu: &Gpu, layout: vk::PipelineLayout, samples: vk::SampleCountFlags
         .fragment(shaders::SKY_FRAG, None)
         .depth(gpu.caps.depth_format, false, vk::CompareOp::EQUAL)
         .color(HDR_FORMAT, opaque())
-        .multisample(samples, false)
+        .multisample(samples)
         .build(gpu, layout)
 }
 
