@@ -13,15 +13,39 @@
 
 layout(set = 0, binding = 0) uniform sampler2D hdr; // R16G16B16A16_SFLOAT, linear radiance
 
-// Mirrors `ToneMapPush` in engine/src/render/tonemap.rs.
+// Mirrors `ToneMapPush` in engine/src/render/tonemap.rs (128 bytes, Vulkan's guaranteed
+// push-constant size).
 layout(push_constant) uniform ToneMap {
-    vec4 params; // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s
+    vec4 params;        // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s; w: 1 = sky behind
+    mat4 inv_view_proj; // the camera's, for each pixel's view direction
+    vec4 sky;           // rgb: the sky's radiance (nits)
+    vec4 sun;           // xyz: unit vector toward the sun; w: cos of its angular radius
+    vec4 sun_disc;      // rgb: the disc's radiance (nits)
 } tm;
 
 layout(location = 0) out vec4 out_color;
 
+// The background's radiance along this pixel's view ray: the level's sky radiance in nits, as
+// the baker lit the level with it, and the sun's disc (its illuminance spread over its solid
+// angle, frame.rs `SkyParams`).
+vec3 sky_radiance() {
+    vec2 ndc = gl_FragCoord.xy / vec2(textureSize(hdr, 0)) * 2.0 - 1.0;
+    // Two points along the pixel's ray (reverse Z: 1 is the near plane, 0.5 twice as far).
+    vec4 a = tm.inv_view_proj * vec4(ndc, 1.0, 1.0);
+    vec4 b = tm.inv_view_proj * vec4(ndc, 0.5, 1.0);
+    vec3 dir = normalize(b.xyz / b.w - a.xyz / a.w);
+    return tm.sky.rgb + (dot(dir, tm.sun.xyz) >= tm.sun.w ? tm.sun_disc.rgb : vec3(0.0));
+}
+
 void main() {
     vec4 c = texelFetch(hdr, ivec2(gl_FragCoord.xy), 0);
+    // With a sky, the frame was drawn over zero radiance and alpha 0, every pass compositing
+    // premultiplied (surfaces alpha 1, glass and particles their coverage, MSAA's resolve the
+    // average): what shows of the background is 1 - alpha of it. One pass over the pixels the
+    // tone map visits anyway, instead of a sky pass of its own.
+    if (tm.params.w > 0.5) {
+        c = vec4(c.rgb + (1.0 - c.a) * sky_radiance(), 1.0);
+    }
     // Alpha 0 marks pixels no surface covered: the clear colour, display-referred, not radiance.
     if (tm.params.y < 0.5 || c.a == 0.0) {
         out_color = vec4(c.rgb, 1.0);

@@ -109,11 +109,12 @@ pub struct FrameData {
     pub tone_map: bool,
     pub camera_right: Vec3,
     pub camera_up: Vec3,
-    /// The background's radiance for the sky pass (a baked level with a sky or a sun).
+    /// The background's radiance, which the tone map puts behind the frame (a baked level with
+    /// a sky or a sun, `Renderer::sky` on).
     pub sky: Option<SkyParams>,
 }
 
-/// The sky pass's push constants (mirrors shaders/sky.frag).
+/// The background: the tone map's sky push constants (mirrors shaders/tonemap.frag).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SkyParams {
@@ -124,8 +125,6 @@ pub struct SkyParams {
     pub sun: Vec4,
     /// rgb: the radiance of the sun's disc (nits).
     pub sun_disc: Vec4,
-    /// xy: the output's size in pixels.
-    pub viewport: Vec4,
 }
 
 /// What every pass records with.
@@ -151,10 +150,10 @@ pub struct FrameCx<'a> {
 pub const SUN_ANGULAR_RADIUS: f32 = 0.004_625;
 
 impl SkyParams {
-    /// The background of a baked level seen through `view_proj` into an output of `extent`:
+    /// The background of a baked level seen through `view_proj`:
     /// its sky radiance and the sun's disc, whose radiance spreads the sun's illuminance E over
     /// the disc's solid angle 2 pi (1 - cos r). None for a level with neither.
-    pub fn of(baked: &BakedLighting, view_proj: Mat4, extent: vk::Extent2D) -> Option<SkyParams> {
+    pub fn of(baked: &BakedLighting, view_proj: Mat4) -> Option<SkyParams> {
         if baked.sky.max_element() <= 0.0 && baked.sun_lux.max_element() <= 0.0 {
             return None;
         }
@@ -166,7 +165,6 @@ impl SkyParams {
             sky: baked.sky.extend(0.0),
             sun: baked.sun_dir.extend(r.cos()),
             sun_disc: (baked.sun_lux / solid_angle).extend(0.0),
-            viewport: Vec4::new(extent.width as f32, extent.height as f32, 0.0, 0.0),
         })
     }
 }

@@ -183,7 +183,8 @@ impl ParticlePass {
 }
 
 /// A particle pipeline: colour = src * src_alpha + dst * `dst_factor` (ONE_MINUS_SRC_ALPHA for
-/// soft alpha, ONE for additive), RGB only; reversed-Z depth test, no depth writes.
+/// soft alpha, which also accumulates coverage in alpha, ONE for additive); reversed-Z depth
+/// test, no depth writes.
 fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Format, dst_factor: vk::BlendFactor, samples: vk::SampleCountFlags) -> Result<vk::Pipeline> {
     let bindings = [vk::VertexInputBindingDescription {
         binding: 0,
@@ -204,15 +205,19 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
             offset: 16,
         },
     ];
+    // Soft particles also cover what is behind them: their alpha accumulates as "over" does
+    // (the tone map shows the sky through 1 - alpha); additive ones cover nothing.
+    let covers = dst_factor == vk::BlendFactor::ONE_MINUS_SRC_ALPHA;
+    let rgb = vk::ColorComponentFlags::R | vk::ColorComponentFlags::G | vk::ColorComponentFlags::B;
     let blend = vk::PipelineColorBlendAttachmentState::default()
         .blend_enable(true)
         .src_color_blend_factor(vk::BlendFactor::SRC_ALPHA)
         .dst_color_blend_factor(dst_factor)
         .color_blend_op(vk::BlendOp::ADD)
-        .src_alpha_blend_factor(vk::BlendFactor::ZERO)
-        .dst_alpha_blend_factor(vk::BlendFactor::ONE)
+        .src_alpha_blend_factor(vk::BlendFactor::ONE)
+        .dst_alpha_blend_factor(vk::BlendFactor::ONE_MINUS_SRC_ALPHA)
         .alpha_blend_op(vk::BlendOp::ADD)
-        .color_write_mask(vk::ColorComponentFlags::R | vk::ColorComponentFlags::G | vk::ColorComponentFlags::B);
+        .color_write_mask(if covers { rgb | vk::ColorComponentFlags::A } else { rgb });
     // Reversed-Z: nearer is greater; particles test depth but do not write it.
     GraphicsPipeline::new("particle", shaders::PARTICLE_VERT)
         .fragment(shaders::PARTICLE_FRAG, None)

@@ -358,7 +358,7 @@ impl Renderer {
             features: Vec4::new(self.material_maps as u32 as f32, self.specular as u32 as f32, 0.0, 0.0),
         };
         (f.exposure, f.tone_map) = (exposure.x, scene.baked.is_some());
-        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj, extent));
+        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj));
         self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(bytemuck::bytes_of(&uniforms));
         if f.draw_shadow {
             // The shadow passes run mesh.vert with the sun's transform as its view_proj.

@@ -5,6 +5,7 @@
 
 use crate::gpu::Gpu;
 use crate::render::fullscreen::FullscreenFilter;
+use crate::render::frame::SkyParams;
 use crate::render::graph::{ImageRef, Rec};
 use bytemuck::{Pod, Zeroable};
 use crate::render::shaders;
@@ -20,13 +21,17 @@ pub const HDR_FORMAT: vk::Format = vk::Format::R16G16B16A16_SFLOAT;
 /// §5.7: "s ≈ 0.7 to 1"; 1 keeps the ratios but often looks oversaturated).
 pub const DEFAULT_SATURATION: f32 = 0.8;
 
-/// Mirrors the push-constant block of shaders/tonemap.frag.
+/// Mirrors the push-constant block of shaders/tonemap.frag (128 bytes, Vulkan's guaranteed
+/// push-constant size).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct ToneMapPush {
-    /// x: exposure; y: 1 = tone map, 0 = pass through; z: saturation exponent.
+    /// x: exposure; y: 1 = tone map, 0 = pass through; z: saturation exponent; w: 1 = the sky
+    /// is behind what the frame drew.
     params: Vec4,
+    sky: SkyParams,
 }
+const _: () = assert!(std::mem::size_of::<ToneMapPush>() == 128);
 
 pub struct ToneMap {
     /// The saturation exponent `s` (see `DEFAULT_SATURATION`).
@@ -46,9 +51,11 @@ impl ToneMap {
     }
 
     /// Record the pass: `hdr` is sampled, every pixel of `target` written. `tone_map` false
-    /// passes the values through (display-referred input: the stand-in lighting).
-    pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool) {
-        let push = ToneMapPush { params: Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0) };
+    /// passes the values through (display-referred input: the stand-in lighting). With `sky`,
+    /// the background shows through where the frame's alpha leaves it uncovered.
+    pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool, sky: Option<SkyParams>) {
+        let params = Vec4::new(exposure, tone_map as u32 as f32, self.saturation, sky.is_some() as u32 as f32);
+        let push = ToneMapPush { params, sky: sky.unwrap_or_else(SkyParams::zeroed) };
         self.filter.draw(rec, hdr.view, target, bytemuck::bytes_of(&push));
     }
 

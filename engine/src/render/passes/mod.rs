@@ -12,7 +12,6 @@ mod shadow_copy;
 mod shadow_dynamic;
 mod shadow_static;
 mod skinning;
-mod sky;
 mod tonemap;
 mod transparent;
 
@@ -33,7 +32,6 @@ pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) ->
     passes.push(Box::new(shadow_dynamic::ShadowDynamic));
     passes.push(Box::new(prepass::Prepass));
     passes.push(Box::new(shading::Shading));
-    passes.push(Box::new(sky::Sky::new(gpu)?));
     passes.push(Box::new(boids::Boids));
     passes.push(Box::new(transparent::Transparent));
     passes.push(Box::new(particles::Particles));

@@ -34,24 +34,47 @@ impl Pass for Shading {
         let (hdr, depth) = (rec.image(HDR), rec.image(DEPTH));
         let f = cx.frame;
         let prepass = cx.settings.prepass;
-        // Alpha 0 marks the clear colour as "no surface" for the tone map, which leaves it as it
-        // is: it is display-referred, not radiance.
+        // Alpha 0 marks "no surface" for the tone map: with a sky it puts the sky there (the
+        // clear is then zero radiance, what premultiplied compositing over the sky needs);
+        // without, it leaves the clear colour as it is (display-referred, not radiance).
         let [r, g, b, _] = CLEAR_COLOR;
-        let color = Rendering::color(hdr, Some([r, g, b, 0.0]));
+        let clear = if f.sky.is_some() { [0.0; 4] } else { [r, g, b, 0.0] };
+        let color = Rendering::color(hdr, Some(clear));
         // After a pre-pass depth is only tested (and kept as it is); alone, the pass clears and
-        // writes it, and stores it when the sky, boids, particles or the transparent phase test
+        // writes it, and stores it when the boids, particles or the transparent phase test
         // against it next.
-        let later = f.draw_particles || f.draw_boids || f.sky.is_some() || !f.transparent_batches.is_empty();
+        let later = f.draw_particles || f.draw_boids || !f.transparent_batches.is_empty();
         let rendering = match prepass {
             true => color.depth(depth, None, vk::AttachmentStoreOp::NONE),
             false => color.depth(depth, Some(0.0), if later { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE }),
         };
+        if f.view_batches.is_empty() {
+            // Nothing opaque in view (glass alone): clear with a command inside the rendering.
+            // Lavapipe 22.3 crashes (SIGSEGV in its execution thread) when a rendering that
+            // draws nothing clears by its load op and a later rendering loads the attachments.
+            clear_without_draws(rec, &rendering, clear);
+            return Ok(());
+        }
         let count = counts(cx);
         let shade = [0, 1].map(|lightmapped| cx.mesh.camera(cx.settings.samples).shade[lightmapped].pick(prepass, count));
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };
         cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then_some(shade[lightmapped as usize]));
         Ok(())
     }
+}
+
+/// Clear the colour (to `color`) and the depth (to the far plane, 0) of `rendering`'s whole
+/// area with vkCmdClearAttachments.
+fn clear_without_draws(rec: &Rec, rendering: &Rendering, color: [f32; 4]) {
+    let extent = rec.image(HDR).extent;
+    let rect = [vk::ClearRect { rect: vk::Rect2D { offset: vk::Offset2D::default(), extent }, base_array_layer: 0, layer_count: 1 }];
+    let attachments = [
+        vk::ClearAttachment { aspect_mask: vk::ImageAspectFlags::COLOR, color_attachment: 0, clear_value: vk::ClearValue { color: vk::ClearColorValue { float32: color } } },
+        vk::ClearAttachment { aspect_mask: vk::ImageAspectFlags::DEPTH, color_attachment: 0, clear_value: vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } } },
+    ];
+    rec.begin_rendering(rendering);
+    unsafe { rec.gpu.device.cmd_clear_attachments(rec.cb, &attachments, &rect) };
+    rec.end_rendering();
 }
 
 /// Whether this frame counts the fragments it shades.

@@ -26,7 +26,7 @@ impl Pass for ToneMapPass {
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let f = cx.frame;
         let out = rec.image(target(cx));
-        cx.tonemap.record(rec, rec.image(cx.settings.tone_map_input()), out, f.exposure, f.tone_map);
+        cx.tonemap.record(rec, rec.image(cx.settings.tone_map_input()), out, f.exposure, f.tone_map, f.sky);
         Ok(())
     }
 }
