@@ -13,11 +13,11 @@
 
 layout(set = 0, binding = 0) uniform sampler2D hdr; // R16G16B16A16_SFLOAT, linear radiance
 
-// Mirrors `ToneMapPush` in engine/src/render/tonemap.rs (128 bytes, Vulkan's guaranteed
+// Mirrors `ToneMapPush` in engine/src/render/tonemap.rs (within 128 bytes, Vulkan's guaranteed
 // push-constant size).
 layout(push_constant) uniform ToneMap {
     vec4 params;        // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s; w: 1 = sky behind
-    mat4 inv_view_proj; // the camera's, for each pixel's view direction
+    vec4 ray[3];        // the view ray through NDC (x, y): ray[0] + x ray[1] + y ray[2] (frame.rs SkyParams)
     vec4 sky;           // rgb: the sky's radiance (nits)
     vec4 sun;           // xyz: unit vector toward the sun; w: cos of its angular radius
     vec4 sun_disc;      // rgb: the disc's radiance (nits)
@@ -30,10 +30,7 @@ layout(location = 0) out vec4 out_color;
 // angle, frame.rs `SkyParams`).
 vec3 sky_radiance() {
     vec2 ndc = gl_FragCoord.xy / vec2(textureSize(hdr, 0)) * 2.0 - 1.0;
-    // Two points along the pixel's ray (reverse Z: 1 is the near plane, 0.5 twice as far).
-    vec4 a = tm.inv_view_proj * vec4(ndc, 1.0, 1.0);
-    vec4 b = tm.inv_view_proj * vec4(ndc, 0.5, 1.0);
-    vec3 dir = normalize(b.xyz / b.w - a.xyz / a.w);
+    vec3 dir = normalize(tm.ray[0].xyz + ndc.x * tm.ray[1].xyz + ndc.y * tm.ray[2].xyz);
     return tm.sky.rgb + (dot(dir, tm.sun.xyz) >= tm.sun.w ? tm.sun_disc.rgb : vec3(0.0));
 }
 

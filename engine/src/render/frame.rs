@@ -118,7 +118,10 @@ pub struct FrameData {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SkyParams {
-    pub inv_view_proj: Mat4,
+    /// The view ray through NDC (x, y) is `ray[0] + x ray[1] + y ray[2]` (xyz; a perspective
+    /// camera's rays are affine in NDC at unit depth): a few multiply-adds a pixel instead of
+    /// unprojecting two points. w: unused.
+    pub ray: [Vec4; 3],
     /// rgb: the sky's radiance (nits).
     pub sky: Vec4,
     /// xyz: toward the sun; w: the cosine of its angular radius.
@@ -160,8 +163,18 @@ impl SkyParams {
         let r = if baked.sun_angular_radius > 0.0 { baked.sun_angular_radius } else { SUN_ANGULAR_RADIUS };
         // 1 - cos r without the cancellation: 2 sin^2(r / 2).
         let solid_angle = 2.0 * std::f32::consts::PI * 2.0 * (r * 0.5).sin().powi(2);
+        // Rays through NDC (0, 0), (1, 0) and (0, 1) at unit depth along the centre ray.
+        let inv = view_proj.inverse();
+        let through = |x: f32, y: f32| {
+            // Two points along the ray (reverse Z: 1 is the near plane, 0.5 twice as far).
+            let (a, b) = (inv.project_point3(Vec3::new(x, y, 1.0)), inv.project_point3(Vec3::new(x, y, 0.5)));
+            (b - a).normalize()
+        };
+        let forward = through(0.0, 0.0);
+        let at_unit_depth = |d: Vec3| d / d.dot(forward);
+        let ray = [forward, at_unit_depth(through(1.0, 0.0)) - forward, at_unit_depth(through(0.0, 1.0)) - forward].map(|v| v.extend(0.0));
         Some(SkyParams {
-            inv_view_proj: view_proj.inverse(),
+            ray,
             sky: baked.sky.extend(0.0),
             sun: baked.sun_dir.extend(r.cos()),
             sun_disc: (baked.sun_lux / solid_angle).extend(0.0),
