@@ -19,41 +19,44 @@ const LIGHTMAP_B: f32 = 100.0;
 const SIZE: u32 = 64;
 
 /// One dynamic unit quad at the origin facing +Z (tangent +X with handedness `w`), placed by
-/// `place`, in `material`; optionally a 1x1 16-bit normal map holding `normal_ts`; a sun of
-/// `lux` shining toward -`towards_sun`; no probes (no indirect light).
-fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, lux: f32, towards_sun: Vec3) -> Pack {
+/// `place`, drawn with material 1, which the caller pushes; a static lightmapped quad far out
+/// of view makes the pack baked (physical lighting, exposure from `LIGHTMAP_B`).
+fn quad_builder(w: f32, place: Mat4) -> PackBuilder {
     let mut b = PackBuilder::new("generated", "test");
     let (mut verts, idx) = quad_vertices();
     for v in &mut verts {
         v.tangent = [1.0, 0.0, 0.0, w];
     }
     add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -50.0, 0.0));
+    let mesh = push_mesh(&mut b, "quad", &verts, &idx, None);
+    b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
+    b.manifest.nodes.push(node("quad", place, mesh));
+    b
+}
+
+/// `quad_builder`'s quad in `material`; optionally a 1x1 16-bit normal map holding
+/// `normal_ts`; a sun of `lux` shining toward -`towards_sun`; no probes (no indirect light).
+fn quad_pack(material: Material, normal_ts: Option<Vec3>, w: f32, place: Mat4, lux: f32, towards_sun: Vec3) -> Pack {
+    let mut b = quad_builder(w, place);
     let normal_texture = normal_ts.map(|n| {
         let texel: Vec<u8> = [n.x * 0.5 + 0.5, n.y * 0.5 + 0.5, n.z * 0.5 + 0.5, 1.0].iter().flat_map(|c| ((c * 65535.0).round() as u16).to_le_bytes()).collect();
         texture(&mut b, "normal", TextureFormat::Rgba16Unorm, [1, 1], &[&texel])
     });
     b.manifest.materials.push(Material { normal_texture, ..material });
-    let mesh = push_mesh(&mut b, "quad", &verts, &idx, None);
-    b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
-    b.manifest.nodes.push(node("quad", place, mesh));
     b.manifest.lights.push(sun(lux, towards_sun, 0.0));
     b.finish()
 }
 
-/// `quad_pack` lit by probes alone: every probe sees a uniform sky of `sky` nits, no sun.
+/// `quad_builder`'s quad in `material`, lit by probes alone: every probe sees a uniform sky of
+/// `sky` nits, no sun.
 fn furnace_pack(material: Material, place: Mat4, sky: f32) -> Pack {
     furnace_builder(material, place, sky).finish()
 }
 
 /// `furnace_pack`, still open for more (the quad's material is material 1).
 fn furnace_builder(material: Material, place: Mat4, sky: f32) -> PackBuilder {
-    let mut b = PackBuilder::new("generated", "test");
-    let (verts, idx) = quad_vertices();
-    add_baked_light(&mut b, LIGHTMAP_B, Vec3::new(0.0, -50.0, 0.0));
+    let mut b = quad_builder(1.0, place);
     b.manifest.materials.push(material);
-    let mesh = push_mesh(&mut b, "quad", &verts, &idx, None);
-    b.manifest.meshes[mesh as usize].lods[0].submeshes[0].material = 1;
-    b.manifest.nodes.push(node("quad", place, mesh));
     push_uniform_probes(&mut b, sky, 0.0);
     b
 }
