@@ -54,6 +54,19 @@ layout(constant_id = 1) const bool LIGHTMAPPED = false;
 // depth-only pre-pass needs no colour output for it) instead of discarding.
 layout(constant_id = 2) const int SAMPLES = 1;
 const bool ALPHA_TO_COVERAGE = SAMPLES > 1;
+// The material's texture slots a pipeline samples (`TextureSlots` in engine/src/scene/mod.rs:
+// 1 base colour, 2 emissive, 4 normal, 8 metallic-roughness, 16 a separate occlusion texture).
+// The renderer draws each material with a pipeline made for its slots, so no fragment samples
+// the white stand-in of an empty slot: on lavapipe a branch is executed masked and the lookup
+// costs the same taken or not (the emissive and occlusion lookups of materials without them
+// were 10 of the 1280x720 flythrough's 43 shading ms). Every slot (31) leaves it to the material
+// constants' flags at run time.
+layout(constant_id = 3) const int SLOTS = 31;
+const bool HAS_BASE_COLOR = (SLOTS & 1) != 0;
+const bool HAS_EMISSIVE = (SLOTS & 2) != 0;
+const bool HAS_NORMAL = (SLOTS & 4) != 0;
+const bool HAS_METALLIC_ROUGHNESS = (SLOTS & 8) != 0;
+const bool HAS_OCCLUSION = (SLOTS & 16) != 0;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -62,13 +75,13 @@ void count_fragment() {
 }
 
 vec4 albedo() {
-    vec4 t = materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? texture(base_color_tex, in_base_color_uv) : vec4(1.0);
+    vec4 t = HAS_BASE_COLOR && materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? texture(base_color_tex, in_base_color_uv) : vec4(1.0);
     return t * draw.base_color * in_color;
 }
 
 // Alpha at texture coordinate `uv` with vertex colour `color`, at this pixel's mip level.
 float alpha_at(vec2 uv, vec4 color) {
-    float t = materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? textureGrad(base_color_tex, uv, dFdx(in_base_color_uv), dFdy(in_base_color_uv)).a : 1.0;
+    float t = HAS_BASE_COLOR && materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? textureGrad(base_color_tex, uv, dFdx(in_base_color_uv), dFdy(in_base_color_uv)).a : 1.0;
     return t * draw.base_color.a * color.a;
 }
 
@@ -205,7 +218,7 @@ vec3 shading_normal(float scale) {
     vec3 n = normalize(in_normal);
     vec3 t = in_tangent.xyz - n * dot(n, in_tangent.xyz);
     float tl = dot(t, t);
-    if (scale != 0.0 && tl > 1e-12) {
+    if (HAS_NORMAL && scale != 0.0 && tl > 1e-12) {
         vec3 ts = texture(normal_tex, in_normal_uv).xyz * 2.0 - 1.0;
         ts.xy *= scale;
         t *= inversesqrt(tl);
@@ -246,16 +259,16 @@ vec4 shade(vec4 a) {
     // Read member by member: copying the whole block costs every field's load on lavapipe.
     uint m = uint(draw.material.y);
     vec4 pbr = materials[m].pbr;
-    // The renderer's switches (uniform: every invocation takes the same branch).
-    bool maps = frame.features.x > 0.5;
-    bool specular = frame.features.y > 0.5;
-    vec3 n = shading_normal(maps ? pbr.z : 0.0);
+    // The renderer's specular switch (uniform: every invocation takes the same branch). Its
+    // material-maps switch picks pipelines whose SLOTS hold the base colour alone.
+    bool specular = frame.features.x > 0.5;
+    vec3 n = shading_normal(pbr.z);
     if (frame.exposure.y < 0.5) {
         // Stand-in lighting, display-referred already. Linear out; the _SRGB attachment encodes.
         float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    vec4 mr = maps && materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
+    vec4 mr = HAS_METALLIC_ROUGHNESS && materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
     float metallic = clamp(pbr.x * mr.b, 0.0, 1.0);
     float rough = clamp(pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
     float alpha = rough * rough;
@@ -263,9 +276,10 @@ vec4 shade(vec4 a) {
     // coordinates (a packed ORM texture): one sample serves both.
     float occlusion_flag = materials[m].occlusion_uv[1].w;
     float ao = 1.0;
-    if (maps && occlusion_flag > 0.5) {
-        float o = occlusion_flag > 1.5 ? mr.r : texture(occlusion_tex, in_occlusion_uv).r;
-        ao = 1.0 + pbr.w * (o - 1.0);
+    if (HAS_OCCLUSION && occlusion_flag > 0.5 && occlusion_flag < 1.5) {
+        ao = 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0);
+    } else if (HAS_METALLIC_ROUGHNESS && occlusion_flag > 1.5) {
+        ao = 1.0 + pbr.w * (mr.r - 1.0);
     }
     vec3 v = normalize(frame.camera_pos.xyz - in_world);
     float nv = max(dot(n, v), 1e-4);
@@ -310,7 +324,7 @@ vec4 shade(vec4 a) {
     // Emission adds radiance on top of the reflected light, before exposure and tone mapping
     // (both in the tone-map pass).
     vec3 emission = materials[m].emission.rgb;
-    if (maps && materials[m].emissive_uv[1].w > 0.5) {
+    if (HAS_EMISSIVE && materials[m].emissive_uv[1].w > 0.5) {
         emission *= texture(emissive_tex, in_emissive_uv).rgb;
     }
     l += emission;

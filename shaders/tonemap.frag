@@ -17,7 +17,7 @@ layout(set = 0, binding = 0) uniform sampler2D hdr; // R16G16B16A16_SFLOAT, line
 // push-constant size).
 layout(push_constant) uniform ToneMap {
     vec4 params;        // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s; w: 1 = sky behind
-    vec4 ray[3];        // the view ray through NDC (x, y): ray[0] + x ray[1] + y ray[2] (frame.rs SkyParams)
+    vec4 ray[3];        // the view ray through pixel (x, y): ray[0] + x ray[1] + y ray[2] (frame.rs SkyParams)
     vec4 sky;           // rgb: the sky's radiance (nits)
     vec4 sun;           // xyz: unit vector toward the sun; w: cos of its angular radius
     vec4 sun_disc;      // rgb: the disc's radiance (nits)
@@ -29,8 +29,7 @@ layout(location = 0) out vec4 out_color;
 // the baker lit the level with it, and the sun's disc (its illuminance spread over its solid
 // angle, frame.rs `SkyParams`).
 vec3 sky_radiance() {
-    vec2 ndc = gl_FragCoord.xy / vec2(textureSize(hdr, 0)) * 2.0 - 1.0;
-    vec3 dir = normalize(tm.ray[0].xyz + ndc.x * tm.ray[1].xyz + ndc.y * tm.ray[2].xyz);
+    vec3 dir = normalize(tm.ray[0].xyz + gl_FragCoord.x * tm.ray[1].xyz + gl_FragCoord.y * tm.ray[2].xyz);
     return tm.sky.rgb + (dot(dir, tm.sun.xyz) >= tm.sun.w ? tm.sun_disc.rgb : vec3(0.0));
 }
 

@@ -5,7 +5,7 @@
 
 use crate::gpu::{Buffer, Gpu, Image};
 use crate::render::samplers::SamplerCache;
-use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts};
+use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts, TextureSlots};
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::Vec3;
@@ -139,7 +139,8 @@ impl GpuScene {
                     .with_context(|| format!("uploading texture '{}'", t.name))?,
             ));
         }
-        // Empty texture slots sample this instead: no shader variants.
+        // Empty texture slots hold this (the pipelines made for a material's `TextureSlots`
+        // do not sample them; those for every slot read white, which changes nothing).
         let white = gpu.own(Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?);
         let lightmaps = gpu.own(match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
             Some(l) => {
@@ -191,6 +192,7 @@ impl GpuScene {
                 alpha_cutoff: if mat.alpha_mode == pack::AlphaMode::Mask { mat.alpha_cutoff } else { -1.0 },
                 double_sided: mat.double_sided,
                 blend: mat.alpha_mode == pack::AlphaMode::Blend,
+                slots: TextureSlots::of(mat),
                 descriptor_set: set,
             });
         }

@@ -1,6 +1,7 @@
 //! The shared samples' material maps reach the image (issue 21): every sample whose materials
 //! use a normal, metallic-roughness, occlusion or emissive texture renders differently with
 //! that map removed, over the pixels the model covers (GolfBall's dimples are its normal map).
+//! With the renderer's material-maps switch off, each renders as with all those maps removed.
 //! Each sample is cooked in-process, lit physically (a lightmap page out of view for the
 //! exposure, uniform probes for the indirect light, a sun) and framed whole. Samples from
 //! $GLTF_SAMPLES_DIR (default ../shared/gltf-samples); skipped with a message when absent.
@@ -40,7 +41,13 @@ fn lit(mut pack: Pack, dark: bool) -> Pack {
 
 /// The frame of `pack` with the model's bounds in view from the front (+Z) and above, 96x96.
 fn render(gpu: &engine::gpu::Gpu, pack: &Pack) -> Vec<u8> {
+    render_maps(gpu, pack, true)
+}
+
+/// `render` with the renderer's material-maps switch as given.
+fn render_maps(gpu: &engine::gpu::Gpu, pack: &Pack, maps: bool) -> Vec<u8> {
     let mut rig = Rig::new(gpu, pack, SIZE, SIZE);
+    rig.renderer.material_maps = maps;
     // The model's bounds: every instance except the quad far below.
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for i in 0..rig.scene.instances.len() {
@@ -119,6 +126,15 @@ fn every_samples_material_maps_change_its_image() {
             // (Terrain's metallic-roughness map only moves a rough dielectric's faint specular.)
             assert!(fraction >= 0.001, "{name}: removing the {slot} map changes only {:.3}% of the image", fraction * 100.0);
             checked.push(format!("{name} {slot}"));
+        }
+        // The renderer's switch: its material-maps-off frame is the frame of the sample with
+        // every such map removed (the pipelines then sample the base colour alone), exactly.
+        if SLOTS.iter().any(|(slot, _)| cooked.manifest.materials.iter().any(|m| has(m, slot))) {
+            let switched_off = render_maps(&gpu, &lit(cooked.clone(), false), false);
+            let mut bare = cooked.clone();
+            bare.manifest.materials.iter_mut().for_each(|m| SLOTS.iter().for_each(|(_, remove)| remove(m)));
+            let bare = render(&gpu, &lit(bare, false));
+            assert!(switched_off == bare, "{name}: with material maps off, {:.3}% of the pixels differ from the sample without its maps", changed(&switched_off, &bare) * 100.0);
         }
     }
     eprintln!("checked: {checked:?}");

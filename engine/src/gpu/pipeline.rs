@@ -198,12 +198,15 @@ impl<T> Default for PerSamples<T> {
 
 impl<T> PerSamples<T> {
     /// The set for `samples`, made by `make` if this is its first use.
-    pub fn ensure(&mut self, samples: vk::SampleCountFlags, make: impl FnOnce(vk::SampleCountFlags) -> Result<T>) -> Result<&T> {
-        if let Some(i) = self.sets.iter().position(|s| s.0 == samples) {
-            return Ok(&self.sets[i].1);
-        }
-        self.sets.push((samples, make(samples)?));
-        Ok(&self.sets.last().unwrap().1)
+    pub fn ensure(&mut self, samples: vk::SampleCountFlags, make: impl FnOnce(vk::SampleCountFlags) -> Result<T>) -> Result<&mut T> {
+        let i = match self.sets.iter().position(|s| s.0 == samples) {
+            Some(i) => i,
+            None => {
+                self.sets.push((samples, make(samples)?));
+                self.sets.len() - 1
+            }
+        };
+        Ok(&mut self.sets[i].1)
     }
 
     /// The set for `samples` (`ensure` made it before the frame).

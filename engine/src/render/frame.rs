@@ -9,8 +9,8 @@ use crate::gpu::Gpu;
 use crate::render::particles_draw::ParticlePass;
 use crate::render::graph::{ImageDesc, ResourceId};
 use crate::render::tonemap::HDR_FORMAT;
-use crate::render::mesh_draw::MeshKit;
-use crate::scene::{BakedLighting, GpuScene};
+use crate::render::mesh_draw::{LitKey, LitPhase, MeshKit};
+use crate::scene::{BakedLighting, GpuMaterial, GpuScene};
 use crate::render::shadow::SunShadow;
 use crate::render::tonemap::ToneMap;
 use crate::render::visibility::Draw;
@@ -42,8 +42,10 @@ pub const LDR: ResourceId = ResourceId("ldr");
 pub struct Settings {
     /// Depth pre-pass, then shading with depth EQUAL (only when there is something to draw).
     pub prepass: bool,
-    /// Count the fragments the shading pass shades.
+    /// Count the fragments the shading pass shades (asked for, and the device can).
     pub count_fragments: bool,
+    /// Sample the materials' normal, metallic-roughness, occlusion and emissive maps.
+    pub material_maps: bool,
     /// Depth testing in the shading pass without a pre-pass.
     pub depth_test: bool,
     /// Show the depth buffer instead of the shaded frame (a debug view).
@@ -55,6 +57,11 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// The lit pipeline a submesh of `material` draws with in `phase` (lit by a lightmap or not).
+    pub fn lit_key(&self, phase: LitPhase, material: &GpuMaterial, lightmapped: bool) -> LitKey {
+        LitKey { phase, lightmapped, counting: self.count_fragments && phase != LitPhase::Blend, slots: material.slots.with_maps(self.material_maps) }
+    }
+
     pub fn multisampled(&self) -> bool {
         self.samples != vk::SampleCountFlags::TYPE_1
     }
@@ -118,9 +125,10 @@ pub struct FrameData {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SkyParams {
-    /// The view ray through NDC (x, y) is `ray[0] + x ray[1] + y ray[2]` (xyz; a perspective
-    /// camera's rays are affine in NDC at unit depth): a few multiply-adds a pixel instead of
-    /// unprojecting two points. w: unused.
+    /// The view ray through the pixel at framebuffer coordinates (x, y) (gl_FragCoord's) is
+    /// `ray[0] + x ray[1] + y ray[2]` (xyz; a perspective camera's rays are affine in screen
+    /// coordinates at unit depth): three multiply-adds a pixel instead of unprojecting two
+    /// points. w: unused.
     pub ray: [Vec4; 3],
     /// rgb: the sky's radiance (nits).
     pub sky: Vec4,
@@ -156,7 +164,8 @@ impl SkyParams {
     /// The background of a baked level seen through `view_proj`:
     /// its sky radiance and the sun's disc, whose radiance spreads the sun's illuminance E over
     /// the disc's solid angle 2 pi (1 - cos r). None for a level with neither.
-    pub fn of(baked: &BakedLighting, view_proj: Mat4) -> Option<SkyParams> {
+    /// `extent`: the target's size in pixels.
+    pub fn of(baked: &BakedLighting, view_proj: Mat4, extent: vk::Extent2D) -> Option<SkyParams> {
         if baked.sky.max_element() <= 0.0 && baked.sun_lux.max_element() <= 0.0 {
             return None;
         }
@@ -172,7 +181,10 @@ impl SkyParams {
         };
         let forward = through(0.0, 0.0);
         let at_unit_depth = |d: Vec3| d / d.dot(forward);
-        let ray = [forward, at_unit_depth(through(1.0, 0.0)) - forward, at_unit_depth(through(0.0, 1.0)) - forward].map(|v| v.extend(0.0));
+        let (dx, dy) = (at_unit_depth(through(1.0, 0.0)) - forward, at_unit_depth(through(0.0, 1.0)) - forward);
+        // NDC from pixels: x_ndc = 2 x / width - 1 (likewise y).
+        let (sx, sy) = (2.0 / extent.width.max(1) as f32, 2.0 / extent.height.max(1) as f32);
+        let ray = [forward - dx - dy, dx * sx, dy * sy].map(|v| v.extend(0.0));
         Some(SkyParams {
             ray,
             sky: baked.sky.extend(0.0),

@@ -4,7 +4,8 @@
 use crate::render::batches::{instance_attributes, Batch, INSTANCE_STRIDE};
 use crate::gpu::{opaque, premultiplied_over, Gpu, GraphicsPipeline, PerSamples};
 use crate::render::graph::{Rec, Rendering};
-use crate::scene::{GpuMaterial, GpuScene};
+use crate::scene::{GpuMaterial, GpuScene, TextureSlots};
+use std::collections::HashMap;
 use crate::render::shaders;
 use crate::render::shadow::{DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE};
 use crate::render::tonemap::HDR_FORMAT;
@@ -33,39 +34,32 @@ const MESH_STAGES: vk::ShaderStageFlags = vk::ShaderStageFlags::from_raw(vk::Sha
 /// Reversed-Z: nearer is greater.
 const NEARER: vk::CompareOp = vk::CompareOp::GREATER_OR_EQUAL;
 
-/// The shading pass's pipelines for one lighting path.
-pub struct Shading {
-    /// Without a pre-pass: depth test and write, alpha test in the shader.
-    plain: vk::Pipeline,
-    /// After the pre-pass: depth EQUAL, no writes, early fragment tests.
-    equal: vk::Pipeline,
-    /// Both again, counting fragments (when the device lets fragment shaders write buffers).
-    counting: Option<(vk::Pipeline, vk::Pipeline)>,
+/// The lit phases' pipelines (shading and transparent), one per key: what mesh_shading.glsl is
+/// specialised for. `MeshKit::prepare_lit` makes those a frame's materials need.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct LitKey {
+    pub phase: LitPhase,
+    /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
+    pub lightmapped: bool,
+    /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
+    pub counting: bool,
+    /// SLOTS: the material's texture slots (less those the renderer's switches leave out).
+    pub slots: TextureSlots,
 }
 
-impl Shading {
-    fn new(make: impl Fn(bool, bool) -> Result<vk::Pipeline>, counting: bool) -> Result<Shading> {
-        Ok(Shading { plain: make(false, false)?, equal: make(true, false)?, counting: if counting { Some((make(false, true)?, make(true, true)?)) } else { None } })
-    }
-
-    pub fn pick(&self, prepass: bool, count: bool) -> vk::Pipeline {
-        match (count, self.counting) {
-            (true, Some((plain, equal))) => if prepass { equal } else { plain },
-            _ => if prepass { self.equal } else { self.plain },
-        }
-    }
-
-    pub fn can_count(&self) -> bool {
-        self.counting.is_some()
-    }
-
-    fn all(&self) -> impl Iterator<Item = vk::Pipeline> {
-        [self.plain, self.equal].into_iter().chain(self.counting.into_iter().flat_map(|(a, b)| [a, b]))
-    }
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LitPhase {
+    /// The shading pass without a pre-pass: depth test and write, alpha test in the shader.
+    Plain,
+    /// The shading pass after the pre-pass: depth EQUAL, no writes, early fragment tests.
+    Equal,
+    /// The transparent phase: premultiplied over, depth tested against the opaque depth, not
+    /// written.
+    Blend,
 }
 
 /// Specialisation constants of the mesh fragment shaders (mesh_shading.glsl).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 struct Variant {
     /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
     count_fragments: bool,
@@ -74,26 +68,29 @@ struct Variant {
     /// SAMPLES: the target's samples per pixel; above 1 alpha-tested (MASK) fragments cover as
     /// many samples as their alpha says instead of discarding (alpha to coverage).
     samples: u32,
+    /// SLOTS: the texture slots the shader samples.
+    slots: TextureSlots,
+}
+
+impl Default for Variant {
+    fn default() -> Self {
+        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL }
+    }
 }
 
 /// The pipelines drawing into the camera's targets, for one sample count.
 pub struct CameraPipelines {
-    /// The shading pipelines of dynamic objects (probes and sun) and of lightmapped static
-    /// geometry: two variants of one shader (LIGHTMAPPED, mesh_shading.glsl), so neither runs
-    /// the other's lighting code.
-    pub shade: [Shading; 2],
     /// Pre-pass: depth only, no fragment shader; and with the alpha test (a discard, or
     /// alpha-to-coverage when multisampled).
     pub depth: vk::Pipeline,
     pub depth_masked: vk::Pipeline,
-    /// The transparent phase, not lit by a lightmap [0] and lit by one [1]: premultiplied over,
-    /// depth tested against the opaque depth, not written.
-    pub blend: [vk::Pipeline; 2],
+    /// The shading and transparent phases' pipelines made so far.
+    lit: HashMap<LitKey, vk::Pipeline>,
 }
 
 impl CameraPipelines {
     fn all(&self) -> impl Iterator<Item = vk::Pipeline> + '_ {
-        [self.depth, self.depth_masked].into_iter().chain(self.blend).chain(self.shade.iter().flat_map(Shading::all))
+        [self.depth, self.depth_masked].into_iter().chain(self.lit.values().copied())
     }
 }
 
@@ -103,8 +100,10 @@ pub struct MeshKit {
     pub material_layout: vk::DescriptorSetLayout,
     pub scene_layout: vk::DescriptorSetLayout,
     pub pipeline_layout: vk::PipelineLayout,
-    /// The camera's pipelines per sample count (`prepare_samples`).
+    /// The camera's pipelines per sample count (`prepare_samples`, `prepare_lit`).
     camera: PerSamples<CameraPipelines>,
+    /// The device lets fragment shaders write buffers: the shading pass can count fragments.
+    can_count: bool,
     /// The shadow pass: depth only, and with the alpha-test discard, into the shadow map's
     /// format, standard depth (0 nearest the sun), no culling, with depth bias.
     pub shadow: vk::Pipeline,
@@ -144,6 +143,7 @@ impl MeshKit {
             scene_layout: scene_layout.keep(),
             pipeline_layout: pipeline_layout.keep(),
             camera: PerSamples::default(),
+            can_count: gpu.caps.fragment_atomics,
             shadow: shadow.keep(),
             shadow_masked,
         });
@@ -151,10 +151,25 @@ impl MeshKit {
         Ok(kit.keep())
     }
 
-    /// Make the camera's pipelines for `samples` if no frame has used them yet.
+    /// Make the camera's depth pipelines for `samples` if no frame has used them yet.
     pub fn prepare_samples(&mut self, gpu: &Gpu, samples: vk::SampleCountFlags) -> Result<()> {
         let pl = self.pipeline_layout;
-        self.camera.ensure(samples, |samples| camera_pipelines(gpu, pl, samples))?;
+        self.camera.ensure(samples, |samples| depth_pipelines(gpu, pl, samples))?;
+        Ok(())
+    }
+
+    /// Make the lit pipelines of `keys` for targets of `samples` samples that are not made yet
+    /// (after `prepare_samples`). The renderer asks for every key its scene's materials can draw
+    /// with under its settings, so a material coming into view never waits for a compile.
+    pub fn prepare_lit(&mut self, gpu: &Gpu, samples: vk::SampleCountFlags, keys: impl IntoIterator<Item = LitKey>) -> Result<()> {
+        let pl = self.pipeline_layout;
+        let set = self.camera.ensure(samples, |samples| depth_pipelines(gpu, pl, samples))?;
+        for key in keys {
+            if !set.lit.contains_key(&key) {
+                let p = lit_pipeline(gpu, pl, samples, key)?;
+                set.lit.insert(key, p);
+            }
+        }
         Ok(())
     }
 
@@ -163,9 +178,14 @@ impl MeshKit {
         self.camera.get(samples)
     }
 
+    /// The lit pipeline of `key` for `samples` samples (`prepare_lit` made it).
+    pub fn lit(&self, samples: vk::SampleCountFlags, key: LitKey) -> vk::Pipeline {
+        *self.camera(samples).lit.get(&key).unwrap_or_else(|| panic!("no pipeline was made for {key:?} at {samples:?} samples"))
+    }
+
     /// Whether the device can count the shading pass's fragments.
     pub fn can_count(&self) -> bool {
-        self.camera(vk::SampleCountFlags::TYPE_1).shade[0].can_count()
+        self.can_count
     }
 
     /// The depth-only pipeline for a material: with the alpha test when it is masked; none for
@@ -278,43 +298,31 @@ fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     }
 }
 
-/// The camera's mesh pipelines for targets of `samples` samples. Multisampled, the shading
-/// without a pre-pass and the masked pre-pass turn a MASK material's alpha into coverage
-/// (their SAMPLES constant); after a pre-pass the EQUAL test already keeps the samples the
-/// pre-pass covered.
-fn camera_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags) -> Result<CameraPipelines> {
+/// The camera's depth pipelines for targets of `samples` samples (the lit ones come with
+/// `MeshKit::prepare_lit`). Multisampled, the masked pre-pass turns a MASK material's alpha
+/// into coverage (its SAMPLES constant).
+fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags) -> Result<CameraPipelines> {
     let depth_format = gpu.caps.depth_format;
-    let sample_count = samples.as_raw();
-    let made = std::cell::RefCell::new(gpu.own(Vec::<vk::Pipeline>::new()));
-    let pipeline = |p: Result<vk::Pipeline>| -> Result<vk::Pipeline> {
-        let p = p?;
-        made.borrow_mut().push(p);
-        Ok(p)
-    };
-    let shading = |lightmapped| {
-        let make = |equal: bool, count_fragments| {
-            // After a pre-pass the EQUAL test already keeps the samples it covered.
-            let variant = Variant { count_fragments, lightmapped, samples: if equal { 1 } else { sample_count } };
-            pipeline(match equal {
-                false => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None, samples),
-                true => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None, samples),
-            })
-        };
-        Shading::new(make, gpu.caps.fragment_atomics)
-    };
-    let blended = |lightmapped| {
-        let variant = Variant { lightmapped, ..Variant::default() };
-        pipeline(create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples))
-    };
-    let masked = Variant { samples: sample_count, ..Variant::default() };
-    let set = CameraPipelines {
-        shade: [shading(false)?, shading(true)?],
-        depth: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, Variant::default(), None, samples))?,
-        depth_masked: pipeline(create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, masked, None, samples))?,
-        blend: [blended(false)?, blended(true)?],
-    };
-    made.into_inner().keep();
-    Ok(set)
+    let depth = gpu.own(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, Variant::default(), None, samples)?);
+    let masked = Variant { samples: samples.as_raw(), ..Variant::default() };
+    let depth_masked = create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, masked, None, samples)?;
+    Ok(CameraPipelines { depth: depth.keep(), depth_masked, lit: HashMap::new() })
+}
+
+/// The lit pipeline of `key` into the camera's targets of `samples` samples. Without a
+/// pre-pass, multisampled, the shading turns a MASK material's alpha into coverage (SAMPLES);
+/// after a pre-pass the EQUAL test already keeps the samples the pre-pass covered.
+fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags, key: LitKey) -> Result<vk::Pipeline> {
+    let depth_format = gpu.caps.depth_format;
+    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1 };
+    match key.phase {
+        LitPhase::Plain => {
+            let variant = Variant { samples: samples.as_raw(), ..variant };
+            create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None, samples)
+        }
+        LitPhase::Equal => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None, samples),
+        LitPhase::Blend => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples),
+    }
 }
 
 /// A mesh pipeline: `mesh.vert` plus `frag` (None: depth only), rendering into `color_format`
@@ -334,11 +342,11 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0, 1 and 2: COUNT_FRAGMENTS, LIGHTMAPPED and SAMPLES
+    // Specialisation constants 0 to 3: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES and SLOTS
     // (mesh_shading.glsl).
-    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1)].map(u32::to_le_bytes);
+    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1), variant.slots.0].map(u32::to_le_bytes);
     let bytes = values.concat();
-    let entries: [vk::SpecializationMapEntry; 3] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
+    let entries: [vk::SpecializationMapEntry; 4] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.

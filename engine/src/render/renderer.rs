@@ -13,7 +13,7 @@ use crate::gpu::{Buffer, Gpu, SlotBuffers};
 use crate::render::particles_draw::ParticlePass;
 use crate::render::frame::{FrameCx, FrameData, Settings, SkyParams, FRAGMENT_COUNTER};
 use crate::render::graph::{Access, FrameProfile, Graph, ImageRef, Pass, ResourceId};
-use crate::render::mesh_draw::MeshKit;
+use crate::render::mesh_draw::{LitPhase, MeshKit};
 use crate::render::passes;
 use crate::scene::{GpuScene, SceneLayouts};
 use crate::render::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
@@ -43,8 +43,8 @@ pub struct FrameUniforms {
     /// x: 1 when this frame drew the shadow map (dynamic objects read it; otherwise the probes'
     /// sun visibility); y: one map texel in metres; z: 1 / map size in texels.
     pub shadow: Vec4,
-    /// The shading's switches (`Renderer::material_maps`, `Renderer::specular`): x: 1 to
-    /// sample the normal, metallic-roughness, occlusion and emissive maps; y: 1 for specular.
+    /// The shading's switches: x: 1 for specular (`Renderer::specular`). (`material_maps`
+    /// picks the pipelines: `MeshKit::lit`.)
     pub features: Vec4,
 }
 
@@ -124,6 +124,8 @@ pub struct Renderer {
     batcher: Batcher,
     /// What `prepare` made for `record`.
     frame: FrameData,
+    /// The scene and settings `prepare_lit` last made pipelines for.
+    lit_prepared: Option<(u64, vk::SampleCountFlags, bool, bool, bool, usize)>,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -224,6 +226,7 @@ impl Renderer {
             instance_buffers: SlotBuffers::new("mesh instances", vk::BufferUsageFlags::VERTEX_BUFFER, frames_in_flight, 256 * INSTANCE_STRIDE as usize),
             batcher: Batcher::default(),
             frame: FrameData::default(),
+            lit_prepared: None,
             prepass: true,
             count_fragments: false,
             depth_test: true,
@@ -355,10 +358,10 @@ impl Renderer {
             ambient: ambient.extend(0.0),
             exposure,
             shadow: shadow_params,
-            features: Vec4::new(self.material_maps as u32 as f32, self.specular as u32 as f32, 0.0, 0.0),
+            features: Vec4::new(self.specular as u32 as f32, 0.0, 0.0, 0.0),
         };
         (f.exposure, f.tone_map) = (exposure.x, scene.baked.is_some());
-        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj));
+        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj, extent));
         self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(bytemuck::bytes_of(&uniforms));
         if f.draw_shadow {
             // The shadow passes run mesh.vert with the sun's transform as its view_proj.
@@ -378,7 +381,8 @@ impl Renderer {
         // depth-only rendering that has no draws).
         let settings = Settings {
             prepass: self.prepass && !self.frame.view_batches.is_empty(),
-            count_fragments: self.count_fragments,
+            count_fragments: self.count_fragments && self.mesh.can_count(),
+            material_maps: self.material_maps,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
             fxaa: self.aa == AntiAliasing::Fxaa,
@@ -388,7 +392,8 @@ impl Renderer {
         self.mesh.prepare_samples(gpu, settings.samples)?;
         self.particles.prepare_samples(gpu, settings.samples)?;
         self.boids.prepare_samples(gpu, settings.samples)?;
-        let counting = settings.count_fragments && self.mesh.can_count();
+        self.prepare_lit(gpu, scene, &settings)?;
+        let counting = settings.count_fragments;
         self.slot_counted[slot] = counting;
         let mut finals = finals.to_vec();
         if counting {
@@ -414,6 +419,22 @@ impl Renderer {
         passes.extend(extra.iter_mut().map(|p| &mut **p as &mut dyn Pass));
         self.graph.run(gpu, cb, slot, output, &mut cx, &mut passes, &finals)?;
         self.draw_calls = cx.draw_calls;
+        Ok(())
+    }
+
+    /// Make the lit pipelines every material of `scene` can draw with under `settings` (once
+    /// per scene and settings): all of them, not only those in view, so that turning the camera
+    /// never stalls a frame on a shader compile.
+    fn prepare_lit(&mut self, gpu: &Gpu, scene: &GpuScene, settings: &Settings) -> Result<()> {
+        let lightmapped: &[bool] = if self.lightmaps && scene.baked.is_some() { &[false, true] } else { &[false] };
+        let prepared = (scene.id, settings.samples, settings.prepass, settings.count_fragments, settings.material_maps, lightmapped.len());
+        if self.lit_prepared == Some(prepared) {
+            return Ok(());
+        }
+        let opaque = if settings.prepass { LitPhase::Equal } else { LitPhase::Plain };
+        let keys = scene.materials.iter().flat_map(|m| lightmapped.iter().map(move |&lm| settings.lit_key(if m.blend { LitPhase::Blend } else { opaque }, m, lm)));
+        self.mesh.prepare_lit(gpu, settings.samples, keys)?;
+        self.lit_prepared = Some(prepared);
         Ok(())
     }
 

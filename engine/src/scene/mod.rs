@@ -53,7 +53,53 @@ pub struct GpuMaterial {
     /// glTF BLEND: drawn in the transparent phase (sorted, over, no depth writes), not in the
     /// opaque passes or the shadow map.
     pub blend: bool,
+    /// The texture slots its fragments sample: the renderer draws it with pipelines made for them.
+    pub slots: TextureSlots,
     pub descriptor_set: vk::DescriptorSet,
+}
+
+/// A set of a material's texture slots, as the shading shaders' SLOTS specialisation constant
+/// (mesh_shading.glsl). Shaders run on lavapipe execute a branch masked, the lookup costing the
+/// same whether taken or not; so rather than branch on a material's flags, each material draws
+/// with a pipeline whose SLOTS leave out what it lacks (the material permutations of other
+/// engines' shader keywords, made per scene: `MeshKit::prepare_lit`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TextureSlots(pub u32);
+
+impl TextureSlots {
+    pub const BASE_COLOR: TextureSlots = TextureSlots(1);
+    pub const EMISSIVE: TextureSlots = TextureSlots(2);
+    pub const NORMAL: TextureSlots = TextureSlots(4);
+    pub const METALLIC_ROUGHNESS: TextureSlots = TextureSlots(8);
+    /// An occlusion texture of its own (a packed ORM's occlusion comes with METALLIC_ROUGHNESS).
+    pub const OCCLUSION: TextureSlots = TextureSlots(16);
+    /// Every slot: the shaders' default, which leaves it to the material's flags at run time.
+    pub const ALL: TextureSlots = TextureSlots(31);
+
+    /// The slots `material` samples: those with a texture that can change its shading (not a
+    /// normal map of scale 0, an emissive texture times a zero factor, an occlusion texture of
+    /// strength 0, nor one that is the metallic-roughness texture read at the same coordinates:
+    /// a packed ORM's occlusion comes with that sample).
+    pub fn of(material: &pack::Material) -> TextureSlots {
+        let m = material;
+        let packed_occlusion = m.occlusion_texture == m.metallic_roughness_texture && m.occlusion_uv == m.metallic_roughness_uv;
+        [
+            (m.base_color_texture.is_some(), TextureSlots::BASE_COLOR),
+            (m.emissive_texture.is_some() && m.emissive.iter().any(|&e| e != 0.0), TextureSlots::EMISSIVE),
+            (m.normal_texture.is_some() && m.normal_scale != 0.0, TextureSlots::NORMAL),
+            (m.metallic_roughness_texture.is_some(), TextureSlots::METALLIC_ROUGHNESS),
+            (m.occlusion_texture.is_some() && m.occlusion_strength != 0.0 && !packed_occlusion, TextureSlots::OCCLUSION),
+        ]
+        .into_iter()
+        .filter(|(has, _)| *has)
+        .fold(TextureSlots(0), |all, (_, slot)| TextureSlots(all.0 | slot.0))
+    }
+
+    /// These slots less what the renderer's switches leave out: without material maps, only
+    /// the base colour.
+    pub fn with_maps(self, maps: bool) -> TextureSlots {
+        if maps { self } else { TextureSlots(self.0 & TextureSlots::BASE_COLOR.0) }
+    }
 }
 
 /// What `GpuScene::spawn` places.
@@ -238,5 +284,42 @@ impl GpuScene {
         for (_, f) in &mut self.flock_meshes {
             f.vertices.destroy(gpu);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TextureSlots;
+    use pack::{Material, TextureTransform};
+
+    #[test]
+    fn a_materials_slots_are_the_textures_that_change_it() {
+        let none = Material::default();
+        assert_eq!(TextureSlots::of(&none), TextureSlots(0));
+        let textured = Material {
+            base_color_texture: Some(0),
+            emissive_texture: Some(1),
+            emissive: [1.0, 0.5, 0.0],
+            normal_texture: Some(2),
+            normal_scale: 1.0,
+            metallic_roughness_texture: Some(3),
+            occlusion_texture: Some(4),
+            occlusion_strength: 1.0,
+            ..Default::default()
+        };
+        assert_eq!(TextureSlots::of(&textured), TextureSlots::ALL);
+        // Textures that cannot change the result are not sampled.
+        let inert = Material { emissive: [0.0; 3], normal_scale: 0.0, occlusion_strength: 0.0, ..textured.clone() };
+        assert_eq!(TextureSlots::of(&inert), TextureSlots(TextureSlots::BASE_COLOR.0 | TextureSlots::METALLIC_ROUGHNESS.0));
+        // A packed ORM: occlusion comes with the metallic-roughness sample, unless it is read
+        // at other coordinates.
+        let orm = Material { occlusion_texture: Some(3), ..textured.clone() };
+        assert_eq!(TextureSlots::of(&orm).0, TextureSlots::ALL.0 & !TextureSlots::OCCLUSION.0);
+        let moved = TextureTransform { offset: [0.5, 0.0], ..Default::default() };
+        let orm_elsewhere = Material { occlusion_uv: moved, ..orm.clone() };
+        assert_eq!(TextureSlots::of(&orm_elsewhere), TextureSlots::ALL);
+        // Without material maps, the base colour alone.
+        assert_eq!(TextureSlots::ALL.with_maps(false), TextureSlots::BASE_COLOR);
+        assert_eq!(TextureSlots::of(&inert).with_maps(true), TextureSlots::of(&inert));
     }
 }

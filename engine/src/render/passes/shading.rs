@@ -4,7 +4,7 @@
 
 use crate::render::frame::{FrameCx, DEPTH, FRAGMENT_COUNTER, HDR, SHADOW_MAP, SKINNED};
 use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
-use crate::render::mesh_draw::DrawSetup;
+use crate::render::mesh_draw::{DrawSetup, LitPhase};
 use crate::render::renderer::CLEAR_COLOR;
 use anyhow::Result;
 use ash::vk;
@@ -25,7 +25,7 @@ impl Pass for Shading {
         if cx.animation.is_some() {
             io.uses(SKINNED, Access::VertexInput);
         }
-        if counts(cx) {
+        if cx.settings.count_fragments {
             io.uses(FRAGMENT_COUNTER, Access::StorageWriteFragment);
         }
     }
@@ -55,10 +55,10 @@ impl Pass for Shading {
             clear_without_draws(rec, &rendering, clear);
             return Ok(());
         }
-        let count = counts(cx);
-        let shade = [0, 1].map(|lightmapped| cx.mesh.camera(cx.settings.samples).shade[lightmapped].pick(prepass, count));
-        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || cx.settings.depth_test, cull: true };
-        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then_some(shade[lightmapped as usize]));
+        let phase = if prepass { LitPhase::Equal } else { LitPhase::Plain };
+        let (mesh, settings) = (cx.mesh, &cx.settings);
+        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || settings.depth_test, cull: true };
+        cx.draw_calls += mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then(|| mesh.lit(settings.samples, settings.lit_key(phase, mat, lightmapped))));
         Ok(())
     }
 }
@@ -75,9 +75,4 @@ fn clear_without_draws(rec: &Rec, rendering: &Rendering, color: [f32; 4]) {
     rec.begin_rendering(rendering);
     unsafe { rec.gpu.device.cmd_clear_attachments(rec.cb, &attachments, &rect) };
     rec.end_rendering();
-}
-
-/// Whether this frame counts the fragments it shades.
-fn counts(cx: &FrameCx) -> bool {
-    cx.settings.count_fragments && cx.mesh.can_count()
 }

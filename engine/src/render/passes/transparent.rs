@@ -6,7 +6,7 @@
 
 use crate::render::frame::{FrameCx, DEPTH, HDR, SHADOW_MAP, SKINNED};
 use crate::render::graph::{Access, Io, Pass, Rec, Rendering};
-use crate::render::mesh_draw::DrawSetup;
+use crate::render::mesh_draw::{DrawSetup, LitPhase};
 use anyhow::Result;
 use ash::vk;
 
@@ -32,8 +32,8 @@ impl Pass for Transparent {
         let f = cx.frame;
         let rendering = Rendering::color(rec.image(HDR), None).depth(rec.image(DEPTH), None, vk::AttachmentStoreOp::NONE);
         let setup = DrawSetup { frame_set: f.frame_set, batches: &f.transparent_batches, instances: f.instances, depth_test: true, cull: true };
-        let blend = cx.mesh.camera(cx.settings.samples).blend;
-        cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| mat.blend.then_some(blend[lightmapped as usize]));
+        let (mesh, settings) = (cx.mesh, &cx.settings);
+        cx.draw_calls += mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| mat.blend.then(|| mesh.lit(settings.samples, settings.lit_key(LitPhase::Blend, mat, lightmapped))));
         Ok(())
     }
 }
