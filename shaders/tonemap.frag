@@ -16,7 +16,7 @@ layout(set = 0, binding = 0) uniform sampler2D hdr; // R16G16B16A16_SFLOAT, line
 // Mirrors `ToneMapPush` in engine/src/render/tonemap.rs (within 128 bytes, Vulkan's guaranteed
 // push-constant size).
 layout(push_constant) uniform ToneMap {
-    vec4 params;        // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s; w: 1 = sky behind
+    vec4 params;        // x: exposure; y: 1 = tone map, 0 = pass through (display-referred input); z: s
     vec4 ray[3];        // the view ray through pixel (x, y): ray[0] + x ray[1] + y ray[2] (frame.rs SkyParams)
     vec4 sky;           // rgb: the sky's radiance (nits)
     vec4 sun;           // xyz: unit vector toward the sun; w: cos of its angular radius
@@ -24,6 +24,10 @@ layout(push_constant) uniform ToneMap {
 } tm;
 
 layout(location = 0) out vec4 out_color;
+
+// The sky is behind what the frame drew: a pipeline of its own (tonemap.rs), since a uniform
+// branch runs masked on lavapipe and the sky's code cost frames without a sky 3 ms at 720p.
+layout(constant_id = 0) const bool SKY = true;
 
 // The background's radiance along this pixel's view ray: the level's sky radiance in nits, as
 // the baker lit the level with it, and the sun's disc (its illuminance spread over its solid
@@ -39,7 +43,7 @@ void main() {
     // premultiplied (surfaces alpha 1, glass and particles their coverage, MSAA's resolve the
     // average): what shows of the background is 1 - alpha of it. One pass over the pixels the
     // tone map visits anyway, instead of a sky pass of its own.
-    if (tm.params.w > 0.5) {
+    if (SKY) {
         c = vec4(c.rgb + (1.0 - c.a) * sky_radiance(), 1.0);
     }
     // Alpha 0 marks pixels no surface covered: the clear colour, display-referred, not radiance.

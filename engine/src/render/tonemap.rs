@@ -26,8 +26,8 @@ pub const DEFAULT_SATURATION: f32 = 0.8;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct ToneMapPush {
-    /// x: exposure; y: 1 = tone map, 0 = pass through; z: saturation exponent; w: 1 = the sky
-    /// is behind what the frame drew.
+    /// x: exposure; y: 1 = tone map, 0 = pass through; z: saturation exponent; w: unused
+    /// (whether the sky is behind what the frame drew is the pipeline's: SKY).
     params: Vec4,
     sky: SkyParams,
 }
@@ -46,7 +46,8 @@ impl ToneMap {
     /// A tone-map pass writing `display_format` (the swapchain's or the offscreen target's).
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
         let push = std::mem::size_of::<ToneMapPush>() as u32;
-        let filter = FullscreenFilter::new(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST)?;
+        // Variants: SKY off (0) and on (1).
+        let filter = FullscreenFilter::new_variants(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])?;
         Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, filter })
     }
 
@@ -54,9 +55,9 @@ impl ToneMap {
     /// passes the values through (display-referred input: the stand-in lighting). With `sky`,
     /// the background shows through where the frame's alpha leaves it uncovered.
     pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool, sky: Option<SkyParams>) {
-        let params = Vec4::new(exposure, tone_map as u32 as f32, self.saturation, sky.is_some() as u32 as f32);
+        let params = Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0);
         let push = ToneMapPush { params, sky: sky.unwrap_or_else(SkyParams::zeroed) };
-        self.filter.draw(rec, hdr.view, target, bytemuck::bytes_of(&push));
+        self.filter.draw_variant(rec, hdr.view, target, bytemuck::bytes_of(&push), sky.is_some() as usize);
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
