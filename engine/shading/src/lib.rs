@@ -11,6 +11,7 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 mod dfg;
+pub mod sh;
 pub use dfg::{dfg, specular_albedo, DfgLut};
 
 /// Filament's fp16-safe floor on perceptual roughness (α ≥ 0.002): α = 0 is singular.
