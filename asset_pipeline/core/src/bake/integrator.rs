@@ -101,6 +101,92 @@ pub fn bake_points(
     Ok(Baked { b, rays })
 }
 
+/// A texel of a directional lightmap (shading.md §4): each channel's L1 irradiance in lightmap
+/// units, `B(n) = b0 + b1·n`, of all the light but the sun's direct light, and the fraction of
+/// the sun's disc the point sees. The runtime lights the texel with the sun itself, for the
+/// shading normal: L1 holds one direction poorly (a quarter of it misplaced, §6d), and the sun
+/// is most of the light outdoors; its bounces are in the L1.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DirectionalTexel {
+    /// b0 per channel (nits): the mean radiance over the sphere.
+    pub b0: V3,
+    /// b1 per channel, each an (x, y, z) vector (nits).
+    pub b1: [V3; 3],
+    /// Of the sun's samples, the fraction that reached the point unoccluded and above its
+    /// horizon (1 without a sun, which then lights nothing).
+    pub sun_visibility: f32,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct BakedDirectional {
+    pub texels: Vec<DirectionalTexel>,
+    /// Every ray cast (closest-hit and shadow).
+    pub rays: u64,
+}
+
+/// `bake_points` for a directional lightmap: per point, `settings.samples` samples, each one
+/// light sample per light (the sun's only counted for its visibility), one emissive triangle
+/// and one continuation ray drawn from `mixture_hemisphere`, MIS-weighted against each other.
+/// The sun is `scene.lights`' first sun, the one the runtime draws.
+#[allow(clippy::too_many_arguments)]
+pub fn bake_points_directional(
+    scene: &BakeScene,
+    points: &[V3],
+    normals: &[V3],
+    ids: Option<&[u64]>,
+    settings: &BakeSettings,
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<BakedDirectional, Cancelled> {
+    assert_eq!(points.len(), normals.len(), "one normal per point");
+    let sun = scene.lights.iter().position(|l| matches!(l, super::lights::Light::Sun { .. }));
+    let (texels, rays) = par_bake(points.len(), CHUNK, ids, progress, cancel, |i, id, cast| bake_texel(scene, points[i], normals[i], id, sun, settings, cast))?;
+    Ok(BakedDirectional { texels, rays })
+}
+
+fn bake_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s: &BakeSettings, rays: &mut u64) -> DirectionalTexel {
+    let nl = length(n);
+    if !(nl > 0.0) || x.iter().any(|v| !v.is_finite()) {
+        return DirectionalTexel::default();
+    }
+    let n = scale(n, 1.0 / nl);
+    let samples = s.samples.max(1);
+    // Sums of L/p (radiance over the density it was drawn with) and of L w / p, per channel.
+    let mut l_sum = [0.0f64; 3];
+    let mut lw_sum = [[0.0f64; 3]; 3];
+    let mut add_sample = |l_over_pdf: V3, w: V3| {
+        for c in 0..3 {
+            l_sum[c] += l_over_pdf[c] as f64;
+            for a in 0..3 {
+                lw_sum[c][a] += (l_over_pdf[c] * w[a]) as f64;
+            }
+        }
+    };
+    let mut sun_seen = 0u32;
+    for k in 0..samples {
+        let mut rng = Rng::for_sample(s.seed, index, k as u64);
+        direct_each(scene, x, n, &mut rng, rays, mixture_pdf, |source, w, e, cos| {
+            if sun.is_some_and(|i| source == Source::Light(i)) {
+                sun_seen += 1;
+            } else if cos > 0.0 {
+                // The sample's irradiance is its radiance x cos / pdf: undo the cosine.
+                add_sample(scale(e, 1.0 / cos), w);
+            }
+        });
+        let (local, pdf) = mixture_hemisphere(rng.next_f32(), rng.next_f32());
+        let w = to_world(local, n);
+        let l = trace(scene, [0.0; 3], x, n, w, pdf, s.bounces, &mut rng, rays);
+        add_sample(scale(l, 1.0 / pdf), w);
+    }
+    // b0 = mean(L/p) / 4 pi, b1 = mean(L w / p) / 2 pi.
+    let k = 1.0 / samples as f64;
+    DirectionalTexel {
+        b0: l_sum.map(|v| (v * k / (4.0 * std::f64::consts::PI)) as f32),
+        b1: lw_sum.map(|c| c.map(|v| (v * k / (2.0 * std::f64::consts::PI)) as f32)),
+        sun_visibility: if sun.is_some() { sun_seen as f32 / samples as f32 } else { 1.0 },
+    }
+}
+
 /// `n` items baked in parallel, `chunk` at a time: `f(i, id, rays)` makes item i, whose random
 /// streams are keyed by `ids[i]` (default i), adding the rays it casts. `progress(items done,
 /// rays cast)` after each chunk; `cancel` stops between chunks. Returns the items and the rays.
@@ -153,13 +239,25 @@ fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, ray
 
 /// One estimate of B at x: (direct irradiance)/pi + radiance along one cosine-sampled ray.
 pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &mut Rng, rays: &mut u64) -> V3 {
-    let mut b = scale(direct(scene, x, n, rng, rays), FRAC_1_PI);
+    let b = scale(direct(scene, x, n, rng, rays), FRAC_1_PI);
+    let local = cosine_hemisphere(rng.next_f32(), rng.next_f32());
+    trace(scene, b, x, n, to_world(local, n), local[2] * FRAC_1_PI, bounces, rng, rays)
+}
+
+/// `acc` plus the radiance arriving at (x, n) from the direction `w`, drawn with density `pdf`
+/// (per steradian): emission where the ray lands (MIS-weighted against light sampling), the sky
+/// if it escapes, and the light reflected there, path-traced through `bounces` more vertices
+/// with cosine-sampled continuations and next-event estimation at each.
+#[allow(clippy::too_many_arguments)]
+fn trace(scene: &BakeScene, acc: V3, x: V3, n: V3, w: V3, pdf: f32, bounces: u32, rng: &mut Rng, rays: &mut u64) -> V3 {
+    let mut b = acc;
     let mut thr = [1.0f32; 3];
-    let (mut p, mut nrm) = (x, n);
+    let (mut p, mut nrm, mut w, mut pdf_bsdf) = (x, n, w, pdf);
     for depth in 0..=bounces {
-        let local = cosine_hemisphere(rng.next_f32(), rng.next_f32());
-        let w = to_world(local, nrm);
-        let pdf_bsdf = local[2] * FRAC_1_PI;
+        if depth > 0 {
+            let local = cosine_hemisphere(rng.next_f32(), rng.next_f32());
+            (w, pdf_bsdf) = (to_world(local, nrm), local[2] * FRAC_1_PI);
+        }
         let o = offset_ray(p, nrm);
         *rays += 1;
         let hit = scene.closest(&Ray { origin: o, dir: w, tmin: 0.0, tmax: f32::INFINITY });
@@ -204,20 +302,38 @@ pub(super) fn sample_path(scene: &BakeScene, x: V3, n: V3, bounces: u32, rng: &m
     b
 }
 
+/// Where a next-event sample's light came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Source {
+    /// `scene.lights[i]`.
+    Light(usize),
+    /// An emissive triangle.
+    Emitter,
+}
+
 /// Next-event estimate of the irradiance H at (x, n) from every analytic light and one emissive
 /// triangle, area lights MIS-weighted against cosine sampling. Always draws the same number of
 /// random numbers, so later dimensions of a path stay aligned whatever is hit.
 pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64) -> V3 {
-    let o = offset_ray(x, n);
     let mut h = [0.0f32; 3];
-    for l in &scene.lights {
+    direct_each(scene, x, n, rng, rays, |cos| cos * FRAC_1_PI, |_, _, e, _| h = add(h, e));
+    h
+}
+
+/// `direct`'s samples one by one: `each(source, direction, irradiance, cos)` for every sample
+/// that arrives unoccluded, its irradiance (lux, the light's radiance x cos / pdf) already
+/// MIS-weighted against continuation rays drawn with density `bsdf_pdf(cos)`.
+pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64, bsdf_pdf: impl Fn(f32) -> f32, mut each: impl FnMut(Source, V3, V3, f32)) {
+    let o = offset_ray(x, n);
+    for (i, l) in scene.lights.iter().enumerate() {
         let (u1, u2) = (rng.next_f32(), rng.next_f32());
         let Some(s) = l.sample(x, n, u1, u2) else { continue };
-        let w = s.pdf.map_or(1.0, |pl| power_heuristic(pl, dot(n, s.dir) * FRAC_1_PI));
+        let cos = dot(n, s.dir);
+        let w = s.pdf.map_or(1.0, |pl| power_heuristic(pl, bsdf_pdf(cos)));
         *rays += 1;
         let tmax = if s.dist.is_finite() { s.dist * (1.0 - SHADOW_SHORTEN) } else { f32::INFINITY };
         if !scene.occluded(&Ray { origin: o, dir: s.dir, tmin: 0.0, tmax }) {
-            h = add(h, scale(s.h, w));
+            each(Source::Light(i), s.dir, scale(s.h, w), cos);
         }
     }
     if scene.has_emitters() {
@@ -240,13 +356,12 @@ pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut 
             // A black texel or a cut-out point sends nothing: no shadow ray needed.
             if le != [0.0; 3] && scene.surfaces.present(prim, q, bary) {
                 let pdf_light = scene.emitter_pdf(prim) * r2 / cos_l;
-                let mis = power_heuristic(pdf_light, cos_i * FRAC_1_PI);
+                let mis = power_heuristic(pdf_light, bsdf_pdf(cos_i));
                 *rays += 1;
                 if !scene.occluded(&Ray { origin: o, dir: w, tmin: 0.0, tmax: r * (1.0 - SHADOW_SHORTEN) }) {
-                    h = add(h, scale(le, cos_i / pdf_light * mis));
+                    each(Source::Emitter, w, scale(le, cos_i / pdf_light * mis), cos_i);
                 }
             }
         }
     }
-    h
 }

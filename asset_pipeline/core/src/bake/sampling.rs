@@ -97,6 +97,20 @@ pub fn cosine_hemisphere(u1: f32, u2: f32) -> V3 {
     [r * phi.cos(), r * phi.sin(), (1.0 - u2).max(0.0).sqrt()]
 }
 
+/// A direction over the hemisphere around z, cosine-weighted half the time and uniform the
+/// other half, and its pdf `½ cos/π + ½/(2π)` (`mixture_pdf`). For estimating L1 SH: with
+/// cosine sampling alone the 1/cos of b0's and the tangential b1's estimators has infinite
+/// variance (shading.md §4.3).
+pub fn mixture_hemisphere(u1: f32, u2: f32) -> (V3, f32) {
+    let local = if u1 < 0.5 { cosine_hemisphere(2.0 * u1, u2) } else { uniform_cone(2.0 * u1 - 1.0, u2, 0.0) };
+    (local, mixture_pdf(local[2]))
+}
+
+/// `mixture_hemisphere`'s density at a direction whose cosine to the axis is `cos`.
+pub fn mixture_pdf(cos: f32) -> f32 {
+    0.5 * cos.max(0.0) * std::f32::consts::FRAC_1_PI + 0.25 * std::f32::consts::FRAC_1_PI
+}
+
 /// Uniform direction in the cone cos(theta) >= cos_max around z; pdf 1/(2 pi (1 - cos_max)).
 pub fn uniform_cone(u1: f32, u2: f32, cos_max: f32) -> V3 {
     let c = 1.0 - u1 * (1.0 - cos_max);
