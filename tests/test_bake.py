@@ -262,3 +262,25 @@ def test_bad_bake_arguments_are_one_line_errors(room, tmp_path, args, message):
     r = subprocess.run([str(COOK), str(room), "-o", str(tmp_path / "x.pack"), *args], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not (tmp_path / "x.pack").exists()
+
+
+def test_directional_texels_hold_the_sky_in_l1_and_the_suns_visibility():
+    # bake_points_directional (issue 22): the sunny tile sees the sky over its hemisphere,
+    # b0 = L/2 and b1 = (0, L/2, 0) per channel (shading.md section 4.1, less the sliver of
+    # sky the roof 10 m away hides), and the whole sun; the tile under the roof none of it.
+    st = bake.static_scene(_two_tiles())
+    baker = bake._core.Baker(*st.baker_args)
+    points = np.array([[-5.0, 0.0, 0.0]] * 32 + [[5.0, 0.0, 0.0]] * 32, np.float32)
+    normals = np.tile(np.array([[0.0, 1.0, 0.0]], np.float32), (64, 1))
+    out, rays = baker.bake_points_directional(points, normals, samples=64, bounces=1)
+    assert out.shape == (64, 13) and out.dtype == np.float32 and rays > 64 * 64
+    sunny, shaded = out[:32].mean(axis=0), out[32:].mean(axis=0)
+    sky = 2000.0 * np.array([0.5, 0.6, 1.0])
+    np.testing.assert_allclose(sunny[0:3], sky / 2, rtol=0.03)
+    b1 = sunny[3:12].reshape(3, 3)  # per channel (x, y, z)
+    np.testing.assert_allclose(b1[:, 1], sky / 2, rtol=0.03)
+    assert np.abs(b1[:, [0, 2]]).max() < 0.03 * sky.max()
+    assert (out[:32, 12] == 1.0).all() and (out[32:, 12] == 0.0).all(), out[:, 12]
+    # Under the roof: 59% of the upper hemisphere's solid angle is the roof's grey underside
+    # (lit by the open sky below it, there being no ground), so less light, less from above.
+    assert shaded[0] < 0.8 * sunny[0] and shaded[4] < 0.5 * sunny[4], (shaded, sunny)

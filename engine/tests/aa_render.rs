@@ -147,7 +147,7 @@ fn switching_msaa_back_and_forth_keeps_both_targets_and_drops_the_unused_one() {
     let pack = cube_pack(&[Mat4::from_scale(Vec3::splat(0.8))], WHITE4, Material::default());
     let mut rig = Rig::new(&gpu, &pack, W, H);
     let images = |gpu: &engine::gpu::Gpu| gpu.live_allocations().into_iter().filter(|n| n.starts_with("hdr") || n.starts_with("depth")).collect::<Vec<_>>();
-    let mut frame = |rig: &mut Rig, aa| {
+    let frame = |rig: &mut Rig, aa| {
         rig.renderer.aa = aa;
         rig.target.render(&gpu, &mut rig.renderer, &rig.scene, &looking_down_neg_z(3.0), &Lighting::default(), false).unwrap();
     };
