@@ -332,3 +332,50 @@ def _has_pyoidn() -> bool:
     except (ImportError, OSError):
         return False
     return True
+
+
+def directional_page(seed=2):
+    """`noisy_page`'s charts with directional texels (13 channels): per chart a b0 and a b1 of
+    directionality 0.4 along its own axis, each texel's estimate noisy; and the sun's
+    visibility, 1 on chart 0 and 0 elsewhere."""
+    rng = np.random.default_rng(seed)
+    _, chart, level = noisy_page()
+    axes = {0: (0.0, 1.0, 0.0), 1: (0.6, 0.8, 0.0), 2: (0.0, 0.6, -0.8)}
+    truth = np.zeros(chart.shape + (13,), np.float32)
+    raw = truth.copy()
+    for c, v in level.items():
+        m = chart == c
+        b0 = np.array([v, 0.5 * v, 0.25 * v], np.float32)
+        b1 = 0.8 * b0[:, None] * np.array(axes[c], np.float32)[None, :]  # [channel, axis], |b1| = 0.8 b0
+        truth[m, 0:3], truth[m, 3:12], truth[m, 12] = b0, b1.ravel(), float(c == 0)
+        noise = 1 + 0.3 * rng.uniform(-1, 1, (m.sum(), 12))
+        raw[m, 0:12] = truth[m, 0:12] * noise
+        raw[m, 12] = truth[m, 12]
+    return raw, truth, chart
+
+
+def test_directional_pages_are_denoised_dilated_and_keep_their_direction():
+    raw, truth, chart = directional_page()
+    # Without the denoiser, covered texels come back as they were (b1 through q = b0 + b1/2
+    # and back), and gutters are filled from their chart, every channel alike.
+    plain = lp.finish_directional_page(raw, chart, settings=lp.LightmapPostSettings(denoise=False, stitch=False))
+    covered = chart != NONE
+    np.testing.assert_allclose(plain.image[covered], raw[covered], rtol=1e-5, atol=1e-5)
+    ring = (plain.chart != NONE) & ~covered
+    assert ring.sum() > 0 and np.isfinite(plain.image).all()
+    near = plain.chart[ring]
+    np.testing.assert_array_equal(plain.image[ring][:, 12], (near == 0).astype(np.float32))
+    with pytest.raises(ValueError, match="directional page has shape"):
+        lp.finish_directional_page(raw[..., :12], chart)
+    # With it: each chart's b0 and b1 are closer to the truth, their means kept.
+    pytest.importorskip("pyoidn", reason="pyoidn (the 'denoise' extra) is not installed")
+    done = lp.finish_directional_page(raw, chart, settings=lp.LightmapPostSettings(stitch=False))
+    for c in range(3):
+        m = chart == c
+        for name, ch in (("b0", slice(0, 3)), ("b1", slice(3, 12))):
+            before = np.abs(raw[m, ch] - truth[m, ch]).mean()
+            after = np.abs(done.image[m, ch] - truth[m, ch]).mean()
+            assert after < 0.5 * before, (c, name, before, after)
+            np.testing.assert_allclose(done.image[m, ch].mean(axis=0), truth[m, ch].mean(axis=0), rtol=0.05, atol=0.02 * truth[m, 0].mean())
+        np.testing.assert_array_equal(done.image[m, 12], truth[m, 12])
+    assert set(done.info) == {"b0", "q_x", "q_y", "q_z", "sun"} and done.info["b0"]["denoise"]["denoised"]

@@ -166,19 +166,63 @@ def read_exr(path: str | Path) -> np.ndarray:
 def finish_page(raw: np.ndarray, chart: np.ndarray, *, seams: np.ndarray | None = None,
                 settings: LightmapPostSettings | None = None, path: str | Path | None = None) -> PagePost:
     """Denoise -> dilate -> stitch -> (write ``path`` as EXR) for one page; see the module notes."""
+    s = _checked(settings)
+    chart = np.ascontiguousarray(chart, np.uint32)
+    img, chart_out, info = _finish_rgb(_check(raw, chart), chart, seams, s, denoised=s.denoise)
+    if path is not None:
+        write_exr(path, img)
+        info["path"] = str(path)
+    return PagePost(img, chart_out, info)
+
+
+# A directional page's 13 channels (``_core.Baker.bake_points_directional``): b0 (r, g, b), b1 of
+# r (x, y, z), of g, of b, and the sun's visibility.
+DIRECTIONAL_CHANNELS = 13
+
+
+def finish_directional_page(raw: np.ndarray, chart: np.ndarray, *, seams: np.ndarray | None = None,
+                            settings: LightmapPostSettings | None = None) -> PagePost:
+    """``finish_page`` for a directional page, (h, w, 13) (``DIRECTIONAL_CHANNELS``): the same
+    steps on RGB images the denoiser can take, which must be non-negative HDR: b0, and for each
+    axis a, ``q_a = b0 + b1_a / 2``, the irradiance of a half-strength lobe toward +a (non-negative
+    since non-negative radiance keeps ``|b1| <= 2 b0``); b1 is recovered as ``2 (q_a - b0)``.
+    Each goes through the denoiser on its own. The sun's visibility is dilated and stitched, not
+    denoised (noise there is a few penumbra texels). Returns the finished (h, w, 13) page."""
+    s = _checked(settings)
+    chart = np.ascontiguousarray(chart, np.uint32)
+    raw = np.asarray(raw, np.float32)
+    if raw.ndim != 3 or raw.shape[2] != DIRECTIONAL_CHANNELS or raw.shape[:2] != chart.shape:
+        raise ValueError(f"directional page has shape {raw.shape}, expected {chart.shape + (DIRECTIONAL_CHANNELS,)}")
+    b0 = raw[..., 0:3]
+    b1 = raw[..., 3:12].reshape(raw.shape[:2] + (3, 3))  # [..., channel, axis]
+    images = [b0] + [b0 + 0.5 * b1[..., :, a] for a in range(3)] + [np.repeat(raw[..., 12:13], 3, axis=2)]
+    done, info, chart_out = [], {}, chart
+    for k, img in enumerate(images):
+        img, chart_out, step = _finish_rgb(_check(img, chart), chart, seams, s, denoised=s.denoise and k < 4)
+        done.append(img)
+        info[["b0", "q_x", "q_y", "q_z", "sun"][k]] = step
+    out = np.empty(raw.shape, np.float32)
+    out[..., 0:3] = done[0]
+    for a in range(3):
+        out[..., 3 + a:12:3] = 2.0 * (done[1 + a] - done[0])
+    out[..., 12] = np.clip(done[4][..., 0], 0.0, 1.0)
+    return PagePost(out, chart_out, info)
+
+
+def _checked(settings: LightmapPostSettings | None) -> LightmapPostSettings:
     s = settings or LightmapPostSettings()
     if int(s.dilate_rings) != s.dilate_rings or s.dilate_rings < 0:
         raise ValueError(f"dilate_rings must be a whole number >= 0, not {s.dilate_rings}")
-    chart = np.ascontiguousarray(chart, np.uint32)
-    img = _check(raw, chart)
+    return s
+
+
+def _finish_rgb(img: np.ndarray, chart: np.ndarray, seams, s: LightmapPostSettings, denoised: bool) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Denoise (when asked) -> dilate -> stitch one RGB image of a page."""
     info: dict = {}
-    if s.denoise:
+    if denoised:
         img, info["denoise"] = denoise(img, chart, int(s.denoise_margin))
     img, chart_out = dilate(img, chart, int(s.dilate_rings))
     info["dilated_texels"] = int((chart_out != chart).sum())
     if s.stitch and seams is not None and len(seams):
         img, info["stitch"] = stitch(img, seams, s)
-    if path is not None:
-        write_exr(path, img)
-        info["path"] = str(path)
-    return PagePost(img, chart_out, info)
+    return img, chart_out, info
