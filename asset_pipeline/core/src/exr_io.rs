@@ -9,7 +9,7 @@
 //! which is never negative; a denoiser can overshoot slightly below 0) become 0; values above the
 //! largest finite half (65504) and +inf become 65504, so no texel is ever infinite.
 
-use exr::prelude::{f16, read_first_rgba_layer_from_file, Encoding, Image, Layer, LayerAttributes, RgbaChannels, SpecificChannels, Vec2, WritableImage};
+use exr::prelude::{f16, read_first_rgba_layer_from_file, AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, RgbaChannels, SmallVec, SpecificChannels, Vec2, WritableImage};
 use std::path::Path;
 
 /// Largest finite half float: what out-of-range values are written as.
@@ -39,6 +39,35 @@ fn check(rgb: &[f32], width: usize, height: usize) -> Result<(), String> {
 pub fn write_exr(path: &Path, rgb: &[f32], width: usize, height: usize) -> Result<(), String> {
     let file = path.display().to_string();
     check(rgb, width, height).map_err(|e| format!("{file}: {e}"))?;
+    let texel = |x: usize, y: usize| {
+        let i = (y * width + x) * 3;
+        (f16::from_f32(sanitise(rgb[i])), f16::from_f32(sanitise(rgb[i + 1])), f16::from_f32(sanitise(rgb[i + 2])))
+    };
+    let layer = Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, SpecificChannels::rgb(|Vec2(x, y)| texel(x, y)));
+    write_atomically(path, |tmp| Image::from_layer(layer).write().to_file(tmp))
+}
+
+/// Write named half-float channels (each `height * width` linear floats, row 0 first, sanitised
+/// as `write_exr`'s; OpenEXR's layer naming, "layer.R") as one OpenEXR image, atomically. A
+/// directional lightmap page is one file this way, its b0 as the plain "R", "G", "B" that
+/// viewers (and `read_exr`) show.
+pub fn write_exr_channels(path: &Path, width: usize, height: usize, channels: &[(&str, &[f32])]) -> Result<(), String> {
+    let file = path.display().to_string();
+    if width == 0 || height == 0 || channels.is_empty() {
+        return Err(format!("{file}: empty image ({width} x {height}, {} channels)", channels.len()));
+    }
+    if let Some((name, data)) = channels.iter().find(|(_, d)| d.len() != width * height) {
+        return Err(format!("{file}: channel '{name}' has {} floats for a {width} x {height} image", data.len()));
+    }
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        channels.iter().map(|(name, data)| AnyChannel::new(*name, FlatSamples::F16(data.iter().map(|&v| f16::from_f32(sanitise(v))).collect()))).collect();
+    let layer = Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list));
+    write_atomically(path, |tmp| Image::from_layer(layer).write().to_file(tmp))
+}
+
+/// `write(temporary path)` beside `path`, then renamed into place; on failure nothing is left.
+fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> exr::error::Result<()>) -> Result<(), String> {
+    let file = path.display().to_string();
     let name = path.file_name().ok_or_else(|| format!("{file}: not a file path"))?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -48,12 +77,7 @@ pub fn write_exr(path: &Path, rgb: &[f32], width: usize, height: usize) -> Resul
         return Err(format!("{file}: output directory '{}' does not exist", dir.display()));
     }
     let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
-    let texel = |x: usize, y: usize| {
-        let i = (y * width + x) * 3;
-        (f16::from_f32(sanitise(rgb[i])), f16::from_f32(sanitise(rgb[i + 1])), f16::from_f32(sanitise(rgb[i + 2])))
-    };
-    let layer = Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, SpecificChannels::rgb(|Vec2(x, y)| texel(x, y)));
-    let written = Image::from_layer(layer).write().to_file(&tmp).map_err(|e| format!("{file}: cannot write EXR: {e}"));
+    let written = write(&tmp).map_err(|e| format!("{file}: cannot write EXR: {e}"));
     let renamed = written.and_then(|_| std::fs::rename(&tmp, path).map_err(|e| format!("{file}: cannot rename into place: {e}")));
     if renamed.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -119,6 +143,28 @@ mod tests {
         write_exr(&p, &rgb, 2, 1).unwrap();
         let (_, _, back) = read_exr(&p).unwrap();
         assert_eq!(back, vec![0.0, 0.0, HALF_MAX, HALF_MAX, 0.5, 2.0]);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn named_channels_round_trip_with_rgb_readable() {
+        let (w, h) = (3usize, 2usize);
+        let r: Vec<f32> = (0..6).map(|i| i as f32 * 100.0).collect();
+        let ones = vec![1.0f32; 6];
+        let q: Vec<f32> = (0..6).map(|i| 0.5 + i as f32).collect();
+        let dir = tmpdir("chan");
+        let p = dir.join("dir.exr");
+        write_exr_channels(&p, w, h, &[("R", &r), ("G", &ones), ("B", &ones), ("qx.R", &q), ("sun.Y", &ones)]).unwrap();
+        // The plain RGB is what read_exr (and any viewer) sees.
+        let (_, _, back) = read_exr(&p).unwrap();
+        assert_eq!(back.chunks(3).map(|c| c[0]).collect::<Vec<_>>(), r);
+        let image = exr::prelude::read_all_flat_layers_from_file(&p).unwrap();
+        let names: Vec<String> = image.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect();
+        assert_eq!(names, ["B", "G", "R", "qx.R", "sun.Y"]);
+        let qx = &image.layer_data[0].channel_data.list[3].sample_data;
+        assert_eq!((0..6).map(|i| qx.value_by_flat_index(i).to_f32()).collect::<Vec<_>>(), q);
+        assert!(write_exr_channels(&p, w, h, &[("R", &r[..5])]).unwrap_err().contains("channel 'R' has 5 floats"));
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
         std::fs::remove_dir_all(dir).unwrap();
     }
 
