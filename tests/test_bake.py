@@ -284,3 +284,51 @@ def test_directional_texels_hold_the_sky_in_l1_and_the_suns_visibility():
     # Under the roof: 59% of the upper hemisphere's solid angle is the roof's grey underside
     # (lit by the open sky below it, there being no ground), so less light, less from above.
     assert shaded[0] < 0.8 * sunny[0] and shaded[4] < 0.5 * sunny[4], (shaded, sunny)
+
+
+def test_a_directional_bake_puts_b0_the_sun_and_the_direction_in_the_pack_and_the_exr(room, tmp_path):
+    # --lightmap-mode directional (issue 22): per page an Rgba16Float of b0 and the sun's
+    # visibility and an Rgba8Unorm of the luminance's direction, in the pack and in the page's
+    # EXR (b0 as its RGB, "sun.Y", "direction.X/Y/Z"); the sun is not in b0.
+    out = tmp_path / "room.pack"
+    r = subprocess.run([str(COOK), str(room), "-o", str(out), "-q", "--no-lods", "--quality", "draft", "--samples", "8",
+                        "--probe-samples", "16", "--lightmap-mode", "directional"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = asset_pipeline.read_pack_summary(out)
+    assert summary["lightmap_pages"] == 1 and summary["lightmaps_baked"] == 1, summary
+    import OpenEXR
+
+    with OpenEXR.File(str(out.with_name("room.lightmap0.exr"))) as f:
+        ch = f.parts[0].channels
+        names = set(ch)
+        get = lambda n: np.asarray(ch[n].pixels, np.float32)
+        b0 = np.stack([get(c) for c in "RGB"], -1) if "RGB" not in ch else np.asarray(ch["RGB"].pixels, np.float32)
+        sun = get("sun.Y")
+        direction = np.stack([get(f"direction.{a}") for a in "XYZ"], -1)
+    assert {"sun.Y", "direction.X", "direction.Y", "direction.Z"} <= names, names
+    assert np.isfinite(b0).all() and b0.min() >= 0.0 and sun.min() >= 0.0 and sun.max() <= 1.0
+    # Sunlit texels (the yard) see the whole sun, the room's far corner none of it; b0 holds the
+    # sky and bounces only: the sun's direct light alone would add 80 000 lux / 4 pi = 6366 nits.
+    assert (sun == 1.0).mean() > 0.2 and (sun == 0.0).mean() > 0.05, ((sun == 1.0).mean(), (sun == 0.0).mean())
+    assert np.median(b0[sun == 1.0][:, 1]) < 5000.0
+    # The direction is a unit-bounded vector, mostly up in the yard (the sky above it).
+    t = 2.0 * direction - 1.0
+    assert np.linalg.norm(t, axis=-1).max() <= 1.0 + 2.0 / 255.0 * 1.8
+    assert np.median(t[sun == 1.0][:, 1]) > 0.2
+
+
+def test_mono_sh_is_the_luminance_direction_over_twice_b0():
+    # shading::sh::MonoSh::from_rgb in numpy: t = b1_Y / (2 b0_Y), clamped to |t| <= 1, as
+    # 0.5 + 0.5 t bytes; b0 and the sun's visibility pass through.
+    page = np.zeros((1, 3, 13), np.float32)
+    page[0, :, 0:3] = [2.0, 2.0, 2.0]
+    page[0, 0, 3:12] = [0.0, 1.0, 0.0] * 3  # b1 = (0, 1, 0) per channel: t = (0, 0.25, 0)
+    page[0, 1, 3:12] = [0.0, 0.0, -8.0] * 3  # noisy: |t| = 2 -> clamped to (0, 0, -1)
+    page[0, 2, 3:12] = [4.0, 0, 0, 0, 0, 0, 0, 0, 0]  # red only: t_x = 0.2126 * 4 / 4
+    page[0, :, 12] = [1.0, 0.5, 0.0]
+    rgba, direction = bake.mono_sh(page)
+    np.testing.assert_array_equal(rgba[0, :, :3], page[0, :, :3])
+    np.testing.assert_array_equal(rgba[0, :, 3], [1.0, 0.5, 0.0])
+    np.testing.assert_array_equal(direction[0, 0], [128, 159, 128, 255])
+    np.testing.assert_array_equal(direction[0, 1], [128, 128, 0, 255])
+    np.testing.assert_array_equal(direction[0, 2], [np.rint((0.5 + 0.5 * 0.2126) * 255), 128, 128, 255])

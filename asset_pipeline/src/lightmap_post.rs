@@ -179,6 +179,22 @@ fn write_exr(py: Python<'_>, path: PathBuf, rgb: PyReadonlyArray3<'_, f32>) -> P
     py.detach(|| exr_io::write_exr(&path, img, w, h)).map_err(crate::CookError::new_err)
 }
 
+/// Write `channels` (name -> (h, w) float32, all one size; OpenEXR layer names such as "sun.Y")
+/// as one half-float OpenEXR image at `path`, atomically, values sanitised as `write_exr`'s.
+#[pyfunction]
+fn write_exr_channels(py: Python<'_>, path: PathBuf, channels: Vec<(String, PyReadonlyArray2<'_, f32>)>) -> PyResult<()> {
+    let Some((_, first)) = channels.first() else { return Err(PyValueError::new_err("write_exr_channels: no channels")) };
+    let (h, w) = (first.shape()[0], first.shape()[1]);
+    let mut data = Vec::with_capacity(channels.len());
+    for (name, a) in &channels {
+        if a.shape() != [h, w] {
+            return Err(PyValueError::new_err(format!("write_exr_channels: channel '{name}' is {:?}, not ({h}, {w})", a.shape())));
+        }
+        data.push((name.as_str(), a.as_slice().map_err(|_| PyValueError::new_err(format!("write_exr_channels: channel '{name}' is not contiguous")))?));
+    }
+    py.detach(|| exr_io::write_exr_channels(&path, w, h, &data)).map_err(crate::CookError::new_err)
+}
+
 /// Read the first RGB(A) layer of an OpenEXR file as (h, w, 3) float32 (alpha dropped).
 #[pyfunction]
 fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
@@ -193,6 +209,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(seam_mismatch, m)?)?;
     m.add_function(wrap_pyfunction!(sample_bilinear, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(write_exr_channels, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     m.add("EXR_HALF_MAX", exr_io::HALF_MAX)?;
     Ok(())

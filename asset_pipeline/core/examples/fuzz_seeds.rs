@@ -136,6 +136,7 @@ fn rich_pack(base: Pack) -> Pack {
         pages: vec![[2, 2]],
         padding: 1,
         textures: vec![1],
+        directions: vec![],
     });
     if let Some(sm) = b.manifest.meshes.first_mut().and_then(|m| m.lods[0].submeshes.first_mut()) {
         sm.lightmap_block = Some(0);

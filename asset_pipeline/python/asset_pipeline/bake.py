@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from asset_pipeline import _core, ir
-from asset_pipeline.lightmap_post import NONE, LightmapPostSettings, finish_page, page_seams
+from asset_pipeline.lightmap_post import DIRECTIONAL_CHANNELS, NONE, LightmapPostSettings, finish_directional_page, finish_page, page_seams
 from asset_pipeline.uv2 import place_on_atlas, rasterize_page
 
 PRESETS = ("draft", "medium", "high")
@@ -70,6 +70,9 @@ class BakeSettings:
     """Settings of the bake stage (all but `threads` are part of its cache key)."""
 
     preset: str = "medium"  # draft | medium | high (cook_core::bake::integrator::BakeSettings::preset)
+    # irradiance: B = H/pi per texel (the sun included); directional: per texel L1 SH of all the
+    # light but the sun's direct light, and the sun's visibility (LIGHTMAP_MODES).
+    lightmap_mode: str = "irradiance"
     samples: int | None = None  # paths per lightmap texel (None: the preset's)
     bounces: int | None = None  # indirect bounces (None: the preset's)
     probe_samples: int | None = None  # rays per probe (None: the preset's)
@@ -94,9 +97,22 @@ class BakeSettings:
 SCHEDULING = ("threads", "batch_texels", "tile_texels", "probe_tile")
 
 
+# What a lightmap texel holds, and its bytes in the pack (see `attach`):
+# - irradiance: B = H/pi (nits), the sun included; Rgba16Float, 8 bytes a texel.
+# - directional: b0 (nits, RGB) and the sun's visibility in one Rgba16Float, and the luminance's
+#   L1 direction t = b1_Y / (2 b0_Y) as 0.5 + 0.5 t in one Rgba8Unorm ("MonoSH", shading.md
+#   section 4.2): 12 bytes a texel, 1.5x. The runtime evaluates b0 (1 + 2 t.n) for the shading
+#   normal and lights the texel with the sun itself, times its visibility. (Every channel's own
+#   direction would take three Rgba8Unorm, 20 bytes, 2.5x, and two lookups more per pixel;
+#   MonoSH loses only colour that differs by direction.)
+LIGHTMAP_MODES = ("irradiance", "directional")
+
+
 @dataclass
 class Baked:
-    pages: list[np.ndarray]  # (h, w, 3) float32 per atlas page: the finished lightmap
+    # Per atlas page, the finished lightmap: (h, w, 3) float32 B, or (h, w, 13) for a directional
+    # bake (lightmap_post.DIRECTIONAL_CHANNELS: b0, b1 per channel, the sun's visibility).
+    pages: list[np.ndarray]
     probes: ir.ProbeGrid | None
     stats: dict
 
@@ -294,13 +310,18 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     s = settings or BakeSettings()
     if s.preset not in PRESETS:
         raise ValueError(f"bake: unknown preset '{s.preset}' ({', '.join(PRESETS)})")
+    if s.lightmap_mode not in LIGHTMAP_MODES:
+        raise ValueError(f"bake: unknown lightmap mode '{s.lightmap_mode}' ({', '.join(LIGHTMAP_MODES)})")
+    directional = s.lightmap_mode == "directional"
     layout = scene.lightmap
     st = static_scene(scene)
     baked_instances = st.baked if layout is not None else []
-    stats: dict = {"preset": s.preset, "static_triangles": int(len(st.triangles)), "static_instances": len(st.instances)}
+    stats: dict = {"preset": s.preset, "lightmap_mode": s.lightmap_mode, "static_triangles": int(len(st.triangles)), "static_instances": len(st.instances)}
     if len(st.triangles) == 0:
         return Baked(pages=[], probes=None, stats=stats)
     kw = dict(preset=s.preset, seed=int(s.seed), bounces=s.bounces, threads=s.threads)
+    # The texels' call: Baker.bake_points or bake_points_directional, and its channels.
+    texel_call = ("bake_points_directional", DIRECTIONAL_CHANNELS) if directional else ("bake_points", 3)
     # Every static instance's own region, at its own world positions and normals.
     lods = [i.lod for i in baked_instances]
     positions = [i.world_positions for i in baked_instances]
@@ -323,12 +344,12 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
         t0 = time.perf_counter()
         baker = _core.Baker(*st.baker_args)
         stats["bvh_seconds"] = time.perf_counter() - t0
-        traced = [_bake_page_local(baker, page, inp, s, kw, progress) for page, inp in enumerate(inputs)]
+        traced = [_bake_page_local(baker, page, inp, s, kw, texel_call, progress) for page, inp in enumerate(inputs)]
         t_probes = time.perf_counter()
         probe_out = _bake_probes_local(baker, probe_points, s, progress, kw)
         probe_seconds = time.perf_counter() - t_probes
     else:
-        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, progress, stats)
+        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, texel_call, progress, stats)
 
     pages: list[np.ndarray] = []
     rays_total, texels_total, bake_seconds = 0, 0, 0.0
@@ -337,10 +358,14 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
         seams = page_seams(lods, layout, page, positions=positions, normals=normals,
                            min_normal_cos=s.post.seam_min_normal_cos) if s.post.stitch else None
         t_post = time.perf_counter()
-        done = finish_page(raw.reshape(h, w, 3), chart, seams=seams, settings=s.post)
+        if directional:
+            done = finish_directional_page(raw.reshape(h, w, DIRECTIONAL_CHANNELS), chart, seams=seams, settings=s.post)
+        else:
+            done = finish_page(raw.reshape(h, w, 3), chart, seams=seams, settings=s.post)
         pages.append(done.image)
         page_stats.append({"page": page, "texels": int(len(covered)), "rays": int(rays), "seconds": seconds,
-                           "post_seconds": time.perf_counter() - t_post, "denoised": bool(done.info.get("denoise", {}).get("denoised", False))})
+                           "post_seconds": time.perf_counter() - t_post,
+                           "denoised": bool((done.info["b0"] if directional else done.info).get("denoise", {}).get("denoised", False))})
         rays_total += rays
         texels_total += len(covered)
         bake_seconds += seconds
@@ -353,15 +378,16 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     return Baked(pages=pages, probes=probes, stats=stats)
 
 
-def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, progress):
-    """One page's covered texels in batches: (raw (h*w, 3), rays, seconds)."""
+def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, texel_call: tuple, progress):
+    """One page's covered texels in batches: (raw (h*w, channels), rays, seconds)."""
     w, h, _, covered, points, normals, ids = inp
-    raw = np.zeros((h * w, 3), np.float32)
+    call, channels = texel_call
+    raw = np.zeros((h * w, channels), np.float32)
     rays, t_page = 0, time.perf_counter()
     with _stage(progress, f"bake p{page}", len(covered)) as bar:
         for a in range(0, len(covered), s.batch_texels):
             b = min(a + s.batch_texels, len(covered))
-            out, n = baker.bake_points(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
+            out, n = getattr(baker, call)(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
             raw[covered[a:b]] = out
             rays += n
             seconds = time.perf_counter() - t_page
@@ -370,7 +396,7 @@ def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, progress)
     return raw, rays, time.perf_counter() - t_page
 
 
-def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, progress, stats: dict):
+def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, texel_call: tuple, progress, stats: dict):
     """Every page's texels in tiles and the probes in batches as Ray tasks, submitted together so
     the cluster stays busy across page boundaries. Returns what the local path returns."""
     from asset_pipeline import executor as ex
@@ -386,7 +412,7 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
     for page, (_, _, _, covered, points, normals, ids) in enumerate(inputs):
         for a in range(0, len(covered), s.tile_texels):
             b = min(a + s.tile_texels, len(covered))
-            tiles.append((page, a, b, (key, boxed, points[a:b], normals[a:b], ids[a:b], {**task_kw, "samples": s.samples})))
+            tiles.append((page, a, b, (key, boxed, points[a:b], normals[a:b], ids[a:b], {**task_kw, "samples": s.samples}, texel_call[0])))
     ids = np.arange(len(probe_points), dtype=np.uint64)
     for a in range(0, len(probe_points), s.probe_tile):
         b = min(a + s.probe_tile, len(probe_points))
@@ -413,7 +439,7 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
 
     traced = []
     for page, (w, h, _, covered, *_) in enumerate(inputs):
-        raw = np.zeros((h * w, 3), np.float32)
+        raw = np.zeros((h * w, texel_call[1]), np.float32)
         page_rays, page_seconds = 0, 0.0
         for (p, a, b, _), (out, n, _, _, seconds) in zip(tiles, tile_results):
             if p == page:
@@ -520,18 +546,47 @@ def _fill_invalid(sh: np.ndarray, sun: np.ndarray, invalid: np.ndarray):
 
 
 def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
-    """The scene with the baked pages as Rgba16Float textures (referenced by its lightmap
-    layout) and the probes."""
+    """The scene with the baked pages as textures referenced by its lightmap layout (see
+    LIGHTMAP_MODES: B as Rgba16Float; or b0 and the sun's visibility as Rgba16Float and the
+    direction as Rgba8Unorm) and the probes."""
     textures = list(scene.textures)
-    ids = []
+    ids, directions = [], []
     for page, img in enumerate(baked.pages):
-        h, w, _ = img.shape
-        rgba = np.concatenate([img, np.ones((h, w, 1), np.float32)], axis=2)
+        h, w, channels = img.shape
+        if channels == DIRECTIONAL_CHANNELS:
+            rgba, direction = mono_sh(img)
+            directions.append(len(textures) + 1)
+        else:
+            rgba, direction = np.concatenate([img, np.ones((h, w, 1), np.float32)], axis=2), None
         ids.append(len(textures))
         textures.append(ir.Texture(name=f"lightmap{page}", width=w, height=h, format="Rgba16Float",
                                    mips=[np.ascontiguousarray(np.clip(rgba, 0.0, 65504.0).astype(np.float16))]))
-    layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids)
+        if direction is not None:
+            textures.append(ir.Texture(name=f"lightmap{page} direction", width=w, height=h, format="Rgba8Unorm", mips=[direction]))
+    layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids, directions=directions)
     return dataclasses.replace(scene, textures=textures, lightmap=layout, probes=baked.probes)
+
+
+# Rec. 709 luminance weights (textures.md section 4.2; shading::sh::LUMINANCE).
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+def mono_sh(page: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A directional page (h, w, 13) as the pack holds it: (b0 rgb + sun visibility (h, w, 4)
+    float32, the luminance's direction t = b1_Y / (2 b0_Y), |t| <= 1, as 0.5 + 0.5 t in
+    (h, w, 4) uint8, alpha 255). The same reduction as shading::sh::MonoSh::from_rgb."""
+    h, w, _ = page.shape
+    b0 = page[..., 0:3]
+    b1 = page[..., 3:12].reshape(h, w, 3, 3)  # [channel, axis]
+    b0_y = b0 @ LUMINANCE
+    b1_y = np.einsum("c,hwca->hwa", LUMINANCE, b1)
+    t = np.where(b0_y[..., None] > 0.0, b1_y / (2.0 * np.maximum(b0_y, 1e-30))[..., None], 0.0)
+    # Non-negative radiance keeps |t| <= 1; noise may not.
+    t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1.0)
+    direction = np.empty((h, w, 4), np.uint8)
+    direction[..., :3] = np.clip(np.rint((0.5 + 0.5 * t) * 255.0), 0, 255).astype(np.uint8)
+    direction[..., 3] = 255
+    return np.concatenate([b0, page[..., 12:13]], axis=2).astype(np.float32), direction
 
 
 class _NoBar:

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from asset_pipeline import CookError
-from asset_pipeline.bake import PRESETS, BakeSettings
+from asset_pipeline.bake import LIGHTMAP_MODES, PRESETS, BakeSettings
 from asset_pipeline.cook import cook_detailed
 from asset_pipeline.executor import EXECUTORS
 from asset_pipeline.pipeline import CookSettings
@@ -80,6 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     bake.add_argument("--sky-nits", type=_non_negative_number, default=CookSettings.sky_nits, metavar="NITS",
                       help=f"a glTF scene's uniform white sky, in nits (default {CookSettings.sky_nits:g}, an overcast day; 0: none); levels bring their own")
     bake.add_argument("--quality", choices=PRESETS, default="medium", help="bake preset: samples and bounces (default: medium)")
+    bake.add_argument("--lightmap-mode", choices=LIGHTMAP_MODES, default=BakeSettings.lightmap_mode,
+                      help="irradiance: one RGB lightmap, the sun in it (8 bytes a texel); directional: its direction too, for normal "
+                           f"maps, and the sun lit at run time (12 bytes a texel) (default: {BakeSettings.lightmap_mode})")
     bake.add_argument("--samples", type=_positive, metavar="N", help="paths per lightmap texel (overrides the preset)")
     bake.add_argument("--bounces", type=_non_negative, metavar="N", help="indirect bounces (overrides the preset)")
     bake.add_argument("--probe-samples", type=_positive, metavar="N", help="rays per light probe (overrides the preset)")
@@ -95,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.ray_address is not None and args.executor != "ray":
         parser.error("--ray-address needs --executor ray")
-    bake_settings = BakeSettings(preset=args.quality, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
+    bake_settings = BakeSettings(preset=args.quality, lightmap_mode=args.lightmap_mode, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
                                  seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
     executor = args.executor
     if executor == "ray":

@@ -292,6 +292,9 @@ class LightmapLayout:
     pages: list[tuple[int, int]]  # (width, height) in texels of each atlas page
     padding: int = 2  # texels between charts
     textures: list[int] = field(default_factory=list)  # baked page -> Rgba16Float texture index (empty: not baked)
+    # Directional lightmaps: page -> Rgba8Unorm direction texture (pack::LightmapLayout::directions;
+    # `textures` then hold b0 and the sun's visibility). Empty: irradiance lightmaps.
+    directions: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -475,7 +478,8 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     )
     if doc.get("lightmap"):
         lm = doc["lightmap"]
-        scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])))
+        scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])),
+                                        list(lm.get("directions", [])))
     if doc.get("probes"):
         pr = doc["probes"]
         scene.probes = ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]),

@@ -308,13 +308,25 @@ def lightmap_paths(out: Path, pages: int) -> list[Path]:
 
 
 def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
+    """Each baked page as the pack holds it: B as RGB; a directional page's b0 as RGB (what
+    viewers show), the sun's visibility as "sun.Y" and the direction texture's 0.5 + 0.5 t as
+    "direction.X/Y/Z" (bake.LIGHTMAP_MODES)."""
+    from asset_pipeline import _core
     from asset_pipeline.lightmap_post import write_exr
 
     if scene.lightmap is None or not scene.lightmap.textures:
         return []
     paths = lightmap_paths(out, len(scene.lightmap.textures))
-    for path, t in zip(paths, scene.lightmap.textures):
-        write_exr(path, np.asarray(scene.textures[t].mips[0][..., :3], np.float32))
+    directions = scene.lightmap.directions or [None] * len(paths)
+    for path, t, d in zip(paths, scene.lightmap.textures, directions):
+        page = np.asarray(scene.textures[t].mips[0], np.float32)
+        if d is None:
+            write_exr(path, page[..., :3])
+            continue
+        direction = np.asarray(scene.textures[d].mips[0], np.float32) / 255.0
+        channels = [(c, np.ascontiguousarray(page[..., k])) for k, c in enumerate("RGB")] + [("sun.Y", np.ascontiguousarray(page[..., 3]))]
+        channels += [(f"direction.{a}", np.ascontiguousarray(direction[..., k])) for k, a in enumerate("XYZ")]
+        _core.write_exr_channels(path, channels)
     return paths
 
 

@@ -41,7 +41,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

@@ -194,6 +194,14 @@ pub struct LightmapLayout {
     /// holding B = H/pi in nits, linear (runtime: `L_out = L_e + albedo * B`). Empty until baked.
     #[serde(default)]
     pub textures: Vec<u32>,
+    /// Directional lightmaps ("MonoSH", shading.md §4), one texture per page (`Rgba8Unorm`, the
+    /// page's size, one level) holding the luminance's L1 direction t = b1_Y / (2 b0_Y) as
+    /// 0.5 + 0.5 t (rgb). With them, `textures` hold b0 (rgb: B(n) = b0 (1 + 2 t·n), clamped
+    /// at 0, for the shading normal n) of all the light but the sun's direct light, and the
+    /// fraction of the sun the texel sees (a): the runtime lights it with the pack's first sun
+    /// itself. Empty: irradiance lightmaps, B with the sun in it.
+    #[serde(default)]
+    pub directions: Vec<u32>,
 }
 
 /// Irradiance probes for dynamic objects on a regular grid: probe (i, j, k) sits at
@@ -660,11 +668,16 @@ impl Manifest {
             if !l.textures.is_empty() && l.textures.len() != l.pages.len() {
                 return bad(format!("lightmap: {} baked textures for {} pages", l.textures.len(), l.pages.len()));
             }
-            for (p, (&t, size)) in l.textures.iter().zip(&l.pages).enumerate() {
+            if !l.directions.is_empty() && (l.directions.len() != l.pages.len() || l.textures.len() != l.pages.len()) {
+                return bad(format!("lightmap: {} direction textures and {} baked textures for {} pages", l.directions.len(), l.textures.len(), l.pages.len()));
+            }
+            let pages = l.textures.iter().map(|&t| (t, TextureFormat::Rgba16Float, "texture")).zip(&l.pages);
+            let directions = l.directions.iter().map(|&t| (t, TextureFormat::Rgba8Unorm, "direction texture")).zip(&l.pages);
+            for (p, ((t, format, what), size)) in pages.enumerate().chain(directions.enumerate()) {
                 match self.textures.get(t as usize) {
-                    Some(tex) if tex.format == TextureFormat::Rgba16Float && [tex.width, tex.height] == *size => {}
-                    Some(tex) => return bad(format!("lightmap page {p}: texture {t} '{}' is {}x{} {:?}, not {}x{} Rgba16Float", tex.name, tex.width, tex.height, tex.format, size[0], size[1])),
-                    None => return bad(format!("lightmap page {p}: texture {t} does not exist")),
+                    Some(tex) if tex.format == format && [tex.width, tex.height] == *size => {}
+                    Some(tex) => return bad(format!("lightmap page {p}: {what} {t} '{}' is {}x{} {:?}, not {}x{} {format:?}", tex.name, tex.width, tex.height, tex.format, size[0], size[1])),
+                    None => return bad(format!("lightmap page {p}: {what} {t} does not exist")),
                 }
             }
         }

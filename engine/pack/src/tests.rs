@@ -78,7 +78,7 @@ fn sample() -> Pack {
     // A baked 4x4 lightmap page (half floats) and a 2x1x1 probe grid.
     let lm = b.push_bytes(&[0x3cu8; 4 * 4 * 8]);
     b.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![lm], sampler: Sampler::default() });
-    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1] });
+    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1], directions: vec![] });
     let sh = b.push_bytes(&[0u8; 2 * 27 * 4]);
     let sun = b.push_bytes(&[0u8; 2 * 4]);
     b.manifest.probes = Some(ProbeGrid { origin: [0.0; 3], spacing: [2.0; 3], counts: [2, 1, 1], sh, sun_visibility: sun });
@@ -234,6 +234,23 @@ fn dangling_references_are_rejected_before_writing() {
     p.manifest.lightmap.as_mut().unwrap().textures = vec![1, 1];
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("2 baked textures for 1 pages"), "{e}");
+    // Directional pages: one Rgba8Unorm direction texture of the page's size per page.
+    let mut p = sample();
+    p.manifest.lightmap.as_mut().unwrap().directions = vec![1];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("lightmap page 0: direction texture 1 'lightmap0' is 4x4 Rgba16Float, not 4x4 Rgba8Unorm"), "{e}");
+    p.manifest.lightmap.as_mut().unwrap().directions = vec![1, 1];
+    let e = p.to_bytes().unwrap_err().to_string();
+    assert!(e.contains("2 direction textures and 1 baked textures for 1 pages"), "{e}");
+    let p = sample();
+    let mut b = PackBuilder::new("test", "test");
+    b.manifest = p.manifest.clone();
+    b.push_bytes(&p.data);
+    let d = b.push_bytes(&[128u8; 4 * 4 * 4]);
+    b.manifest.textures.push(Texture { name: "lightmap0 direction".into(), width: 4, height: 4, format: TextureFormat::Rgba8Unorm, mips: vec![d], sampler: Sampler::default() });
+    b.manifest.lightmap.as_mut().unwrap().directions = vec![2];
+    let q = Pack::from_bytes(&b.finish().to_bytes().unwrap()).unwrap();
+    assert_eq!(q.manifest.lightmap.unwrap().directions, vec![2]);
 
     // Probe data must hold 27 floats and a visibility per probe.
     let mut p = sample();
