@@ -22,6 +22,10 @@ layout(std430, set = 2, binding = 1) readonly buffer Probes {
 // The specular lobe's directional albedo split by Schlick, (A, B) over (n.v, roughness): a lobe
 // of reflectance f0 returns f0 A + B of a uniform environment (engine/shading, `DfgLut`).
 layout(set = 2, binding = 3) uniform sampler2D dfg_lut;
+// Directional lightmaps (DIRECTIONAL): per page the luminance's L1 direction t, stored as
+// (128 + 127 t) / 255 in rgb ("MonoSH", shading.md §4.2); `lightmap` then holds b0 (rgb) and
+// the sun's visibility (a).
+layout(set = 2, binding = 4) uniform sampler2DArray lightmap_direction;
 
 // The sun's shadow map (depth, 0 nearest the sun), sampled with a LESS_OR_EQUAL comparison and
 // linear filtering: each lookup is a 2x2 PCF in hardware. Set 0 is the renderer's.
@@ -67,6 +71,10 @@ const bool HAS_EMISSIVE = (SLOTS & 2) != 0;
 const bool HAS_NORMAL = (SLOTS & 4) != 0;
 const bool HAS_METALLIC_ROUGHNESS = (SLOTS & 8) != 0;
 const bool HAS_OCCLUSION = (SLOTS & 16) != 0;
+// Set by the renderer for a LIGHTMAPPED variant when the scene's lightmaps are directional:
+// B(n) = b0 (1 + 2 t.n), clamped at 0, for the shading normal n (its normal map shows under
+// baked light), and the sun lit here through the full BRDF, times the baked visibility.
+layout(constant_id = 4) const bool DIRECTIONAL = false;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -246,6 +254,27 @@ float vis_smith(float nl, float nv, float a) {
     return 0.5 / max(gv + gl, 1e-12);
 }
 
+// The sun's light that a surface (normal n, toward the eye v) reflects toward the eye, times the
+// fraction of the sun it sees: [(1 - m)(1 - F_d) base / pi + F D Vis] E n.l; without specular,
+// the diffuse term alone (kd / pi).
+vec3 sun_reflected(vec3 n, vec3 v, vec3 kd, vec3 f0, float alpha, float nv, bool specular, float visibility) {
+    vec3 sun_l = frame.sun_dir.xyz;
+    float nl = dot(n, sun_l);
+    if (nl <= 0.0) {
+        return vec3(0.0);
+    }
+    if (!specular) {
+        return kd / PI * frame.sun_color.rgb * nl * visibility;
+    }
+    vec3 h = normalize(v + sun_l);
+    float vh = max(dot(v, h), 0.0);
+    float w = pow(1.0 - vh, 5.0);
+    vec3 f = f0 + (1.0 - f0) * w;
+    float fd = 0.04 + 0.96 * w;
+    vec3 brdf = kd * (1.0 - fd) / PI + f * (d_ggx(max(dot(n, h), 0.0), alpha) * vis_smith(nl, nv, alpha));
+    return brdf * frame.sun_color.rgb * nl * visibility;
+}
+
 // The fragment's linear radiance for the HDR target; alpha 1 marks it covered (the tone-map pass
 // leaves alpha-0 pixels, the clear colour, as they are). glTF metallic-roughness
 // (engine/shading is the same model on the CPU, ../shared/notes/shading.md 2.2 and 5):
@@ -297,7 +326,15 @@ vec4 shade(vec4 a) {
     vec3 b;
     vec3 env;
     vec3 l = vec3(0.0);
-    if (LIGHTMAPPED) {
+    if (LIGHTMAPPED && DIRECTIONAL) {
+        vec3 at = vec3(in_lightmap_uv, in_lightmap_layer);
+        vec4 lm = texture(lightmap, at);
+        vec3 t = (texture(lightmap_direction, at).xyz * 255.0 - 128.0) / 127.0;
+        b = lm.rgb * max(1.0 + 2.0 * dot(t, n), 0.0);
+        // The rough environment: the same light toward the lobe's dominant direction.
+        env = lm.rgb * max(1.0 + 2.0 * dot(t, r_dom), 0.0);
+        l += sun_reflected(n, v, kd, f0, alpha, nv, specular, lm.a);
+    } else if (LIGHTMAPPED) {
         b = texture(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
         // The lightmap's B stands for the environment too (no probe code in this variant: it
         // is most of the screen).
@@ -305,19 +342,7 @@ vec4 shade(vec4 a) {
     } else {
         vec4 pl = probe_light(in_world, n, r_dom, env);
         b = pl.rgb;
-        vec3 sun_l = frame.sun_dir.xyz;
-        float nl = dot(n, sun_l);
-        if (nl > 0.0 && !specular) {
-            l += kd / PI * frame.sun_color.rgb * nl * sun_visibility(in_world, n, pl.w);
-        } else if (nl > 0.0) {
-            vec3 h = normalize(v + sun_l);
-            float vh = max(dot(v, h), 0.0);
-            float w = pow(1.0 - vh, 5.0);
-            vec3 f = f0 + (1.0 - f0) * w;
-            float fd = 0.04 + 0.96 * w;
-            vec3 brdf = kd * (1.0 - fd) / PI + f * (d_ggx(max(dot(n, h), 0.0), alpha) * vis_smith(nl, nv, alpha));
-            l += brdf * frame.sun_color.rgb * nl * sun_visibility(in_world, n, pl.w);
-        }
+        l += sun_reflected(n, v, kd, f0, alpha, nv, specular, sun_visibility(in_world, n, pl.w));
     }
     float wd = 1.0 - (0.04 * dfg.x + dfg.y);
     l += (kd * wd * b + env * (f0 * dfg.x + dfg.y)) * ao;

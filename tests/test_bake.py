@@ -312,14 +312,14 @@ def test_a_directional_bake_puts_b0_the_sun_and_the_direction_in_the_pack_and_th
     assert (sun == 1.0).mean() > 0.2 and (sun == 0.0).mean() > 0.05, ((sun == 1.0).mean(), (sun == 0.0).mean())
     assert np.median(b0[sun == 1.0][:, 1]) < 5000.0
     # The direction is a unit-bounded vector, mostly up in the yard (the sky above it).
-    t = 2.0 * direction - 1.0
-    assert np.linalg.norm(t, axis=-1).max() <= 1.0 + 2.0 / 255.0 * 1.8
+    t = (255.0 * direction - 128.0) / 127.0
+    assert np.linalg.norm(t, axis=-1).max() <= 1.0 + 1.5 / 127.0
     assert np.median(t[sun == 1.0][:, 1]) > 0.2
 
 
 def test_mono_sh_is_the_luminance_direction_over_twice_b0():
     # shading::sh::MonoSh::from_rgb in numpy: t = b1_Y / (2 b0_Y), clamped to |t| <= 1, as
-    # 0.5 + 0.5 t bytes; b0 and the sun's visibility pass through.
+    # bytes 128 + 127 t; b0 and the sun's visibility pass through.
     page = np.zeros((1, 3, 13), np.float32)
     page[0, :, 0:3] = [2.0, 2.0, 2.0]
     page[0, 0, 3:12] = [0.0, 1.0, 0.0] * 3  # b1 = (0, 1, 0) per channel: t = (0, 0.25, 0)
@@ -329,6 +329,6 @@ def test_mono_sh_is_the_luminance_direction_over_twice_b0():
     rgba, direction = bake.mono_sh(page)
     np.testing.assert_array_equal(rgba[0, :, :3], page[0, :, :3])
     np.testing.assert_array_equal(rgba[0, :, 3], [1.0, 0.5, 0.0])
-    np.testing.assert_array_equal(direction[0, 0], [128, 159, 128, 255])
-    np.testing.assert_array_equal(direction[0, 1], [128, 128, 0, 255])
-    np.testing.assert_array_equal(direction[0, 2], [np.rint((0.5 + 0.5 * 0.2126) * 255), 128, 128, 255])
+    np.testing.assert_array_equal(direction[0, 0], [128, 160, 128, 255])
+    np.testing.assert_array_equal(direction[0, 1], [128, 128, 1, 255])
+    np.testing.assert_array_equal(direction[0, 2], [128 + np.rint(127 * 0.2126), 128, 128, 255])

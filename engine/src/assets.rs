@@ -118,11 +118,13 @@ impl GpuScene {
         let vertex_buffer = gpu.own(Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?);
         let index_buffer = gpu.own(Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?);
 
-        // The lightmap pages go into one array texture below, not into images of their own.
+        // The lightmap pages (and their direction textures) go into array textures below, not
+        // into images of their own.
         let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
+        let directions: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.directions);
         let mut textures = gpu.own(Vec::with_capacity(m.textures.len()));
         for (i, t) in m.textures.iter().enumerate() {
-            if pages.contains(&(i as u32)) {
+            if pages.contains(&(i as u32)) || directions.contains(&(i as u32)) {
                 textures.push(None);
                 continue;
             }
@@ -151,11 +153,20 @@ impl GpuScene {
             }
             None => Image::sampled_array(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
         });
+        let lightmap_directions = gpu.own(match m.lightmap.as_ref().filter(|l| !l.directions.is_empty()) {
+            Some(l) => {
+                let layers: Vec<&[u8]> = directions.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
+                let [width, height] = l.pages[0];
+                Image::sampled_array(gpu, "lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width, height }, &layers)
+                    .with_context(|| format!("uploading {} lightmap direction pages of {width}x{height}", layers.len()))?
+            }
+            None => Image::sampled_array(gpu, "no lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[128, 128, 128, 255]])?,
+        });
         let mut samplers = gpu.own(SamplerCache::default());
 
         let material_count = m.materials.len() as u32;
         let pool_sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: MATERIAL_SLOTS * material_count + 2 },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: MATERIAL_SLOTS * material_count + 3 },
             vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 },
         ];
         let pool = gpu.own(unsafe {
@@ -235,6 +246,7 @@ impl GpuScene {
         let scene_layout = [layouts.scene];
         let scene_set = unsafe { gpu.device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(*pool).set_layouts(&scene_layout))?[0] };
         let image_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmaps.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+        let direction_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmap_directions.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let lut_extent = vk::Extent2D { width: DFG_LUT_SIZE, height: DFG_LUT_SIZE };
         let dfg_lut = gpu.own(Image::sampled_with_mips(gpu, "dfg lut", vk::Format::R16G16_SFLOAT, lut_extent, &[dfg_lut_texels()])?);
         let lut_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: dfg_lut.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
@@ -245,6 +257,7 @@ impl GpuScene {
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(1).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&probe_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&constants_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(3).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&lut_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(4).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&direction_info),
         ];
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
@@ -268,6 +281,8 @@ impl GpuScene {
             textures: textures.keep(),
             white: white.keep(),
             lightmaps: lightmaps.keep(),
+            lightmap_directions: lightmap_directions.keep(),
+            directional_lightmaps: !directions.is_empty(),
             dfg_lut: dfg_lut.keep(),
             samplers: samplers.keep(),
             pool: pool.keep(),
@@ -303,14 +318,28 @@ fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
 
 /// Sun and exposure for a baked pack: exposure k / L with k = 0.18 and L the log-average
 /// luminance (textures.md eq. 21.1) of the lightmaps' covered texels times an albedo of 0.5.
+/// A directional texel's B is estimated toward its light's direction, which is near its
+/// surface's normal: b0 (1 + 2 |t|) plus the sun's E cos / pi times its visibility, the cosine
+/// taken to that direction (the pack does not hold the surface normal).
 fn baked_lighting(pack: &Pack) -> BakedLighting {
     let m = &pack.manifest;
+    let (sun_dir, sun_lux, sun_angular_radius) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
+        Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity, sun.angular_radius),
+        None => (Vec3::Y, Vec3::ZERO, 0.0),
+    };
+    let luminance = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
     let (mut sum, mut count) = (0.0f64, 0u64);
-    for &t in m.lightmap.as_ref().map_or(&[][..], |l| &l.textures[..]) {
+    let (pages, directions) = m.lightmap.as_ref().map_or((&[][..], &[][..]), |l| (&l.textures[..], &l.directions[..]));
+    for (p, &t) in pages.iter().enumerate() {
         let tex = &m.textures[t as usize];
-        for px in pack.bytes(tex.mips[0]).chunks_exact(8) {
-            let c: [f32; 3] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
-            let lum = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let dir_bytes = directions.get(p).map(|&d| pack.bytes(m.textures[d as usize].mips[0]));
+        for (i, px) in pack.bytes(tex.mips[0]).chunks_exact(8).enumerate() {
+            let c: [f32; 4] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
+            let mut lum = luminance(Vec3::new(c[0], c[1], c[2]));
+            if let Some(d) = dir_bytes {
+                let t = (Vec3::new(d[4 * i] as f32, d[4 * i + 1] as f32, d[4 * i + 2] as f32) - 128.0) / 127.0;
+                lum = lum * (1.0 + 2.0 * t.length().min(1.0)) + c[3] * luminance(sun_lux) * t.normalize_or_zero().dot(sun_dir).max(0.0) / std::f32::consts::PI;
+            }
             if lum > 0.0 {
                 sum += (1e-4 + 0.5 * lum as f64).ln();
                 count += 1;
@@ -318,10 +347,6 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
         }
     }
     let log_average = if count > 0 { (sum / count as f64).exp() as f32 } else { 1.0 };
-    let (sun_dir, sun_lux, sun_angular_radius) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
-        Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity, sun.angular_radius),
-        None => (Vec3::Y, Vec3::ZERO, 0.0),
-    };
     let sky = m.sky.map_or(Vec3::ZERO, |s| Vec3::from(s.color) * s.intensity);
     BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: 0.18 / log_average }
 }

@@ -100,7 +100,7 @@ SCHEDULING = ("threads", "batch_texels", "tile_texels", "probe_tile")
 # What a lightmap texel holds, and its bytes in the pack (see `attach`):
 # - irradiance: B = H/pi (nits), the sun included; Rgba16Float, 8 bytes a texel.
 # - directional: b0 (nits, RGB) and the sun's visibility in one Rgba16Float, and the luminance's
-#   L1 direction t = b1_Y / (2 b0_Y) as 0.5 + 0.5 t in one Rgba8Unorm ("MonoSH", shading.md
+#   L1 direction t = b1_Y / (2 b0_Y) as bytes 128 + 127 t in one Rgba8Unorm ("MonoSH", shading.md
 #   section 4.2): 12 bytes a texel, 1.5x. The runtime evaluates b0 (1 + 2 t.n) for the shading
 #   normal and lights the texel with the sun itself, times its visibility. (Every channel's own
 #   direction would take three Rgba8Unorm, 20 bytes, 2.5x, and two lookups more per pixel;
@@ -573,7 +573,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 def mono_sh(page: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A directional page (h, w, 13) as the pack holds it: (b0 rgb + sun visibility (h, w, 4)
-    float32, the luminance's direction t = b1_Y / (2 b0_Y), |t| <= 1, as 0.5 + 0.5 t in
+    float32, the luminance's direction t = b1_Y / (2 b0_Y), |t| <= 1, as bytes 128 + 127 t in
     (h, w, 4) uint8, alpha 255). The same reduction as shading::sh::MonoSh::from_rgb."""
     h, w, _ = page.shape
     b0 = page[..., 0:3]
@@ -584,7 +584,8 @@ def mono_sh(page: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # Non-negative radiance keeps |t| <= 1; noise may not.
     t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1.0)
     direction = np.empty((h, w, 4), np.uint8)
-    direction[..., :3] = np.clip(np.rint((0.5 + 0.5 * t) * 255.0), 0, 255).astype(np.uint8)
+    # 128 + 127 t: symmetric, so t = 0 is exactly 128 (the shader decodes (x - 128) / 127).
+    direction[..., :3] = np.clip(128.0 + np.rint(127.0 * t), 1, 255).astype(np.uint8)
     direction[..., 3] = 255
     return np.concatenate([b0, page[..., 12:13]], axis=2).astype(np.float32), direction
 

@@ -309,8 +309,8 @@ def lightmap_paths(out: Path, pages: int) -> list[Path]:
 
 def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
     """Each baked page as the pack holds it: B as RGB; a directional page's b0 as RGB (what
-    viewers show), the sun's visibility as "sun.Y" and the direction texture's 0.5 + 0.5 t as
-    "direction.X/Y/Z" (bake.LIGHTMAP_MODES)."""
+    viewers show), the sun's visibility as "sun.Y" and the direction texture's bytes / 255,
+    (128 + 127 t) / 255, as "direction.X/Y/Z" (bake.LIGHTMAP_MODES)."""
     from asset_pipeline import _core
     from asset_pipeline.lightmap_post import write_exr
 

@@ -195,8 +195,8 @@ pub struct LightmapLayout {
     #[serde(default)]
     pub textures: Vec<u32>,
     /// Directional lightmaps ("MonoSH", shading.md §4), one texture per page (`Rgba8Unorm`, the
-    /// page's size, one level) holding the luminance's L1 direction t = b1_Y / (2 b0_Y) as
-    /// 0.5 + 0.5 t (rgb). With them, `textures` hold b0 (rgb: B(n) = b0 (1 + 2 t·n), clamped
+    /// page's size, one level) holding the luminance's L1 direction t = b1_Y / (2 b0_Y) as the
+    /// bytes 128 + 127 t (rgb). With them, `textures` hold b0 (rgb: B(n) = b0 (1 + 2 t·n), clamped
     /// at 0, for the shading normal n) of all the light but the sun's direct light, and the
     /// fraction of the sun the texel sees (a): the runtime lights it with the pack's first sun
     /// itself. Empty: irradiance lightmaps, B with the sun in it.

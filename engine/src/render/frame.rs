@@ -46,6 +46,8 @@ pub struct Settings {
     pub count_fragments: bool,
     /// Sample the materials' normal, metallic-roughness, occlusion and emissive maps.
     pub material_maps: bool,
+    /// The scene's lightmaps are directional (`GpuScene::directional_lightmaps`).
+    pub directional_lightmaps: bool,
     /// Depth testing in the shading pass without a pre-pass.
     pub depth_test: bool,
     /// Show the depth buffer instead of the shaded frame (a debug view).
@@ -59,7 +61,13 @@ pub struct Settings {
 impl Settings {
     /// The lit pipeline a submesh of `material` draws with in `phase` (lit by a lightmap or not).
     pub fn lit_key(&self, phase: LitPhase, material: &GpuMaterial, lightmapped: bool) -> LitKey {
-        LitKey { phase, lightmapped, counting: self.count_fragments && phase != LitPhase::Blend, slots: material.slots.with_maps(self.material_maps) }
+        LitKey {
+            phase,
+            lightmapped,
+            directional: lightmapped && self.directional_lightmaps,
+            counting: self.count_fragments && phase != LitPhase::Blend,
+            slots: material.slots.with_maps(self.material_maps),
+        }
     }
 
     pub fn multisampled(&self) -> bool {

@@ -41,6 +41,8 @@ pub struct LitKey {
     pub phase: LitPhase,
     /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
     pub lightmapped: bool,
+    /// DIRECTIONAL: the lightmap is directional (b0 and a direction, the sun lit here).
+    pub directional: bool,
     /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
     pub counting: bool,
     /// SLOTS: the material's texture slots (less those the renderer's switches leave out).
@@ -70,11 +72,13 @@ struct Variant {
     samples: u32,
     /// SLOTS: the texture slots the shader samples.
     slots: TextureSlots,
+    /// DIRECTIONAL: a LIGHTMAPPED variant reads directional lightmaps.
+    directional: bool,
 }
 
 impl Default for Variant {
     fn default() -> Self {
-        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL }
+        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false }
     }
 }
 
@@ -122,8 +126,8 @@ impl MeshKit {
         // metallic-roughness (3), occlusion (4).
         let material_binding = [0, 1, 2, 3, 4].map(|b| binding(b, sampled, frag));
         // Set 2: the lightmap array, the probes, the material constants (their UV transforms
-        // are applied per vertex) and the specular (A, B) table.
-        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES), binding(3, sampled, frag)];
+        // are applied per vertex), the specular (A, B) table and the lightmaps' directions.
+        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES), binding(3, sampled, frag), binding(4, sampled, frag)];
         let layout = |b: &[vk::DescriptorSetLayoutBinding]| unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(b), None) };
         // Everything is owned until the kit is whole: an error frees what was made before it.
         let frame_layout = gpu.own(layout(&frame_binding)?);
@@ -314,7 +318,7 @@ fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFl
 /// after a pre-pass the EQUAL test already keeps the samples the pre-pass covered.
 fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags, key: LitKey) -> Result<vk::Pipeline> {
     let depth_format = gpu.caps.depth_format;
-    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1 };
+    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1, directional: key.directional };
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
@@ -342,11 +346,11 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0 to 3: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES and SLOTS
-    // (mesh_shading.glsl).
-    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1), variant.slots.0].map(u32::to_le_bytes);
+    // Specialisation constants 0 to 4: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS and
+    // DIRECTIONAL (mesh_shading.glsl).
+    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1), variant.slots.0, vk::Bool32::from(variant.directional)].map(u32::to_le_bytes);
     let bytes = values.concat();
-    let entries: [vk::SpecializationMapEntry; 4] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
+    let entries: [vk::SpecializationMapEntry; 5] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.

@@ -383,6 +383,7 @@ impl Renderer {
             prepass: self.prepass && !self.frame.view_batches.is_empty(),
             count_fragments: self.count_fragments && self.mesh.can_count(),
             material_maps: self.material_maps,
+            directional_lightmaps: scene.directional_lightmaps,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
             fxaa: self.aa == AntiAliasing::Fxaa,

@@ -152,6 +152,12 @@ pub struct GpuScene {
     /// Every baked lightmap page as one layer of a 2D array (pages have one size), so instances
     /// on different pages still draw in one instanced call; one black layer without a bake.
     pub(crate) lightmaps: Image,
+    /// With directional lightmaps, each page's direction texture as the same layer of a second
+    /// array (`lightmaps` then holds b0 and the sun's visibility); one grey layer without.
+    pub(crate) lightmap_directions: Image,
+    /// The lightmaps are directional (pack `LightmapLayout::directions`): lightmapped surfaces
+    /// evaluate them for the shading normal and take the sun at run time.
+    pub directional_lightmaps: bool,
     /// The specular lobe's (A, B) table the mesh shaders read (`shading::DfgLut`).
     pub(crate) dfg_lut: Image,
     pub(crate) samplers: SamplerCache,
@@ -276,6 +282,7 @@ impl GpuScene {
         }
         self.white.destroy(gpu);
         self.lightmaps.destroy(gpu);
+        self.lightmap_directions.destroy(gpu);
         self.dfg_lut.destroy(gpu);
         self.probes.destroy(gpu);
         self.material_constants.destroy(gpu);
