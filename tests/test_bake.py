@@ -265,14 +265,14 @@ def test_bad_bake_arguments_are_one_line_errors(room, tmp_path, args, message):
 
 
 def test_directional_texels_hold_the_sky_in_l1_and_the_suns_visibility():
-    # bake_points_directional (issue 22): the sunny tile sees the sky over its hemisphere,
+    # bake_points(directional=True) (issue 22): the sunny tile sees the sky over its hemisphere,
     # b0 = L/2 and b1 = (0, L/2, 0) per channel (shading.md section 4.1, less the sliver of
     # sky the roof 10 m away hides), and the whole sun; the tile under the roof none of it.
     st = bake.static_scene(_two_tiles())
     baker = bake._core.Baker(*st.baker_args)
     points = np.array([[-5.0, 0.0, 0.0]] * 32 + [[5.0, 0.0, 0.0]] * 32, np.float32)
     normals = np.tile(np.array([[0.0, 1.0, 0.0]], np.float32), (64, 1))
-    out, rays = baker.bake_points_directional(points, normals, samples=64, bounces=1)
+    out, rays = baker.bake_points(points, normals, samples=64, bounces=1, directional=True)
     assert out.shape == (64, 13) and out.dtype == np.float32 and rays > 64 * 64
     sunny, shaded = out[:32].mean(axis=0), out[32:].mean(axis=0)
     sky = 2000.0 * np.array([0.5, 0.6, 1.0])

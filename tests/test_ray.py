@@ -12,6 +12,7 @@ stops: a head node and one extra worker node, one CPU each (two worker processes
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import socket
@@ -152,6 +153,18 @@ def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room,
     assert result.tasks_submitted > 0
     # The killed worker's tile was retried: the pack and the EXR are the local cook's bytes.
     assert _files(out) == _files(local)
+
+
+def test_a_directional_bake_on_ray_is_byte_identical_to_local(cluster, room, tmp_path):
+    # Directional lightmap tiles (13 channels a texel) go through the same tasks.
+    settings = dataclasses.replace(ROOM_BAKE, lightmap_mode="directional")
+    local, remote = tmp_path / "local" / "room.pack", tmp_path / "ray" / "room.pack"
+    for out, executor in ((local, "local"), (remote, RayExecutor())):
+        out.parent.mkdir()
+        cook(room, out, CookSettings(bake=settings, lods=False, report=False, cache_dir=out.parent / "cache", executor=executor))
+    a, b = _files(local), _files(remote)
+    assert sorted(a) == sorted(b) == ["room.lightmap0.exr", "room.pack"], (sorted(a), sorted(b))
+    assert a == b, [k for k in a if a[k] != b.get(k)]
 
 
 def test_scene_is_built_once_per_worker_not_per_task(cluster, room, tmp_path):

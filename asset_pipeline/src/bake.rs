@@ -111,8 +111,12 @@ impl PyBaker {
 
     /// B = H/pi (nits, linear RGB; runtime shading is L_e + albedo * B) at `points` with unit
     /// `normals` (float32 (k, 3)); `ids` uint64 (k,) key each point's random streams (default:
-    /// 0..k). Returns `(B float32 (k, 3), rays cast)`.
-    #[pyo3(signature = (points, normals, ids=None, preset="medium", seed=0, samples=None, bounces=None, threads=None))]
+    /// 0..k). Returns `(B float32 (k, 3), rays cast)`. With `directional`, a directional
+    /// lightmap's texels instead (see `cook_core::bake::integrator::DirectionalTexel`):
+    /// `(float32 (k, 13), rays cast)`, per point b0 (r, g, b), b1 of r (x, y, z), of g, of b
+    /// (nits; all light but the sun's direct light, B(n) = b0 + b1.n per channel), and the
+    /// sun's visibility.
+    #[pyo3(signature = (points, normals, ids=None, preset="medium", seed=0, samples=None, bounces=None, threads=None, directional=false))]
     #[allow(clippy::too_many_arguments)]
     fn bake_points<'py>(
         &self,
@@ -125,6 +129,7 @@ impl PyBaker {
         samples: Option<u32>,
         bounces: Option<u32>,
         threads: Option<usize>,
+        directional: bool,
     ) -> PyResult<(Bound<'py, PyArray2<f32>>, u64)> {
         let s = settings(preset, seed, samples, bounces, None)?;
         let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
@@ -133,40 +138,14 @@ impl PyBaker {
         }
         let ids = ids_for(&ids, pts.len())?;
         let cancel = AtomicBool::new(false);
-        let out = py.detach(|| with_threads(threads, || bake_points(&self.scene, &pts, &nrm, ids.as_deref(), &s, &|_, _| {}, &cancel)));
-        match out.map_err(PyRuntimeError::new_err)? {
-            Ok(baked) => Ok((to_array(py, &baked.b), baked.rays)),
-            Err(_) => Err(PyRuntimeError::new_err("bake cancelled")),
+        let cancelled = |_| PyRuntimeError::new_err("bake cancelled");
+        if !directional {
+            let out = py.detach(|| with_threads(threads, || bake_points(&self.scene, &pts, &nrm, ids.as_deref(), &s, &|_, _| {}, &cancel)));
+            let baked = out.map_err(PyRuntimeError::new_err)?.map_err(cancelled)?;
+            return Ok((to_array(py, &baked.b), baked.rays));
         }
-    }
-
-    /// A directional lightmap's texels at `points` (as `bake_points`; see
-    /// `cook_core::bake::integrator::DirectionalTexel`): returns `(float32 (k, 13), rays cast)`,
-    /// per point b0 (r, g, b), b1 of r (x, y, z), of g, of b (nits; all light but the sun's
-    /// direct light, B(n) = b0 + b1.n per channel), and the sun's visibility.
-    #[pyo3(signature = (points, normals, ids=None, preset="medium", seed=0, samples=None, bounces=None, threads=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn bake_points_directional<'py>(
-        &self,
-        py: Python<'py>,
-        points: PyReadonlyArray2<'py, f32>,
-        normals: PyReadonlyArray2<'py, f32>,
-        ids: Option<PyReadonlyArray1<'py, u64>>,
-        preset: &str,
-        seed: u64,
-        samples: Option<u32>,
-        bounces: Option<u32>,
-        threads: Option<usize>,
-    ) -> PyResult<(Bound<'py, PyArray2<f32>>, u64)> {
-        let s = settings(preset, seed, samples, bounces, None)?;
-        let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
-        if pts.len() != nrm.len() {
-            return Err(PyValueError::new_err(format!("bake_points_directional: {} points but {} normals", pts.len(), nrm.len())));
-        }
-        let ids = ids_for(&ids, pts.len())?;
-        let cancel = AtomicBool::new(false);
         let out = py.detach(|| with_threads(threads, || bake_points_directional(&self.scene, &pts, &nrm, ids.as_deref(), &s, &|_, _| {}, &cancel)));
-        let baked = out.map_err(PyRuntimeError::new_err)?.map_err(|_| PyRuntimeError::new_err("bake cancelled"))?;
+        let baked = out.map_err(PyRuntimeError::new_err)?.map_err(cancelled)?;
         let flat: Vec<f32> = baked.texels.iter().flat_map(|t| t.b0.into_iter().chain(t.b1.into_iter().flatten()).chain([t.sun_visibility])).collect();
         Ok((PyArray1::from_vec(py, flat).reshape([baked.texels.len(), 13])?, baked.rays))
     }

@@ -320,8 +320,8 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     if len(st.triangles) == 0:
         return Baked(pages=[], probes=None, stats=stats)
     kw = dict(preset=s.preset, seed=int(s.seed), bounces=s.bounces, threads=s.threads)
-    # The texels' call: Baker.bake_points or bake_points_directional, and its channels.
-    texel_call = ("bake_points_directional", DIRECTIONAL_CHANNELS) if directional else ("bake_points", 3)
+    # The texels' channels (Baker.bake_points: B, or with directional=True a directional texel).
+    channels = DIRECTIONAL_CHANNELS if directional else 3
     # Every static instance's own region, at its own world positions and normals.
     lods = [i.lod for i in baked_instances]
     positions = [i.world_positions for i in baked_instances]
@@ -344,12 +344,12 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
         t0 = time.perf_counter()
         baker = _core.Baker(*st.baker_args)
         stats["bvh_seconds"] = time.perf_counter() - t0
-        traced = [_bake_page_local(baker, page, inp, s, kw, texel_call, progress) for page, inp in enumerate(inputs)]
+        traced = [_bake_page_local(baker, page, inp, s, {**kw, "directional": directional}, channels, progress) for page, inp in enumerate(inputs)]
         t_probes = time.perf_counter()
         probe_out = _bake_probes_local(baker, probe_points, s, progress, kw)
         probe_seconds = time.perf_counter() - t_probes
     else:
-        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, texel_call, progress, stats)
+        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, channels, progress, stats)
 
     pages: list[np.ndarray] = []
     rays_total, texels_total, bake_seconds = 0, 0, 0.0
@@ -378,16 +378,15 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     return Baked(pages=pages, probes=probes, stats=stats)
 
 
-def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, texel_call: tuple, progress):
+def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, channels: int, progress):
     """One page's covered texels in batches: (raw (h*w, channels), rays, seconds)."""
     w, h, _, covered, points, normals, ids = inp
-    call, channels = texel_call
     raw = np.zeros((h * w, channels), np.float32)
     rays, t_page = 0, time.perf_counter()
     with _stage(progress, f"bake p{page}", len(covered)) as bar:
         for a in range(0, len(covered), s.batch_texels):
             b = min(a + s.batch_texels, len(covered))
-            out, n = getattr(baker, call)(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
+            out, n = baker.bake_points(points[a:b], normals[a:b], ids[a:b], samples=s.samples, **kw)
             raw[covered[a:b]] = out
             rays += n
             seconds = time.perf_counter() - t_page
@@ -396,7 +395,7 @@ def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, texel_cal
     return raw, rays, time.perf_counter() - t_page
 
 
-def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, texel_call: tuple, progress, stats: dict):
+def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, channels: int, progress, stats: dict):
     """Every page's texels in tiles and the probes in batches as Ray tasks, submitted together so
     the cluster stays busy across page boundaries. Returns what the local path returns."""
     from asset_pipeline import executor as ex
@@ -412,7 +411,7 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
     for page, (_, _, _, covered, points, normals, ids) in enumerate(inputs):
         for a in range(0, len(covered), s.tile_texels):
             b = min(a + s.tile_texels, len(covered))
-            tiles.append((page, a, b, (key, boxed, points[a:b], normals[a:b], ids[a:b], {**task_kw, "samples": s.samples}, texel_call[0])))
+            tiles.append((page, a, b, (key, boxed, points[a:b], normals[a:b], ids[a:b], {**task_kw, "samples": s.samples, "directional": channels != 3})))
     ids = np.arange(len(probe_points), dtype=np.uint64)
     for a in range(0, len(probe_points), s.probe_tile):
         b = min(a + s.probe_tile, len(probe_points))
@@ -439,7 +438,7 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
 
     traced = []
     for page, (w, h, _, covered, *_) in enumerate(inputs):
-        raw = np.zeros((h * w, texel_call[1]), np.float32)
+        raw = np.zeros((h * w, channels), np.float32)
         page_rays, page_seconds = 0, 0.0
         for (p, a, b, _), (out, n, _, _, seconds) in zip(tiles, tile_results):
             if p == page:

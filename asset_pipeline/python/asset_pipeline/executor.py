@@ -53,12 +53,12 @@ def _worker_baker(key: str, boxed_ref: list):
     return baker, True
 
 
-def bake_tile(key: str, boxed_ref: list, points, normals, ids, kw: dict, call: str = "bake_points"):
-    """One tile of lightmap texels with the Baker's `call` (bake_points: B (k, 3);
-    bake_points_directional: (k, 13)): (texels, rays, worker pid, built the BVH here, seconds)."""
+def bake_tile(key: str, boxed_ref: list, points, normals, ids, kw: dict):
+    """One tile of lightmap texels (B (k, 3), or (k, 13) with kw's directional): (texels, rays,
+    worker pid, built the BVH here, seconds)."""
     t0 = time.perf_counter()
     baker, built = _worker_baker(key, boxed_ref)
-    out, rays = getattr(baker, call)(points, normals, ids, **kw)
+    out, rays = baker.bake_points(points, normals, ids, **kw)
     return out, rays, os.getpid(), built, time.perf_counter() - t0
 
 

@@ -175,7 +175,7 @@ def finish_page(raw: np.ndarray, chart: np.ndarray, *, seams: np.ndarray | None 
     return PagePost(img, chart_out, info)
 
 
-# A directional page's 13 channels (``_core.Baker.bake_points_directional``): b0 (r, g, b), b1 of
+# A directional page's 13 channels (``_core.Baker.bake_points(directional=True)``): b0 (r, g, b), b1 of
 # r (x, y, z), of g, of b, and the sun's visibility.
 DIRECTIONAL_CHANNELS = 13
 
