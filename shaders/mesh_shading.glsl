@@ -75,6 +75,9 @@ const bool HAS_OCCLUSION = (SLOTS & 16) != 0;
 // B(n) = b0 (1 + 2 t.n), clamped at 0, for the shading normal n (its normal map shows under
 // baked light), and the sun lit here through the full BRDF, times the baked visibility.
 layout(constant_id = 4) const bool DIRECTIONAL = false;
+// Set by the renderer (`Renderer::bicubic_lightmaps`) for LIGHTMAPPED variants: lightmaps are
+// read through a cubic B-spline instead of bilinearly.
+layout(constant_id = 5) const bool BICUBIC = false;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -130,6 +133,34 @@ bool alpha_tested_away(vec4 a) {
 
 
 const float PI = 3.14159265;
+
+// A lightmap array's texel at `at` (uv, layer): bilinear; with BICUBIC the uniform cubic
+// B-spline over the 4x4 texels around it, as four bilinear taps placed so the hardware's
+// weights make the spline's (Sigg and Hadwiger, GPU Gems 2 ch. 20). Its weights are never
+// negative (no ringing below 0 next to a shadow) and its slope is continuous across texels,
+// where bilinear's kinks at every texel draw a baked shadow's edge as visible steps.
+vec4 lightmap_at(sampler2DArray map, vec3 at) {
+    if (!BICUBIC) {
+        return texture(map, at);
+    }
+    vec2 size = vec2(textureSize(map, 0).xy);
+    vec2 p = at.xy * size - 0.5;
+    vec2 i = floor(p);
+    vec2 f = p - i;
+    vec2 f2 = f * f;
+    vec2 f3 = f2 * f;
+    vec2 w0 = (1.0 - 3.0 * f + 3.0 * f2 - f3) / 6.0;
+    vec2 w1 = (4.0 - 6.0 * f2 + 3.0 * f3) / 6.0;
+    vec2 w2 = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) / 6.0;
+    vec2 w3 = f3 / 6.0;
+    vec2 g0 = w0 + w1;
+    vec2 g1 = w2 + w3;
+    // Tap positions (texel centres at i + 0.5): between texels i-1 and i, and i+1 and i+2.
+    vec2 t0 = (i - 0.5 + w1 / g0) / size;
+    vec2 t1 = (i + 1.5 + w3 / g1) / size;
+    return g0.y * (g0.x * texture(map, vec3(t0.x, t0.y, at.z)) + g1.x * texture(map, vec3(t1.x, t0.y, at.z)))
+         + g1.y * (g0.x * texture(map, vec3(t0.x, t1.y, at.z)) + g1.x * texture(map, vec3(t1.x, t1.y, at.z)));
+}
 
 // One probe's 28 floats start here.
 uint probe_base(ivec3 c) {
@@ -328,14 +359,14 @@ vec4 shade(vec4 a) {
     vec3 l = vec3(0.0);
     if (LIGHTMAPPED && DIRECTIONAL) {
         vec3 at = vec3(in_lightmap_uv, in_lightmap_layer);
-        vec4 lm = texture(lightmap, at);
-        vec3 t = (texture(lightmap_direction, at).xyz * 255.0 - 128.0) / 127.0;
+        vec4 lm = lightmap_at(lightmap, at);
+        vec3 t = (lightmap_at(lightmap_direction, at).xyz * 255.0 - 128.0) / 127.0;
         b = lm.rgb * max(1.0 + 2.0 * dot(t, n), 0.0);
         // The rough environment: the same light toward the lobe's dominant direction.
         env = lm.rgb * max(1.0 + 2.0 * dot(t, r_dom), 0.0);
         l += sun_reflected(n, v, kd, f0, alpha, nv, specular, lm.a);
     } else if (LIGHTMAPPED) {
-        b = texture(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
+        b = lightmap_at(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
         // The lightmap's B stands for the environment too (no probe code in this variant: it
         // is most of the screen).
         env = b;

@@ -48,6 +48,8 @@ pub struct Settings {
     pub material_maps: bool,
     /// The scene's lightmaps are directional (`GpuScene::directional_lightmaps`).
     pub directional_lightmaps: bool,
+    /// Lightmaps read through a cubic B-spline (`Renderer::bicubic_lightmaps`).
+    pub bicubic_lightmaps: bool,
     /// Depth testing in the shading pass without a pre-pass.
     pub depth_test: bool,
     /// Show the depth buffer instead of the shaded frame (a debug view).
@@ -65,6 +67,7 @@ impl Settings {
             phase,
             lightmapped,
             directional: lightmapped && self.directional_lightmaps,
+            bicubic: lightmapped && self.bicubic_lightmaps,
             counting: self.count_fragments && phase != LitPhase::Blend,
             slots: material.slots.with_maps(self.material_maps),
         }

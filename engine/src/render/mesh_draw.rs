@@ -43,6 +43,8 @@ pub struct LitKey {
     pub lightmapped: bool,
     /// DIRECTIONAL: the lightmap is directional (b0 and a direction, the sun lit here).
     pub directional: bool,
+    /// BICUBIC: the lightmap is read through a cubic B-spline.
+    pub bicubic: bool,
     /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
     pub counting: bool,
     /// SLOTS: the material's texture slots (less those the renderer's switches leave out).
@@ -74,11 +76,13 @@ struct Variant {
     slots: TextureSlots,
     /// DIRECTIONAL: a LIGHTMAPPED variant reads directional lightmaps.
     directional: bool,
+    /// BICUBIC: a LIGHTMAPPED variant reads its lightmap through a cubic B-spline.
+    bicubic: bool,
 }
 
 impl Default for Variant {
     fn default() -> Self {
-        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false }
+        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false, bicubic: false }
     }
 }
 
@@ -318,7 +322,7 @@ fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFl
 /// after a pre-pass the EQUAL test already keeps the samples the pre-pass covered.
 fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags, key: LitKey) -> Result<vk::Pipeline> {
     let depth_format = gpu.caps.depth_format;
-    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1, directional: key.directional };
+    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1, directional: key.directional, bicubic: key.bicubic };
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
@@ -346,11 +350,19 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0 to 4: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS and
-    // DIRECTIONAL (mesh_shading.glsl).
-    let values = [vk::Bool32::from(variant.count_fragments), vk::Bool32::from(variant.lightmapped), variant.samples.max(1), variant.slots.0, vk::Bool32::from(variant.directional)].map(u32::to_le_bytes);
+    // Specialisation constants 0 to 5: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS,
+    // DIRECTIONAL and BICUBIC (mesh_shading.glsl).
+    let values = [
+        vk::Bool32::from(variant.count_fragments),
+        vk::Bool32::from(variant.lightmapped),
+        variant.samples.max(1),
+        variant.slots.0,
+        vk::Bool32::from(variant.directional),
+        vk::Bool32::from(variant.bicubic),
+    ]
+    .map(u32::to_le_bytes);
     let bytes = values.concat();
-    let entries: [vk::SpecializationMapEntry; 5] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
+    let entries: [vk::SpecializationMapEntry; 6] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.

@@ -125,7 +125,7 @@ pub struct Renderer {
     /// What `prepare` made for `record`.
     frame: FrameData,
     /// The scene and settings `prepare_lit` last made pipelines for.
-    lit_prepared: Option<(u64, vk::SampleCountFlags, bool, bool, bool, usize)>,
+    lit_prepared: Option<(u64, vk::SampleCountFlags, bool, bool, bool, usize, bool)>,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -135,6 +135,11 @@ pub struct Renderer {
     /// Instances with a lightmap region read their baked lightmap (on by default); off, they are
     /// lit like dynamic geometry, by the probes and the sun, to compare the two.
     pub lightmaps: bool,
+    /// Read lightmaps through a cubic B-spline (four bilinear taps) instead of one bilinear
+    /// tap: a baked shadow's edge without the kinks bilinear puts at every texel. Off by
+    /// default: on lavapipe each lookup of the most-drawn surfaces costs milliseconds, and the
+    /// filter reaches two texels past a chart, more than the atlas's 2-texel padding keeps clear.
+    pub bicubic_lightmaps: bool,
     /// Show the depth buffer instead of the shaded frame (the `depth view` debug pass).
     pub depth_view: bool,
     /// Draw a baked level's sky and sun disc as the background (on by default; off, the clear
@@ -231,6 +236,7 @@ impl Renderer {
             count_fragments: false,
             depth_test: true,
             lightmaps: true,
+            bicubic_lightmaps: false,
             depth_view: false,
             sky: true,
             material_maps: true,
@@ -384,6 +390,7 @@ impl Renderer {
             count_fragments: self.count_fragments && self.mesh.can_count(),
             material_maps: self.material_maps,
             directional_lightmaps: scene.directional_lightmaps,
+            bicubic_lightmaps: self.bicubic_lightmaps,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
             fxaa: self.aa == AntiAliasing::Fxaa,
@@ -428,7 +435,7 @@ impl Renderer {
     /// never stalls a frame on a shader compile.
     fn prepare_lit(&mut self, gpu: &Gpu, scene: &GpuScene, settings: &Settings) -> Result<()> {
         let lightmapped: &[bool] = if self.lightmaps && scene.baked.is_some() { &[false, true] } else { &[false] };
-        let prepared = (scene.id, settings.samples, settings.prepass, settings.count_fragments, settings.material_maps, lightmapped.len());
+        let prepared = (scene.id, settings.samples, settings.prepass, settings.count_fragments, settings.material_maps, lightmapped.len(), settings.bicubic_lightmaps);
         if self.lit_prepared == Some(prepared) {
             return Ok(());
         }

@@ -69,7 +69,7 @@ Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
                     animating at a fixed step; frames cycle through the default (no anti-aliasing)
                     and the variants aa_msaa, aa_fxaa, sky_off, material_maps_off, specular_off,
-                    transparency_off
+                    transparency_off, lightmaps_bicubic
   culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection;
                     frames alternate with instancing on (the scenario's times) and off, one draw
                     call per cube (its `variants.instancing_off`)
@@ -201,6 +201,7 @@ enum Switch {
     MaterialMapsOff,
     SpecularOff,
     TransparencyOff,
+    BicubicLightmaps,
 }
 
 impl Switch {
@@ -215,6 +216,7 @@ impl Switch {
             Switch::MaterialMapsOff => "material_maps_off",
             Switch::SpecularOff => "specular_off",
             Switch::TransparencyOff => "transparency_off",
+            Switch::BicubicLightmaps => "lightmaps_bicubic",
         }
     }
 
@@ -228,6 +230,7 @@ impl Switch {
             Switch::MaterialMapsOff => "material maps off",
             Switch::SpecularOff => "specular off",
             Switch::TransparencyOff => "transparency off",
+            Switch::BicubicLightmaps => "bicubic lightmaps",
         }
     }
 
@@ -242,6 +245,7 @@ impl Switch {
             Switch::MaterialMapsOff => r.material_maps = !on,
             Switch::SpecularOff => r.specular = !on,
             Switch::TransparencyOff => r.transparency = !on,
+            Switch::BicubicLightmaps => r.bicubic_lightmaps = on,
         }
     }
 }
