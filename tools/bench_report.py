@@ -61,7 +61,8 @@ def fmt(v, digits: int = 2) -> str:
 # ---- plots ---------------------------------------------------------------------------------------
 
 WIDTH, HEIGHT, MARGIN = 720, 300, 56
-COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2")
+# One per series; a scenario with more series than colours reuses them in order.
+COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
 
 
 def polyline(values: list[float], y_max: float, colour: str) -> str:
@@ -98,14 +99,14 @@ def plot_svg(doc: dict) -> str:
     floor = doc.get("floor_ms", {}).get("p50") or 0.0
     y_max = max([floor] + [max(v) for _, v in series if v]) * 1.1 or 1.0
     parts = axes(f"{doc['scenario']} ({doc['width']}x{doc['height']}, {doc['device']})", y_max, doc["frames"])
-    for (label, values), colour in zip(series, COLOURS):
-        parts.append(polyline(values, y_max, colour))
+    for i, (label, values) in enumerate(series):
+        parts.append(polyline(values, y_max, COLOURS[i % len(COLOURS)]))
     if floor:
         y = HEIGHT - MARGIN - (HEIGHT - 2 * MARGIN) * floor / y_max
         parts.append(f'<line x1="{MARGIN}" y1="{y:.1f}" x2="{WIDTH - MARGIN}" y2="{y:.1f}" stroke="#777" stroke-dasharray="5,4"/>')
         series.append((f"floor p50 {floor:.2f} ms (clear + wait)", None))
     for i, (label, values) in enumerate(series):
-        colour = COLOURS[i] if values is not None else "#777"
+        colour = COLOURS[i % len(COLOURS)] if values is not None else "#777"
         parts.append(f'<text x="{MARGIN + 8}" y="{MARGIN - 16 + 14 * i}" font-size="11" fill="{colour}">{escape(label)}</text>')
     body = "\n".join(parts)
     return f'<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" viewBox="0 0 {WIDTH} {HEIGHT}">\n{body}\n</svg>\n'
