@@ -315,6 +315,7 @@ def test_a_directional_bake_puts_b0_the_sun_and_the_direction_in_the_pack_and_th
     t = (255.0 * direction - 128.0) / 127.0
     assert np.linalg.norm(t, axis=-1).max() <= 1.0 + 1.5 / 127.0
     assert np.median(t[sun == 1.0][:, 1]) > 0.2
+    assert "Preset draft, directional lightmaps;" in out.with_suffix(".report.md").read_text()
 
 
 def test_mono_sh_is_the_luminance_direction_over_twice_b0():

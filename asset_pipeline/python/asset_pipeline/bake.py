@@ -611,7 +611,8 @@ DESCRIBE_INSTANCES = 40
 
 def describe(stats: dict) -> list[str]:
     """Report lines for the bake."""
-    lines = [f"Preset {stats.get('preset')}; {stats.get('static_triangles', 0)} static triangles."]
+    mode = stats.get("lightmap_mode", "irradiance")
+    lines = [f"Preset {stats.get('preset')}, {mode} lightmaps; {stats.get('static_triangles', 0)} static triangles."]
     inst = stats.get("instances")
     if inst is not None:
         with_texels = [i for i in inst if i["texels"] > 0]
