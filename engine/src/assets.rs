@@ -56,7 +56,7 @@ fn uv_rows(t: &TextureTransform, texture: Option<u32>) -> [[f32; 4]; 2] {
 /// sample instead of sampling the same texel again.
 fn occlusion_rows(mt: &pack::Material) -> [[f32; 4]; 2] {
     let mut rows = uv_rows(&mt.occlusion_uv, mt.occlusion_texture);
-    if mt.occlusion_texture.is_some() && mt.occlusion_texture == mt.metallic_roughness_texture && mt.occlusion_uv == mt.metallic_roughness_uv {
+    if TextureSlots::packed_occlusion(mt) {
         rows[1][3] = 2.0;
     }
     rows

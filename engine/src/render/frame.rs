@@ -38,7 +38,7 @@ pub const FRAGMENT_COUNTER: ResourceId = ResourceId("fragment counter");
 pub const LDR: ResourceId = ResourceId("ldr");
 
 /// The renderer's switches, as this frame uses them.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Settings {
     /// Depth pre-pass, then shading with depth EQUAL (only when there is something to draw).
     pub prepass: bool,

@@ -124,8 +124,8 @@ pub struct Renderer {
     batcher: Batcher,
     /// What `prepare` made for `record`.
     frame: FrameData,
-    /// The scene and settings `prepare_lit` last made pipelines for.
-    lit_prepared: Option<(u64, vk::SampleCountFlags, bool, bool, bool, usize, bool)>,
+    /// The scene and settings `prepare_lit` last made pipelines for (and whether lightmaps were on).
+    lit_prepared: Option<(u64, Settings, bool)>,
     /// Depth pre-pass, then shading with depth EQUAL (on by default; off for comparison).
     pub prepass: bool,
     /// Count the fragments the shading pass shades (`fragment_count`); costs an atomic each.
@@ -434,11 +434,12 @@ impl Renderer {
     /// per scene and settings): all of them, not only those in view, so that turning the camera
     /// never stalls a frame on a shader compile.
     fn prepare_lit(&mut self, gpu: &Gpu, scene: &GpuScene, settings: &Settings) -> Result<()> {
-        let lightmapped: &[bool] = if self.lightmaps && scene.baked.is_some() { &[false, true] } else { &[false] };
-        let prepared = (scene.id, settings.samples, settings.prepass, settings.count_fragments, settings.material_maps, lightmapped.len(), settings.bicubic_lightmaps);
+        let lightmaps = self.lightmaps && scene.baked.is_some();
+        let prepared = (scene.id, *settings, lightmaps);
         if self.lit_prepared == Some(prepared) {
             return Ok(());
         }
+        let lightmapped: &[bool] = if lightmaps { &[false, true] } else { &[false] };
         let opaque = if settings.prepass { LitPhase::Equal } else { LitPhase::Plain };
         let keys = scene.materials.iter().flat_map(|m| lightmapped.iter().map(move |&lm| settings.lit_key(if m.blend { LitPhase::Blend } else { opaque }, m, lm)));
         self.mesh.prepare_lit(gpu, settings.samples, keys)?;

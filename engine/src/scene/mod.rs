@@ -82,17 +82,23 @@ impl TextureSlots {
     /// a packed ORM's occlusion comes with that sample).
     pub fn of(material: &pack::Material) -> TextureSlots {
         let m = material;
-        let packed_occlusion = m.occlusion_texture == m.metallic_roughness_texture && m.occlusion_uv == m.metallic_roughness_uv;
         [
             (m.base_color_texture.is_some(), TextureSlots::BASE_COLOR),
             (m.emissive_texture.is_some() && m.emissive.iter().any(|&e| e != 0.0), TextureSlots::EMISSIVE),
             (m.normal_texture.is_some() && m.normal_scale != 0.0, TextureSlots::NORMAL),
             (m.metallic_roughness_texture.is_some(), TextureSlots::METALLIC_ROUGHNESS),
-            (m.occlusion_texture.is_some() && m.occlusion_strength != 0.0 && !packed_occlusion, TextureSlots::OCCLUSION),
+            (m.occlusion_texture.is_some() && m.occlusion_strength != 0.0 && !TextureSlots::packed_occlusion(m), TextureSlots::OCCLUSION),
         ]
         .into_iter()
         .filter(|(has, _)| *has)
         .fold(TextureSlots(0), |all, (_, slot)| TextureSlots(all.0 | slot.0))
+    }
+
+    /// Whether `material`'s occlusion is the red of its metallic-roughness texture read at the
+    /// same coordinates (glTF's packed ORM): the shader takes it from that sample.
+    pub fn packed_occlusion(material: &pack::Material) -> bool {
+        let m = material;
+        m.occlusion_texture.is_some() && m.occlusion_texture == m.metallic_roughness_texture && m.occlusion_uv == m.metallic_roughness_uv
     }
 
     /// These slots less what the renderer's switches leave out: without material maps, only
