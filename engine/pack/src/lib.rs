@@ -22,6 +22,8 @@
 //! Version 4: 80-byte vertices with TEXCOORD_1; lightmaps per static instance (`Node::lightmap`
 //! regions, `Submesh::lightmap_block`, pages of one size) and `Node::is_static` instead of
 //! `Mesh::is_static`; texture slot transforms (`Material::*_uv`) and samplers (`Texture::sampler`).
+//! Version 5: directional lightmaps (`LightmapLayout::directions`; with them a page's texture
+//! holds b0 and the sun's visibility instead of B).
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
