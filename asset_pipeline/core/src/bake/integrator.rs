@@ -145,11 +145,7 @@ pub fn bake_points_directional(
 }
 
 fn bake_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s: &BakeSettings, rays: &mut u64) -> DirectionalTexel {
-    let nl = length(n);
-    if !(nl > 0.0) || x.iter().any(|v| !v.is_finite()) {
-        return DirectionalTexel::default();
-    }
-    let n = scale(n, 1.0 / nl);
+    let Some(n) = unit_normal(x, n) else { return DirectionalTexel::default() };
     let samples = s.samples.max(1);
     // Sums of L/p (radiance over the density it was drawn with) and of L w / p, per channel.
     let mut l_sum = [0.0f64; 3];
@@ -220,12 +216,15 @@ pub(super) fn par_bake<T: Clone + Default + Send>(
     Ok((out, rays.into_inner()))
 }
 
-fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, rays: &mut u64) -> V3 {
+/// `n` made unit, or None for a point the baker cannot place (a zero or NaN normal, a
+/// position that is not finite), which bakes as no light.
+fn unit_normal(x: V3, n: V3) -> Option<V3> {
     let nl = length(n);
-    if !(nl > 0.0) || x.iter().any(|v| !v.is_finite()) {
-        return [0.0; 3];
-    }
-    let n = scale(n, 1.0 / nl);
+    (nl > 0.0 && x.iter().all(|v| v.is_finite())).then(|| scale(n, 1.0 / nl))
+}
+
+fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, rays: &mut u64) -> V3 {
+    let Some(n) = unit_normal(x, n) else { return [0.0; 3] };
     let mut sum = [0.0f64; 3];
     for k in 0..s.samples {
         let mut rng = Rng::for_sample(s.seed, index, k as u64);
