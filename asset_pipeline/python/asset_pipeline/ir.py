@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -311,6 +312,42 @@ class ProbeGrid:
 
 
 @dataclass
+class ReflectionProbe:
+    """An authored reflection probe (pack::ReflectionProbe without its cube): the capture point
+    and a world-space axis-aligned box, which is both the parallax-correction box and the
+    influence volume (the weight fades to 0 over `blend_distance` metres inside its faces). The
+    capture point lies inside the box."""
+
+    name: str
+    position: tuple[float, float, float]
+    box_min: tuple[float, float, float]
+    box_max: tuple[float, float, float]
+    blend_distance: float = 0.5  # metres, >= 0
+
+
+# Every face of a reflection cube, in the pack's (and Vulkan's layer) order.
+CUBE_FACES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+
+
+def cube_texels(face_size: int, levels: int) -> int:
+    """Texels of a reflection cube with its mip chain: sum over k < levels of 6 (face_size >> k)^2."""
+    return sum(6 * (face_size >> k) ** 2 for k in range(levels))
+
+
+@dataclass
+class ReflectionCubes:
+    """Baked reflection probes (the pack's `reflection_probes` with Scene.reflection_probes): per
+    probe, in the same order, its radiance cube as float16 (cube_texels(face_size, levels), 4)
+    RGBA (alpha 1), rows [level k][face +X, -X, +Y, -Y, +Z, -Z][row j, 0 = top][column i]; level k
+    prefiltered for roughness k / (levels - 1), level 0 the mirror. Nits, linear, the sun's disc
+    left out."""
+
+    face_size: int
+    levels: int
+    cubes: list[np.ndarray]
+
+
+@dataclass
 class Scene:
     name: str
     source: str
@@ -324,6 +361,10 @@ class Scene:
     sky: Sky | None = None
     lightmap: LightmapLayout | None = None
     probes: ProbeGrid | None = None
+    # Reflection probes as authored (a level's [[reflection_probes]], a glTF scene's node extras
+    # or its default one), and their cubes once baked (None: not baked; the pack then has none).
+    reflection_probes: list[ReflectionProbe] = field(default_factory=list)
+    reflection_cubes: ReflectionCubes | None = None
     skins: list[Skin] = field(default_factory=list)
     clips: list[Clip] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  # fixes the import made (one line each)
@@ -360,6 +401,27 @@ class Scene:
                 raise IrError(f"node {i} '{n.name}': parent {n.parent} does not precede it")
             if n.mesh is not None and not 0 <= n.mesh < len(self.meshes):
                 raise IrError(f"node {i} '{n.name}': mesh {n.mesh} does not exist")
+        for i, p in enumerate(self.reflection_probes):
+            what = f"reflection probe {i} '{p.name}'"
+            lo, hi, at = (np.asarray(v, np.float64) for v in (p.box_min, p.box_max, p.position))
+            if not all(v.shape == (3,) and np.isfinite(v).all() for v in (lo, hi, at)) or not math.isfinite(p.blend_distance):
+                raise IrError(f"{what}: its position and box need three finite numbers each, and a finite blend distance")
+            if not (lo < hi).all():
+                raise IrError(f"{what}: the box {tuple(lo)}..{tuple(hi)} is empty")
+            if not ((lo <= at) & (at <= hi)).all():
+                raise IrError(f"{what}: the capture point {tuple(at)} is outside its box {tuple(lo)}..{tuple(hi)}")
+            if p.blend_distance < 0:
+                raise IrError(f"{what}: blend distance {p.blend_distance} is negative")
+        rc = self.reflection_cubes
+        if rc is not None:
+            if rc.face_size < 4 or rc.face_size & (rc.face_size - 1) or not 1 <= rc.levels or rc.face_size >> (rc.levels - 1) < 1:
+                raise IrError(f"reflection cubes: face size {rc.face_size} with {rc.levels} levels")
+            if len(rc.cubes) != len(self.reflection_probes):
+                raise IrError(f"reflection cubes: {len(rc.cubes)} cubes for {len(self.reflection_probes)} probes")
+            t = cube_texels(rc.face_size, rc.levels)
+            for p, c in zip(self.reflection_probes, rc.cubes):
+                if c.dtype != np.float16 or c.shape != (t, 4):
+                    raise IrError(f"reflection probe '{p.name}': its cube is {c.dtype}{c.shape}, expected float16({t}, 4)")
 
 
 # ---- crossing to and from the Rust core -------------------------------------------------------
@@ -391,6 +453,15 @@ def _lod_from_doc(d: dict, arrays: list[np.ndarray]) -> Lod:
         morph_positions=None if d.get("morph_positions") is None else arrays[d["morph_positions"]],
         morph_normals=None if d.get("morph_normals") is None else arrays[d["morph_normals"]],
     )
+
+
+def _probe_doc(p: ReflectionProbe) -> dict:
+    return {"name": p.name, "position": [float(x) for x in p.position], "box_min": [float(x) for x in p.box_min],
+            "box_max": [float(x) for x in p.box_max], "blend_distance": float(p.blend_distance)}
+
+
+def _probe_from_doc(d: dict) -> ReflectionProbe:
+    return ReflectionProbe(d["name"], tuple(d["position"]), tuple(d["box_min"]), tuple(d["box_max"]), float(d.get("blend_distance", 0.5)))
 
 
 def lods_to_wire(lods: list[Lod]) -> tuple[list[dict], list[np.ndarray]]:
@@ -438,6 +509,15 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
             "sh": put(np.asarray(scene.probes.sh, np.float32).reshape(-1, 27)),
             "sun_visibility": put(np.asarray(scene.probes.sun_visibility, np.float32).reshape(-1)),
         },
+        # The pack's `reflection_probes` (reflection_contract: each probe's `data` here the index
+        # of its float16 (T, 4) cube), present only once baked; the authored probes ride beside
+        # it for the cooker's own caches (the Rust core ignores them).
+        "authored_reflection_probes": [_probe_doc(p) for p in scene.reflection_probes],
+        "reflection_probes": None if scene.reflection_cubes is None else {
+            "face_size": int(scene.reflection_cubes.face_size), "levels": int(scene.reflection_cubes.levels),
+            "probes": [{**_probe_doc(p), "data": put(np.asarray(c, np.float16))}
+                       for p, c in zip(scene.reflection_probes, scene.reflection_cubes.cubes)],
+        },
         "skins": [{"name": s.name, "joints": [int(j) for j in s.joints], "inverse_bind": put(np.asarray(s.inverse_bind, np.float32).reshape(-1, 16))} for s in scene.skins],
         "clips": [{"name": c.name, "channels": [{"node": int(ch.node), "path": ch.path, "interpolation": ch.interpolation,
                                                   "times": put(np.asarray(ch.times, np.float32).reshape(-1)),
@@ -480,6 +560,11 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
         lm = doc["lightmap"]
         scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])),
                                         list(lm.get("directions", [])))
+    rp = doc.get("reflection_probes")
+    authored = doc.get("authored_reflection_probes", rp["probes"] if rp else [])
+    scene.reflection_probes = [_probe_from_doc(p) for p in authored]
+    if rp:
+        scene.reflection_cubes = ReflectionCubes(int(rp["face_size"]), int(rp["levels"]), [arrays[p["data"]] for p in rp["probes"]])
     if doc.get("probes"):
         pr = doc["probes"]
         scene.probes = ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]),
