@@ -1,5 +1,5 @@
 """Level spec -> scene IR: brushes through manifold3d into closed meshes, plus materials, props,
-lights, spawns and sky.
+lights, spawns, reflection probes and sky.
 
 ``build_level(spec) -> ir.Scene``. One mesh per output object (see
 ``LevelSpec.outputs``), positions in world space under an identity node. Each output triangle
@@ -262,7 +262,8 @@ def build_level(spec: LevelSpec, *, import_gltf=None) -> ir.Scene:
             return gltf_import.import_gltf(path, root=spec.path.parent, allow_external_uris=spec.allow_external)
     # The level's lightmap density rides in a layout with no pages yet: the uv2 stage lays it out.
     scene = ir.Scene(name=spec.name, source=str(spec.path), sky=spec.sky, lights=list(spec.lights),
-                     spawns=list(spec.spawns), lightmap=ir.LightmapLayout(spec.texels_per_metre, pages=[]), files=[str(spec.path)])
+                     spawns=list(spec.spawns), reflection_probes=list(spec.reflection_probes),
+                     lightmap=ir.LightmapLayout(spec.texels_per_metre, pages=[]), files=[str(spec.path)])
 
     # A texture table (or path) -> its textures' indices: base colour, and for procedural relief
     # the normal map and the occlusion-roughness-metalness map.

@@ -73,6 +73,15 @@ listed is an error; ``name`` is unique within its section, brushes and objects s
                                     #       intensity in nits, range (optional)
     color = [1, 1, 1]
 
+    [[reflection_probes]]           # a baked cube of the radiance around a point, for glossy
+                                    # surfaces (only a baked level gets them)
+    name = "hall"                   # default: reflection_probe_<i>
+    position = [0, 2, 0]            # the capture point, inside the box
+    box_min = [-5, 0, -5]           # the world-space box of what it reflects: the room's walls
+    box_max = [5, 4, 5]             # (parallax correction) and where it applies (influence)
+    blend_distance = 1.0            # metres inside the box's faces over which it fades out
+                                    # (default 0.5; >= 0)
+
     [[spawns]]
     name = "player"
     kind = "player"                 # player | character | boids | particles
@@ -164,6 +173,7 @@ class LevelSpec:
     props: list[PropSpec] = field(default_factory=list)
     lights: list[ir.Light] = field(default_factory=list)
     spawns: list[ir.Spawn] = field(default_factory=list)
+    reflection_probes: list[ir.ReflectionProbe] = field(default_factory=list)
     text: str = ""  # the source, to find line numbers for errors found later (e.g. empty CSG)
     allow_external: bool = False  # files outside the level's folder may be read (--allow-external-uris)
 
@@ -507,6 +517,46 @@ LIGHT_KIND_KEYS = {
 }
 
 
+REFLECTION_PROBE_KEYS = ("name", "position", "box_min", "box_max", "blend_distance")
+
+
+def _reflection_probe(c: _Checker, raw, key: tuple, i: int) -> ir.ReflectionProbe:
+    """One [[reflection_probes]] entry; every message names the probe."""
+    if not isinstance(raw, dict):
+        c.fail(key, f"expected a table, got {_tname(raw)}")
+    name = string(c, raw["name"], key + ("name",)) if "name" in raw else f"reflection_probe_{i}"
+    what = f"reflection probe '{name}'"
+    for k in raw:
+        if k not in REFLECTION_PROBE_KEYS:
+            c.fail(key + (k,), f"{what}: unknown key '{k}' (expected one of: {', '.join(REFLECTION_PROBE_KEYS)})")
+
+    def point(k: str) -> tuple[float, float, float]:
+        if k not in raw:
+            c.fail(key + (k,), f"{what}: missing")
+        v = raw[k]
+        if not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            c.fail(key + (k,), f"{what}: expected an array of 3 numbers, got {_tname(v) if not isinstance(v, list) else f'{len(v)} values'}")
+        if not all(math.isfinite(x) for x in v):
+            c.fail(key + (k,), f"{what}: every number must be finite, got [{', '.join(str(x) for x in v)}]")
+        return tuple(float(x) for x in v)
+
+    position, lo, hi = point("position"), point("box_min"), point("box_max")
+    blend = raw.get("blend_distance", 0.5)
+    if not isinstance(blend, (int, float)) or isinstance(blend, bool):
+        c.fail(key + ("blend_distance",), f"{what}: expected a number, got {_tname(blend)}")
+    if not math.isfinite(blend) or blend < 0:
+        c.fail(key + ("blend_distance",), f"{what}: blend_distance must be a finite number >= 0, got {blend}")
+    empty = [a for a, l, h in zip("xyz", lo, hi) if not l < h]
+    if empty:
+        c.fail(key + ("box_max",), f"{what}: the box is empty (box_max must exceed box_min on every axis; it does not on "
+                                   f"{', '.join(empty)}): {list(lo)}..{list(hi)}")
+    outside = [a for a, p, l, h in zip("xyz", position, lo, hi) if not l <= p <= h]
+    if outside:
+        c.fail(key + ("position",), f"{what}: the capture point {list(position)} is outside its box {list(lo)}..{list(hi)} "
+                                    f"(on {', '.join(outside)})")
+    return ir.ReflectionProbe(name=name, position=position, box_min=lo, box_max=hi, blend_distance=float(blend))
+
+
 def _claim(c: _Checker, seen: dict, name: str, section: str, i: int) -> None:
     """Names are unique within a section (brushes and objects share one namespace)."""
     if name in seen:
@@ -579,7 +629,7 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
     top = c.table(doc, (), {
         "level": (lambda c, v, k: v, {}), "materials": (array_of_tables, []), "brushes": (array_of_tables, []),
         "objects": (array_of_tables, []), "props": (array_of_tables, []), "lights": (array_of_tables, []),
-        "spawns": (array_of_tables, []),
+        "spawns": (array_of_tables, []), "reflection_probes": (array_of_tables, []),
     })
     lvl = c.table(top["level"], ("level",), {
         "name": (string, path.stem),
@@ -699,6 +749,10 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
         spec.spawns.append(ir.Spawn(name=s["name"], kind=kind, position=s["position"],
                                     rotation=euler_quaternion(s["rotation"]), params=s["params"]))
     _unique(c, spawns, "spawns")
+
+    probes = [_reflection_probe(c, raw, ("reflection_probes", i), i) for i, raw in enumerate(top["reflection_probes"])]
+    _unique(c, [{"name": p.name} for p in probes], "reflection_probes")
+    spec.reflection_probes = probes
 
     if not spec.objects and not spec.props:
         c.fail(("objects",), "a level needs at least one [[objects]] or [[props]] entry")
