@@ -26,7 +26,7 @@ import numpy as np
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
 from asset_pipeline.cache import Hasher, StageCache, library_version, process_running, write_atomic
-from asset_pipeline.gltf_import import import_gltf, write_pack
+from asset_pipeline.gltf_import import import_gltf_scene, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
 
@@ -95,7 +95,7 @@ def _load_source(source: Path, settings: CookSettings) -> ir.Scene:
         from asset_pipeline.level import load_level
 
         return build_level(load_level(source, settings.allow_external_uris))
-    return import_gltf(source, allow_external_uris=settings.allow_external_uris)
+    return import_gltf_scene(source, allow_external_uris=settings.allow_external_uris)
 
 
 def _files_key(files: list[str]) -> str | None:
