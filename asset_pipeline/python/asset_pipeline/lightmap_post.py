@@ -40,9 +40,11 @@ NONE = 0xFFFFFFFF
 
 @dataclass(frozen=True)
 class LightmapPostSettings:
-    # Gutter rings to fill. uv2 keeps >= 2 empty texels between charts, so 2 rings fill every
-    # gutter texel next to a chart (each from its nearest chart).
-    dilate_rings: int = 2
+    # Gutter rings to fill, as many as uv2's padding (Uv2Settings.padding, 4): every gutter texel
+    # within the padding of a chart gets a value (each from its nearest chart), so bicubic sampling,
+    # which reads 2 texels past a chart, never reads an unfilled texel; between two charts 4 apart
+    # each fills the 2 texels on its side.
+    dilate_rings: int = 4
     denoise: bool = True
     # Texels of context around each chart handed to the denoiser (filled from that chart only).
     denoise_margin: int = 8
