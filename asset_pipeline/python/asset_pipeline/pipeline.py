@@ -583,12 +583,13 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
     16-bit at every level (level 0 re-encoded: 8 bits cannot hold a unit vector), HDR with a
     non-negative kernel; alpha-tested base colours keep their coverage. Levels filter across the
     edges as the texture's sampler reads past them (repeat, clamp, mirror); a texture read
-    without mipmaps keeps one level. Lightmap pages are left at one level: they are magnified,
-    and their 2-texel chart gutters would bleed neighbouring charts into level 1 and below.
+    without mipmaps keeps one level. Lightmap pages (and a directional page's direction texture)
+    are left at one level: they are magnified, and their chart gutters would bleed neighbouring
+    charts into level 1 and below.
     Textures that arrive with more than one level keep theirs."""
     from asset_pipeline.executor import texture_levels
 
-    skip = set(scene.lightmap.textures) if scene.lightmap is not None else set()
+    skip = set(scene.lightmap.textures) | set(scene.lightmap.directions) if scene.lightmap is not None else set()
     cutoffs = _alpha_cutoffs(scene)
     # A texture its sampler reads without mipmaps (glTF's NEAREST or LINEAR minification) keeps one level.
     todo = [i for i, t in enumerate(scene.textures)
