@@ -19,10 +19,14 @@ RAW = LightmapPostSettings(denoise=False, stitch=False)
 
 
 def baked(path: Path, samples: int, bounces: int = 3, texels_per_metre: float = 16.0, sky_nits: float = 0.0):
-    """Cook and bake `path` (no LODs, no mips, no sky unless asked): (the scene as written, the
-    lightmap pages as read back from their EXR files)."""
+    """Cook and bake `path` (no LODs, no mips, no sky unless asked) with irradiance lightmaps: (the
+    scene as written, the lightmap pages as read back from their EXR files, B = H/pi per texel).
+    Irradiance, not the default directional: a directional page's RGB is b0, and its L1
+    reconstruction b0 (1 + 2 t.n) is not exact for concentrated lights (shading.md section 6d),
+    so only irradiance pages can be held to closed forms and references within 1%."""
     out = path.with_suffix(".pack")
-    settings = CookSettings(bake=bake.BakeSettings(preset="medium", samples=samples, bounces=bounces, probe_samples=16, post=RAW),
+    settings = CookSettings(bake=bake.BakeSettings(preset="medium", lightmap_mode="irradiance", samples=samples, bounces=bounces, probe_samples=16,
+                                                   post=RAW),
                             lods=False, mips=False, texels_per_metre=texels_per_metre, sky_nits=sky_nits)
     result = cook(path, out, settings)
     pages = [read_exr(out.with_name(f"{out.stem}.lightmap{p}.exr")) for p in range(len(result.scene.lightmap.pages))]

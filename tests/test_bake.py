@@ -88,7 +88,10 @@ intensity = 100
 range = 8
 """
 
-QUICK = bake.BakeSettings(preset="draft", samples=8, probe_samples=16)
+# Irradiance lightmaps (not the default, directional): these tests check B = H/pi with the sun in it
+# per texel, which only an irradiance page holds (a directional page's RGB is b0, without the sun);
+# the directional bake has tests of its own below.
+QUICK = bake.BakeSettings(preset="draft", samples=8, probe_samples=16, lightmap_mode="irradiance")
 
 
 @pytest.fixture(scope="module")

@@ -75,13 +75,15 @@ def test_box_textured_cooks_and_reads_back(gltf_samples, run_cook, tmp_path):
     # Not a terminal: one plain line per stage, no bar.
     assert "%|" not in r.stderr and all(l.startswith("cook: ") for l in r.stderr.splitlines()), r.stderr
     assert "cook: import: 1/1" in r.stderr and "cook: write: 1/1" in r.stderr
-    # A static box: baked (its lightmap page is the second texture) under the default sky.
-    assert r.stdout.splitlines() == [f"cook: wrote {out}: 1 mesh, 12 triangles, 2 textures, {out.stat().st_size} bytes"]
+    # A static box: baked (its lightmap page is the second texture) under the default sky. The
+    # default lightmaps are directional, so the page comes with a third texture, its direction
+    # (Rgba8Unorm, as big as the page and, like it, one level).
+    assert r.stdout.splitlines() == [f"cook: wrote {out}: 1 mesh, 12 triangles, 3 textures, {out.stat().st_size} bytes"]
     s = asset_pipeline.read_pack_summary(out)
     page = s["texture_sizes"][1]
     assert s == {
         "meshes": 1, "submeshes": 1, "vertices": 24, "indices": 36, "triangles": 12, "materials": 1,
-        "textures": 2, "texture_sizes": [[256, 256], page], "texture_mips": [9, 1], "nodes": 2, "bytes": out.stat().st_size,
+        "textures": 3, "texture_sizes": [[256, 256], page, page], "texture_mips": [9, 1, 1], "nodes": 2, "bytes": out.stat().st_size,
         "lightmap_pages": 1, "lightmaps_baked": 1, "probes": s["probes"],
     }
     assert s["probes"] >= 1

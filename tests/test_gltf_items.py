@@ -30,6 +30,10 @@ from lightmap_samples import RAW, polygon_irradiance, surface_samples
 
 UP = np.array([0.0, 1.0, 0.0])
 DOWN = np.array([0.0, -1.0, 0.0])
+# These tests read B = H/pi from the pages' EXRs and hold it to closed forms: irradiance lightmaps,
+# not the default directional ones (whose RGB is b0, without the sun, and whose L1 reconstruction
+# is not exact for a concentrated light; see lightmap_samples.baked).
+IRRADIANCE = {"lightmap_mode": "irradiance"}
 
 
 # ---- helpers ------------------------------------------------------------------------------------
@@ -39,10 +43,10 @@ def bake_scene(s: Scene, folder: Path, name: str, *, samples: int = 32, bounces:
                sky_nits: float = 0.0):
     """Write `s` as `<name>.gltf` in `folder`, cook it (no LODs, no mips; raw baker output at
     `samples` paths per texel; no sky unless asked) and read its lightmap pages back from their
-    EXR files: (CookResult, pages)."""
+    EXR files: (CookResult, pages). Irradiance lightmaps (IRRADIANCE), whose pages hold B."""
     src = s.write(folder / f"{name}.gltf")
     out = folder / f"{name}.pack"
-    settings = CookSettings(bake=BakeSettings(preset="draft", samples=samples, bounces=bounces, probe_samples=16, post=RAW), lods=False,
+    settings = CookSettings(bake=BakeSettings(preset="draft", samples=samples, bounces=bounces, probe_samples=16, post=RAW, **IRRADIANCE), lods=False,
                             mips=False, texels_per_metre=texels_per_metre, sky_nits=sky_nits, force=True)
     result = cook(src, out, settings)
     return result, [read_exr(p) for p in lightmap_paths(out, len(result.scene.lightmap.pages))]
@@ -122,7 +126,7 @@ def test_only_the_plain_mesh_node_is_static_gets_a_region_and_bakes(tmp_path):
     s = what_is_static_scene()
     src = s.write(tmp_path / "level.gltf")
     out = tmp_path / "level.pack"
-    result = cook(src, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW), lods=False, mips=False))
+    result = cook(src, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW, **IRRADIANCE), lods=False, mips=False))
     mesh_nodes = [n for n in result.scene.nodes if n.mesh is not None]
     assert sorted(n.name for n in mesh_nodes) == ["carried", "door", "morphed", "plain", "skinned"]
     assert {n.name: n.static for n in mesh_nodes} == {"plain": True, "skinned": False, "morphed": False, "carried": False, "door": False}
@@ -182,7 +186,7 @@ translation = [4, 0, 0]
 static = false
 """)
     out = tmp_path / "props.pack"
-    result = cook(level, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW), lods=False, mips=False))
+    result = cook(level, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW, **IRRADIANCE), lods=False, mips=False))
     assert [s.name for s in result.stages] == ["level", "uv2", "bake", "write"]
     doc = manifest(out)
     packed = {n["name"]: n for n in doc["nodes"] if n["mesh"] is not None}

@@ -71,8 +71,9 @@ class BakeSettings:
 
     preset: str = "medium"  # draft | medium | high (cook_core::bake::integrator::BakeSettings::preset)
     # irradiance: B = H/pi per texel (the sun included); directional: per texel L1 SH of all the
-    # light but the sun's direct light, and the sun's visibility (LIGHTMAP_MODES).
-    lightmap_mode: str = "irradiance"
+    # light but the sun's direct light, and the sun's visibility (LIGHTMAP_MODES). Directional by
+    # default: the runtime reads it (normal maps under baked light, the sun's highlight).
+    lightmap_mode: str = "directional"
     samples: int | None = None  # paths per lightmap texel (None: the preset's)
     bounces: int | None = None  # indirect bounces (None: the preset's)
     probe_samples: int | None = None  # rays per probe (None: the preset's)
