@@ -1,6 +1,7 @@
 //! Python face of `cook_core::bake`: `Baker` (a scene with its BVH; B = H/pi per surface point,
-//! see `cook_core::bake::integrator`, and irradiance probes, `cook_core::bake::probes`) and
-//! `trace_rays` (closest hits, for the BVH benchmark).
+//! see `cook_core::bake::integrator`, irradiance probes, `cook_core::bake::probes`, and
+//! reflection probes, `cook_core::bake::reflection`) and `trace_rays` (closest hits, for the
+//! BVH benchmark).
 //! Arrays are read in place and the work runs without the GIL.
 
 use crate::measure::{rows, rows3, vec1};
@@ -9,6 +10,7 @@ use cook_core::bake::integrator::{bake_points, bake_points_directional, BakeSett
 use cook_core::bake::lights::Light;
 use cook_core::bake::material::{Material, VertexAttributes};
 use cook_core::bake::probes::bake_probes;
+use cook_core::bake::reflection::{capture, prefilter, PREFILTER_SAMPLES};
 use cook_core::bake::scene::{BakeScene, Geometry};
 use cook_core::bake::textures::{Texture, TextureInfo};
 use cook_core::bake::with_threads;
@@ -180,6 +182,54 @@ impl PyBaker {
             PyArray1::from_vec(py, probes.iter().map(|p| p.backface).collect()),
             rays,
         ))
+    }
+
+    /// A reflection probe at `position` (see `cook_core::bake::reflection`): the radiance cube
+    /// seen from there, `face_size`² texels a face (a power of two), path-traced with `samples`
+    /// rays a texel (None: the preset's, draft 16, medium 32, high 128) and `bounces`, then
+    /// prefiltered into `levels` mips (level k: roughness k / (levels - 1)). Returns `(radiance
+    /// float32 (T, 3), rays cast)`, rows [level][face +X -X +Y -Y +Z -Z][row from the top]
+    /// [column], nits, the sun's disc left out. `id` keys the probe's random streams.
+    #[pyo3(signature = (position, id=0, face_size=128, levels=6, preset="medium", seed=0, samples=None, bounces=None, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn bake_reflection_probe<'py>(
+        &self,
+        py: Python<'py>,
+        position: [f32; 3],
+        id: u64,
+        face_size: usize,
+        levels: usize,
+        preset: &str,
+        seed: u64,
+        samples: Option<u32>,
+        bounces: Option<u32>,
+        threads: Option<usize>,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, u64)> {
+        let s = settings(preset, seed, None, bounces, None)?;
+        let samples = samples.unwrap_or(match preset {
+            "draft" => 16,
+            "medium" => 32,
+            _ => 128,
+        });
+        if !face_size.is_power_of_two() || !(4..=2048).contains(&face_size) {
+            return Err(PyValueError::new_err(format!("reflection probe: face_size {face_size} is not a power of two in 4..2048")));
+        }
+        let max_levels = face_size.trailing_zeros() as usize + 1;
+        if !(1..=max_levels).contains(&levels) {
+            return Err(PyValueError::new_err(format!("reflection probe: {levels} levels for a {face_size}-texel face (1..{max_levels})")));
+        }
+        if !position.iter().all(|v| v.is_finite()) {
+            return Err(PyValueError::new_err(format!("reflection probe: position {position:?} is not finite")));
+        }
+        let cancel = AtomicBool::new(false);
+        let out = py.detach(|| {
+            with_threads(threads, || {
+                capture(&self.scene, position, id, face_size, samples, s.bounces, s.seed, &|_, _| {}, &cancel).map(|(cube, rays)| (prefilter(&cube, levels, PREFILTER_SAMPLES), rays))
+            })
+        });
+        let (cubes, rays) = out.map_err(PyRuntimeError::new_err)?.map_err(|_| PyRuntimeError::new_err("bake cancelled"))?;
+        let rows: Vec<[f32; 3]> = cubes.into_iter().flat_map(|c| c.texels).collect();
+        Ok((to_array(py, &rows), rays))
     }
 }
 

@@ -9,6 +9,7 @@ pub mod integrator;
 pub mod lights;
 pub mod material;
 pub mod probes;
+pub mod reflection;
 pub mod sampling;
 pub mod scene;
 pub mod textures;
