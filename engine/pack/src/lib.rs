@@ -24,6 +24,7 @@
 //! `Mesh::is_static`; texture slot transforms (`Material::*_uv`) and samplers (`Texture::sampler`).
 //! Version 5: directional lightmaps (`LightmapLayout::directions`; with them a page's texture
 //! holds b0 and the sun's visibility instead of B).
+//! Version 6: reflection probes (`Manifest::reflection_probes`).
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
@@ -43,7 +44,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

@@ -97,6 +97,10 @@ pub struct Manifest {
     /// Baked irradiance probes; `None` when the level was not baked.
     #[serde(default)]
     pub probes: Option<ProbeGrid>,
+    /// Baked reflection probes (radiance cubes prefiltered per roughness); `None` when the
+    /// level was not baked or has none.
+    #[serde(default)]
+    pub reflection_probes: Option<ReflectionProbes>,
     /// Skins, clips and deforming meshes (see `anim.rs`); empty for static content.
     #[serde(default)]
     pub animation: crate::Animation,
@@ -224,6 +228,61 @@ pub struct ProbeGrid {
 impl ProbeGrid {
     pub fn count(&self) -> u64 {
         self.counts.iter().map(|&c| c as u64).product()
+    }
+}
+
+/// Reflection probes (shading.md §3): per probe a cube map of the radiance arriving at its
+/// capture point, path-traced by the cooker with the sun's disc left out, prefiltered for GGX
+/// into its mip chain (level k holds roughness k / (levels − 1); level 0 is the mirror). Every
+/// probe has the same face size and levels (the runtime holds them as one cube-map array).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReflectionProbes {
+    /// Texels along a face's edge at level 0 (a power of two).
+    pub face_size: u32,
+    /// Mip levels, 1 ..= log2(face_size) + 1.
+    pub levels: u32,
+    pub probes: Vec<ReflectionProbe>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReflectionProbe {
+    pub name: String,
+    /// Where the cube was captured (world space), inside the box.
+    pub position: [f32; 3],
+    /// The world-space axis-aligned box of the room it reflects: the parallax-correction box
+    /// and the probe's influence, whose weight fades to 0 over `blend_distance` metres inside
+    /// its faces.
+    pub box_min: [f32; 3],
+    pub box_max: [f32; 3],
+    pub blend_distance: f32,
+    /// Half-float RGBA (alpha 1), radiance in nits: [level][face +X, −X, +Y, −Y, +Z, −Z (Vulkan's
+    /// layer order)][row from the top][column], level k `face_size >> k` texels square.
+    pub data: BufferRange,
+}
+
+impl ReflectionProbes {
+    /// Bytes of one probe's `data`.
+    pub fn probe_bytes(&self) -> u64 {
+        (0..self.levels).map(|k| 6 * ((self.face_size as u64) >> k).max(1).pow(2) * 8).sum()
+    }
+}
+
+impl ReflectionProbe {
+    fn problem(&self) -> Option<String> {
+        let numbers = [&self.position[..], &self.box_min, &self.box_max, &[self.blend_distance]].concat();
+        if !numbers.iter().all(|x| x.is_finite()) {
+            return Some(format!("non-finite numbers (position {:?}, box {:?}..{:?}, blend {})", self.position, self.box_min, self.box_max, self.blend_distance));
+        }
+        if !(0..3).all(|i| self.box_min[i] < self.box_max[i]) {
+            return Some(format!("box {:?}..{:?} is empty", self.box_min, self.box_max));
+        }
+        if !(0..3).all(|i| (self.box_min[i]..=self.box_max[i]).contains(&self.position[i])) {
+            return Some(format!("position {:?} is outside its box {:?}..{:?}", self.position, self.box_min, self.box_max));
+        }
+        if self.blend_distance < 0.0 {
+            return Some(format!("blend distance {} is negative", self.blend_distance));
+        }
+        None
     }
 }
 
@@ -688,6 +747,17 @@ impl Manifest {
             }
             in_data("probes sh", g.sh, n * 27 * 4)?;
             in_data("probes sun_visibility", g.sun_visibility, n * 4)?;
+        }
+        if let Some(r) = &self.reflection_probes {
+            if !r.face_size.is_power_of_two() || !(1..=2048).contains(&r.face_size) || !(1..=r.face_size.trailing_zeros() + 1).contains(&r.levels) {
+                return bad(format!("reflection probes: bad cube ({} texels a face, {} levels)", r.face_size, r.levels));
+            }
+            for (i, p) in r.probes.iter().enumerate() {
+                if let Some(problem) = p.problem() {
+                    return bad(format!("reflection probe {i} '{}': {problem}", p.name));
+                }
+                in_data(&format!("reflection probe {i} '{}'", p.name), p.data, r.probe_bytes())?;
+            }
         }
         for (i, p) in self.pillars.iter().enumerate() {
             if let Some(problem) = p.problem() {

@@ -446,3 +446,38 @@ fn a_spawn_mesh_must_be_one_of_the_packs_meshes() {
         assert!(e.contains(&format!("spawn 1 'doves': mesh {bad} is not one of the 1 meshes")), "{e}");
     }
 }
+
+/// `sample()` with one 4-texel reflection probe of 3 levels (4, 2, 1 texels a face).
+fn with_reflection_probe() -> Pack {
+    let p = sample();
+    let mut b = PackBuilder::new("test", "test");
+    b.manifest = p.manifest.clone();
+    b.push_bytes(&p.data);
+    let texels = 6 * (16 + 4 + 1);
+    let data = b.push_bytes(&vec![0x3cu8; texels * 8]);
+    let probe = ReflectionProbe { name: "hall".into(), position: [0.0, 2.0, 0.0], box_min: [-5.0, 0.0, -5.0], box_max: [5.0, 4.0, 5.0], blend_distance: 1.0, data };
+    b.manifest.reflection_probes = Some(ReflectionProbes { face_size: 4, levels: 3, probes: vec![probe] });
+    b.finish()
+}
+
+#[test]
+fn reflection_probes_round_trip_and_bad_ones_are_rejected_by_name() {
+    let p = with_reflection_probe();
+    let q = Pack::from_bytes(&p.to_bytes().unwrap()).unwrap();
+    assert_eq!(p, q);
+    assert_eq!(q.manifest.reflection_probes.as_ref().unwrap().probe_bytes(), 6 * 21 * 8);
+    for (edit, want) in [
+        ((|r: &mut ReflectionProbes| r.levels = 4) as fn(&mut ReflectionProbes), "reflection probes: bad cube (4 texels a face, 4 levels)"),
+        (|r| r.face_size = 6, "reflection probes: bad cube (6 texels a face"),
+        (|r| r.levels = 2, "reflection probe 0 'hall': 1008 bytes stored but 960 expected"),
+        (|r| r.probes[0].position[1] = 4.5, "reflection probe 0 'hall': position [0.0, 4.5, 0.0] is outside its box"),
+        (|r| r.probes[0].box_max[0] = -5.0, "reflection probe 0 'hall': box [-5.0, 0.0, -5.0]..[-5.0, 4.0, 5.0] is empty"),
+        (|r| r.probes[0].blend_distance = -1.0, "reflection probe 0 'hall': blend distance -1 is negative"),
+        (|r| r.probes[0].box_min[2] = f32::NAN, "reflection probe 0 'hall': non-finite numbers"),
+    ] {
+        let mut p = with_reflection_probe();
+        edit(p.manifest.reflection_probes.as_mut().unwrap());
+        let e = p.to_bytes().unwrap_err().to_string();
+        assert!(e.contains(want), "want '{want}' in: {e}");
+    }
+}
