@@ -28,6 +28,12 @@ What is baked
   ``lightmap_post.finish_page``: OIDN denoise per chart, dilation into the gutters, seam
   stitching (within each instance). Pages go into the pack as half-float textures and beside it
   as OpenEXR files.
+- **Reflection probes** (``Scene.reflection_probes``, after the lightmaps and the probes): per
+  probe, the radiance seen from its capture point as a cube with its mip chain, each level
+  prefiltered for a roughness (GGX), by ``Baker.bake_reflection_probe`` (``cook_core::bake``);
+  face size, levels and samples from ``BakeSettings.reflection`` (REFLECTION_PRESETS). Stored
+  as half-float RGBA (``half_rgba``), ``Scene.reflection_cubes`` in the pack. A scene that is
+  not baked has none.
 - **Probes**: a grid over the static geometry's bounds, ``probe_spacing`` metres apart (wider if
   it would exceed ``max_probes``); each holds order-2 SH of B(n) = E(n)/pi without the sun's direct
   light, and the fraction of the sun's disk it sees (``cook_core::bake::probes``). Probes inside
@@ -39,14 +45,16 @@ The baker's inputs are built once (``StaticScene.baker_args``, the arguments of
 cannot drift apart.
 
 Determinism: a texel's random streams are keyed by (seed, page, texel index), a probe's by its
-grid index, so the same seed gives the same bytes for any thread count and batch size.
-Ctrl-C is honoured between batches (about a second of work each): the stage raises
+grid index, a reflection probe's by its index in the scene, so the same seed gives the same bytes
+for any thread count and batch size. Ctrl-C is honoured between batches (about a second of work
+each; a reflection probe is one call, several seconds at medium): the stage raises
 ``KeyboardInterrupt`` and nothing is written.
 
 With a Ray executor (executor.py) the texels of every page are cut into tiles of
-``tile_texels`` and the probes into batches of ``probe_tile``, all submitted at once as tasks
-against the scene put once into the object store; rasterising the pages, the clean-up
-(``finish_page``) and filling the probes inside geometry stay in the driver.
+``tile_texels``, the probes into batches of ``probe_tile``, and each reflection probe is a task
+of its own, all submitted at once as tasks against the scene put once into the object store;
+rasterising the pages, the clean-up (``finish_page``) and filling the probes inside geometry stay
+in the driver.
 """
 
 from __future__ import annotations
@@ -88,9 +96,21 @@ class BakeSettings:
     # Smaller tiles balance better across workers; each costs a round trip (see README).
     tile_texels: int = 4096
     probe_tile: int = 128
+    # Reflection probes (Scene.reflection_probes): each cube face's size in texels, a power of two
+    # >= 8 (its mip chain stops at 4 texels: log2(face) - 1 levels), and capture samples per
+    # texel; None: the preset's (REFLECTION_PRESETS).
+    reflection_face: int | None = None
+    reflection_samples: int | None = None
 
     def key_doc(self) -> dict:
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in SCHEDULING}
+
+    def reflection(self) -> tuple[int, int, int]:
+        """(face size, levels, samples per texel) of this bake's reflection probes."""
+        face, samples = REFLECTION_PRESETS[self.preset]
+        face = face if self.reflection_face is None else int(self.reflection_face)
+        samples = samples if self.reflection_samples is None else int(self.reflection_samples)
+        return face, reflection_levels(face), samples
 
 
 # Settings that change how the work is cut up and where it runs, never the result: left out of
@@ -108,6 +128,18 @@ SCHEDULING = ("threads", "batch_texels", "tile_texels", "probe_tile")
 #   MonoSH loses only colour that differs by direction.)
 LIGHTMAP_MODES = ("irradiance", "directional")
 
+# Per preset, a reflection probe's (cube face size in texels, capture samples per texel)
+# (reflection_contract.md; shading.md section 3.2: base 128, 32-128 samples).
+REFLECTION_PRESETS = {"draft": (64, 16), "medium": (128, 32), "high": (128, 128)}
+
+
+def reflection_levels(face: int) -> int:
+    """Mip levels of a reflection cube of `face` texels: down to 4 texels a side (log2(face) - 1).
+    Level k holds roughness k / (levels - 1), so the chain's length fixes the roughness steps."""
+    if face < 8 or face & (face - 1):
+        raise ValueError(f"bake: a reflection probe's face size must be a power of two >= 8, got {face}")
+    return face.bit_length() - 2
+
 
 @dataclass
 class Baked:
@@ -116,6 +148,8 @@ class Baked:
     pages: list[np.ndarray]
     probes: ir.ProbeGrid | None
     stats: dict
+    # The reflection probes' cubes (Scene.reflection_probes' order); None: the scene has none.
+    reflections: ir.ReflectionCubes | None = None
 
 
 # ---- the scene --------------------------------------------------------------------------------
@@ -224,11 +258,15 @@ def key_inputs(scene: ir.Scene) -> tuple[dict, list[np.ndarray]]:
     baker's own arguments (``StaticScene.baker_args``: world-space geometry of every static
     instance, per-vertex uv0 / texcoord1 / colour, the materials' baked fields, the textures
     they read with formats and samplers, lights, sky) plus, per instance, its atlas region and
-    the placed lightmap UVs, pages and normals it is rasterised from, and the atlas layout."""
+    the placed lightmap UVs, pages and normals it is rasterised from, the atlas layout, and the
+    reflection probes' capture points in order."""
     st = static_scene(scene)
     positions, triangles, materials, uv0, texcoord1, colors, materials_json, textures, textures_json, lights_json, sky = st.baker_args
     arrays = [positions, triangles, materials, uv0, texcoord1, colors, *textures]
     doc = {"materials": materials_json, "textures": textures_json, "lights": lights_json, "sky": sky,
+           # What a reflection probe's cube depends on besides the scene: its capture point and
+           # its index (its random streams' key); not its box, name or blend (the pack's, not the bake's).
+           "reflection_probes": [[float(x) for x in p.position] for p in scene.reflection_probes],
            "arrays": [None if a is None else [a.dtype.str, list(a.shape)] for a in arrays],
            "layout": None if scene.lightmap is None else {"texels_per_metre": float(scene.lightmap.texels_per_metre),
                                                          "pages": [list(map(int, p)) for p in scene.lightmap.pages],
@@ -314,6 +352,9 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     if s.lightmap_mode not in LIGHTMAP_MODES:
         raise ValueError(f"bake: unknown lightmap mode '{s.lightmap_mode}' ({', '.join(LIGHTMAP_MODES)})")
     directional = s.lightmap_mode == "directional"
+    # The reflection probes' capture points and cube settings (checked before any work is done).
+    refl_points = np.array([p.position for p in scene.reflection_probes], np.float32).reshape(-1, 3)
+    refl = s.reflection() if len(refl_points) else None
     layout = scene.lightmap
     st = static_scene(scene)
     baked_instances = st.baked if layout is not None else []
@@ -349,8 +390,10 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
         t_probes = time.perf_counter()
         probe_out = _bake_probes_local(baker, probe_points, s, progress, kw)
         probe_seconds = time.perf_counter() - t_probes
+        refl_out = _bake_reflections_local(baker, refl_points, refl, kw, progress)
     else:
-        traced, probe_out, probe_seconds = _bake_on_ray(executor, st, inputs, probe_points, s, kw, channels, progress, stats)
+        traced, probe_out, probe_seconds, refl_out = _bake_on_ray(executor, st, inputs, probe_points, refl_points, refl, s, kw, channels,
+                                                                  progress, stats)
 
     pages: list[np.ndarray] = []
     rays_total, texels_total, bake_seconds = 0, 0, 0.0
@@ -376,7 +419,10 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     probes, probe_stats = _finish_probes(probe_layout, probe_out, s)
     stats["probes"] = probe_stats
     stats["probe_seconds"] = probe_seconds
-    return Baked(pages=pages, probes=probes, stats=stats)
+    reflections = None
+    if refl is not None:
+        reflections, stats["reflections"] = _finish_reflections(scene.reflection_probes, refl, refl_out)
+    return Baked(pages=pages, probes=probes, stats=stats, reflections=reflections)
 
 
 def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, channels: int, progress):
@@ -396,9 +442,11 @@ def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, channels:
     return raw, rays, time.perf_counter() - t_page
 
 
-def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s: BakeSettings, kw: dict, channels: int, progress, stats: dict):
-    """Every page's texels in tiles and the probes in batches as Ray tasks, submitted together so
-    the cluster stays busy across page boundaries. Returns what the local path returns."""
+def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, refl_points: np.ndarray, refl, s: BakeSettings, kw: dict,
+                 channels: int, progress, stats: dict):
+    """Every page's texels in tiles, the probes in batches and each reflection probe as Ray
+    tasks, submitted together so the cluster stays busy across page boundaries. Returns what the
+    local path returns."""
     from asset_pipeline import executor as ex
 
     # The baker's arguments (the local bake's, exactly) go into the object store once; tasks
@@ -417,8 +465,10 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
     for a in range(0, len(probe_points), s.probe_tile):
         b = min(a + s.probe_tile, len(probe_points))
         probe_batches.append((a, b, (key, boxed, probe_points[a:b], ids[a:b], {**task_kw, "probe_samples": s.probe_samples})))
+    # One task per reflection probe, its id its index as in the local bake.
+    refl_tasks = [(key, boxed, tuple(float(x) for x in p), i, _reflection_kw(refl, task_kw)) for i, p in enumerate(refl_points)]
 
-    total = len(tiles) + len(probe_batches)
+    total = len(refl_tasks) + len(tiles) + len(probe_batches)
     rays = [0]
     workers: set = set()
     builds = [0]
@@ -431,9 +481,12 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
             bar.note(f"{rays[0] / max(time.perf_counter() - t0, 1e-9) / 1e6:.2f} Mrays/s on {len(workers)} worker(s)")
             bar.advance()
 
-        # Both kinds are submitted before waiting on either, so they share the cluster.
-        calls = [(ex.bake_tile, t[3]) for t in tiles] + [(ex.bake_probe_batch, p[2]) for p in probe_batches]
+        # Every kind is submitted before waiting on any, so they share the cluster; the reflection
+        # probes (the longest tasks) first, so none starts last and holds up the end.
+        calls = ([(ex.bake_reflection_probe, r) for r in refl_tasks] + [(ex.bake_tile, t[3]) for t in tiles]
+                 + [(ex.bake_probe_batch, p[2]) for p in probe_batches])
         results = executor.run(calls, on_done=lambda i, r: done(r))
+    refl_results, results = results[:len(refl_tasks)], results[len(refl_tasks):]
     tile_results, probe_results = results[:len(tiles)], results[len(tiles):]
     wall = time.perf_counter() - t0
 
@@ -454,11 +507,70 @@ def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, s:
         sh[a:b], sun[a:b], back[a:b] = bsh, bsun, bback
         probe_rays += r
         probe_seconds += seconds
-    stats["ray"] = {"tiles": len(tiles), "probe_batches": len(probe_batches), "tile_texels": s.tile_texels, "probe_tile": s.probe_tile,
+    # seconds: summed over the probes' tasks
+    refl_out = ([r[0] for r in refl_results], sum(int(r[1]) for r in refl_results), sum(r[4] for r in refl_results))
+    stats["ray"] = {"tiles": len(tiles), "probe_batches": len(probe_batches), "reflection_tasks": len(refl_tasks),
+                    "tile_texels": s.tile_texels, "probe_tile": s.probe_tile,
                     "workers": len(workers), "scene_builds": builds[0], "wall_seconds": wall,
-                    "task_seconds": sum(t[2] for t in traced) + probe_seconds,
+                    "task_seconds": sum(t[2] for t in traced) + probe_seconds + refl_out[2],
                     "rays_per_s": rays[0] / wall if wall > 0 else 0.0}
-    return traced, (sh, sun, back, probe_rays), probe_seconds
+    return traced, (sh, sun, back, probe_rays), probe_seconds, refl_out
+
+
+# ---- reflection probes ---------------------------------------------------------------------------
+
+
+def _reflection_kw(refl: tuple[int, int, int], kw: dict) -> dict:
+    """Baker.bake_reflection_probe's keywords but the position and id: the cube's settings, and
+    the bake's preset, seed, bounces and threads."""
+    face, levels, samples = refl
+    return {**kw, "face_size": face, "levels": levels, "samples": samples}
+
+
+def _bake_reflections_local(baker, points: np.ndarray, refl, kw: dict, progress):
+    """(cubes float32 (T, 3) per probe, rays, seconds); a probe's random streams are keyed by its
+    index (`id`). Ctrl-C is honoured between probes."""
+    cubes, rays = [], 0
+    if not len(points):
+        return cubes, rays, 0.0
+    t0 = time.perf_counter()
+    rkw = _reflection_kw(refl, kw)
+    with _stage(progress, "reflections", len(points)) as bar:
+        for i, p in enumerate(points):
+            rgb, n = baker.bake_reflection_probe(tuple(float(x) for x in p), id=i, **rkw)
+            cubes.append(rgb)
+            rays += n
+            bar.note(f"{rays / max(time.perf_counter() - t0, 1e-9) / 1e6:.2f} Mrays/s")
+            bar.advance()
+    return cubes, rays, time.perf_counter() - t0
+
+
+def half_rgba(rgb: np.ndarray, what: str = "reflection probe") -> np.ndarray:
+    """A cube's float32 (T, 3) radiance as the pack holds it: float16 (T, 4) RGBA, alpha 1, each
+    channel clamped to [0, 65504] (half's largest finite value). A value that is not a number is
+    a baker bug, refused rather than hidden."""
+    rgb = np.asarray(rgb, np.float32)
+    if rgb.ndim != 2 or rgb.shape[1] != 3:
+        raise ValueError(f"{what}: expected (T, 3) radiance, got {rgb.shape}")
+    if np.isnan(rgb).any():
+        raise ValueError(f"{what}: the baker returned NaN radiance")
+    out = np.ones((len(rgb), 4), np.float16)
+    out[:, :3] = np.clip(rgb, 0.0, 65504.0)
+    return out
+
+
+def _finish_reflections(probes: list[ir.ReflectionProbe], refl, traced) -> tuple[ir.ReflectionCubes, dict]:
+    face, levels, samples = refl
+    raw, rays, seconds = traced
+    texels = ir.cube_texels(face, levels)
+    cubes = []
+    for p, rgb in zip(probes, raw):
+        if np.shape(rgb) != (texels, 3):
+            raise ValueError(f"reflection probe '{p.name}': the baker returned {np.shape(rgb)} texels, expected ({texels}, 3)")
+        cubes.append(half_rgba(rgb, f"reflection probe '{p.name}'"))
+    stats = {"count": len(cubes), "face_size": face, "levels": levels, "samples": samples, "rays": int(rays), "seconds": seconds,
+             "bytes": int(sum(c.nbytes for c in cubes))}
+    return ir.ReflectionCubes(face_size=face, levels=levels, cubes=cubes), stats
 
 
 # ---- probes -------------------------------------------------------------------------------------
@@ -548,7 +660,7 @@ def _fill_invalid(sh: np.ndarray, sun: np.ndarray, invalid: np.ndarray):
 def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
     """The scene with the baked pages as textures referenced by its lightmap layout (see
     LIGHTMAP_MODES: B as Rgba16Float; or b0 and the sun's visibility as Rgba16Float and the
-    direction as Rgba8Unorm) and the probes."""
+    direction as Rgba8Unorm), the probes and the reflection probes' cubes."""
     textures = list(scene.textures)
     ids, directions = [], []
     for page, img in enumerate(baked.pages):
@@ -564,7 +676,8 @@ def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
         if direction is not None:
             textures.append(ir.Texture(name=f"lightmap{page} direction", width=w, height=h, format="Rgba8Unorm", mips=[direction]))
     layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids, directions=directions)
-    return dataclasses.replace(scene, textures=textures, lightmap=layout, probes=baked.probes)
+    cubes = baked.reflections if baked.reflections is not None and len(baked.reflections.cubes) == len(scene.reflection_probes) else None
+    return dataclasses.replace(scene, textures=textures, lightmap=layout, probes=baked.probes, reflection_cubes=cubes)
 
 
 # Rec. 709 luminance weights (textures.md section 4.2; shading::sh::LUMINANCE).
@@ -632,7 +745,8 @@ def describe(stats: dict) -> list[str]:
                          f"{p['post_seconds']:.1f} s clean-up{' (denoised)' if p['denoised'] else ''}")
     r = stats.get("ray")
     if r:
-        lines.append(f"On Ray: {r['tiles']} tiles of {r['tile_texels']} texels and {r['probe_batches']} probe batches of {r['probe_tile']} "
+        refl_tasks = f", {r['reflection_tasks']} reflection probe task(s)" if r.get("reflection_tasks") else ""
+        lines.append(f"On Ray: {r['tiles']} tiles of {r['tile_texels']} texels and {r['probe_batches']} probe batches of {r['probe_tile']}{refl_tasks} "
                      f"on {r['workers']} worker(s) (scene built {r['scene_builds']} time(s)), {r['wall_seconds']:.1f} s wall, "
                      f"{r['rays_per_s'] / 1e6:.2f} M rays/s across the cluster; per-page seconds are summed over tasks.")
     pr = stats.get("probes")
@@ -640,5 +754,10 @@ def describe(stats: dict) -> list[str]:
         lines.append(f"Probes: {pr['count']} ({' x '.join(str(c) for c in pr['counts'])}, cells "
                      f"{' x '.join(f'{x:.2f}' for x in pr['spacing'])} m), {pr['inside_geometry']} inside geometry (filled from "
                      f"neighbours), {pr['rays'] / 1e6:.1f} M rays in {stats.get('probe_seconds', 0.0):.1f} s.")
+    rp = stats.get("reflections")
+    if rp:
+        lines.append(f"Reflection probes: {rp['count']}, cube faces {rp['face_size']} px with {rp['levels']} levels, {rp['samples']} samples per "
+                     f"texel; {rp['rays'] / 1e6:.1f} M rays in {rp['seconds']:.1f} s{' (summed over tasks)' if r else ''}; "
+                     f"{rp['bytes']} bytes ({rp['bytes'] / 2**20:.2f} MiB, half-float RGBA).")
     return lines
 

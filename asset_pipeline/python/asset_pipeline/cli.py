@@ -57,6 +57,14 @@ def _number(minimum: float, strict: bool):
 _positive_number, _non_negative_number = _number(0.0, True), _number(0.0, False)
 
 
+def _face_size(text: str) -> int:
+    """argparse type: a reflection cube's face size, a power of two >= 8."""
+    n = _positive(text)
+    if n < 8 or n & (n - 1):
+        raise argparse.ArgumentTypeError(f"{n} is not a power of two of 8 or more")
+    return n
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="cook", description="Cook a glTF 2.0 file (.gltf/.glb) or a CSG level (.toml) into a pack.")
     parser.add_argument("source", help="the .gltf, .glb or level .toml to cook")
@@ -75,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-mips", action="store_true", help="skip the textures stage (textures keep one level)")
     parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
                         help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
-    bake = parser.add_argument_group("baking (lightmaps and probes, for levels with lightmap UVs)")
+    bake = parser.add_argument_group("baking (lightmaps, probes and reflection probes, for levels with lightmap UVs)")
     bake.add_argument("--no-bake", action="store_true", help="skip the bake stage")
     bake.add_argument("--sky-nits", type=_non_negative_number, default=CookSettings.sky_nits, metavar="NITS",
                       help=f"a glTF scene's uniform white sky, in nits (default {CookSettings.sky_nits:g}, an overcast day; 0: none); levels bring their own")
@@ -86,6 +94,10 @@ def main(argv: list[str] | None = None) -> int:
     bake.add_argument("--samples", type=_positive, metavar="N", help="paths per lightmap texel (overrides the preset)")
     bake.add_argument("--bounces", type=_non_negative, metavar="N", help="indirect bounces (overrides the preset)")
     bake.add_argument("--probe-samples", type=_positive, metavar="N", help="rays per light probe (overrides the preset)")
+    bake.add_argument("--reflection-face", type=_face_size, metavar="N",
+                      help="reflection probes' cube face size in texels, a power of two >= 8 (overrides the preset's: draft 64, medium and high 128)")
+    bake.add_argument("--reflection-samples", type=_positive, metavar="N",
+                      help="capture samples per reflection probe texel (overrides the preset's: draft 16, medium 32, high 128)")
     bake.add_argument("--seed", type=_non_negative, default=0, help="random seed: the same seed gives the same bytes")
     bake.add_argument("--threads", type=_positive, metavar="N", help="bake threads (default: all cores; the result is the same)")
     scale = parser.add_argument_group("scale-out (the same bytes wherever the work runs)")
@@ -99,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.ray_address is not None and args.executor != "ray":
         parser.error("--ray-address needs --executor ray")
     bake_settings = BakeSettings(preset=args.quality, lightmap_mode=args.lightmap_mode, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
-                                 seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
+                                 reflection_face=args.reflection_face, reflection_samples=args.reflection_samples, seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
     executor = args.executor
     if executor == "ray":
         # A process that exits on Ctrl-C leaves its tasks to the cluster (see RayExecutor).

@@ -1,8 +1,8 @@
 """Where the cook's independent work runs: ``local`` (this process; the default, needs no Ray) or
 ``ray`` (tasks on a Ray cluster, ``cook --executor ray [--ray-address ADDR]``).
 
-What goes to Ray: lightmap texel tiles and probe batches (the bake), LOD chains per mesh and mip
-chains per texture. The source import and the lightmap UV atlas stay in the driver: each is one
+What goes to Ray: lightmap texel tiles, probe batches and reflection probes (the bake), LOD
+chains per mesh and mip chains per texture. The source import and the lightmap UV atlas stay in the driver: each is one
 item (the atlas packs every mesh's charts together).
 
 The bake's scene (``bake.StaticScene.baker_args``, the arguments of ``_core.Baker``: triangles,
@@ -13,9 +13,10 @@ reference and keeps it for the following tiles (``_WORKER_BAKER``), so the BVH i
 worker process, not per task.
 
 Results do not depend on where or in which order tiles run: the baker keys every texel's random
-streams by (seed, page, texel index) and every probe's by its grid index, so the pack is the same
-bytes as a local cook. A task whose worker dies is resubmitted (``max_retries``); Ctrl-C cancels
-every submitted task that has not finished.
+streams by (seed, page, texel index), every probe's by its grid index and every reflection
+probe's by its index in the scene, so the pack is the same bytes as a local cook. A task whose
+worker dies is resubmitted (``max_retries``); Ctrl-C cancels every submitted task that has not
+finished.
 
 This module imports ``ray`` only when a Ray executor connects.
 """
@@ -68,6 +69,15 @@ def bake_probe_batch(key: str, boxed_ref: list, points, ids, kw: dict):
     baker, built = _worker_baker(key, boxed_ref)
     sh, sun, back, rays = baker.bake_probes(points, ids, **kw)
     return sh, sun, back, rays, os.getpid(), built, time.perf_counter() - t0
+
+
+def bake_reflection_probe(key: str, boxed_ref: list, position, index: int, kw: dict):
+    """One reflection probe (Baker.bake_reflection_probe, `id` its index in the scene): (radiance
+    float32 (T, 3), rays, worker pid, built the BVH here, seconds)."""
+    t0 = time.perf_counter()
+    baker, built = _worker_baker(key, boxed_ref)
+    rgb, rays = baker.bake_reflection_probe(position, id=index, **kw)
+    return rgb, rays, os.getpid(), built, time.perf_counter() - t0
 
 
 def lod_chain(base, lod_settings):

@@ -513,14 +513,18 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
 
 def _bake_key(scene: ir.Scene, bake_settings) -> str:
     """Everything the bake reads (bake.key_inputs: the static instances where they stand, their
-    regions, the materials' baked fields and the textures they read, lights, sky, the atlas),
-    the settings and the denoiser."""
+    regions, the materials' baked fields and the textures they read, lights, sky, the atlas, the
+    reflection probes' capture points), the settings and the denoiser."""
     from asset_pipeline.bake import key_inputs
     from asset_pipeline.lightmap_post import denoiser
 
     # The denoiser that will run (its version), or none: a bake made without it is not the one
     # made with it, and installing it must not leave the cache serving the noisy one.
-    key = Hasher("bake").settings(bake_settings.key_doc()).text(denoiser() if bake_settings.post.denoise else "denoise off")
+    doc = bake_settings.key_doc()
+    if not scene.reflection_probes:
+        # Without reflection probes their settings change nothing: a level without any keeps its bake.
+        doc = {k: v for k, v in doc.items() if not k.startswith("reflection_")}
+    key = Hasher("bake").settings(doc).text(denoiser() if bake_settings.post.denoise else "denoise off")
     doc, arrays = key_inputs(scene)
     key.settings(doc)
     for a in arrays:
@@ -540,10 +544,16 @@ def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, prog
     if hit is not None:
         meta, arrays = hit
         probes = None
+        at = pages  # arrays: the pages, the probes' SH and sun visibility, the reflection cubes
         if meta["probes"] is not None:
             pr = meta["probes"]
-            probes = ir.ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]), arrays[pages], arrays[pages + 1])
-        baked = Baked(pages=arrays[:pages], probes=probes, stats=meta["stats"])
+            probes = ir.ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]), arrays[at], arrays[at + 1])
+            at += 2
+        reflections = None
+        if meta.get("reflections") is not None:
+            rc = meta["reflections"]
+            reflections = ir.ReflectionCubes(rc["face_size"], rc["levels"], list(arrays[at:at + rc["count"]]))
+        baked = Baked(pages=arrays[:pages], probes=probes, stats=meta["stats"], reflections=reflections)
         rec.cached = pages
         progress.line(f"bake: {pages} page(s) from the cache")
     else:
@@ -554,7 +564,12 @@ def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, prog
             p = baked.probes
             probes = {"origin": list(p.origin), "spacing": list(p.spacing), "counts": list(p.counts)}
             arrays += [p.sh, p.sun_visibility]
-        cache.store("bake", key, {"probes": probes, "stats": baked.stats}, arrays)
+        reflections = None
+        if baked.reflections is not None:
+            r = baked.reflections
+            reflections = {"face_size": r.face_size, "levels": r.levels, "count": len(r.cubes)}
+            arrays += list(r.cubes)
+        cache.store("bake", key, {"probes": probes, "reflections": reflections, "stats": baked.stats}, arrays)
     rec.seconds = time.perf_counter() - t0
     return attach(scene, baked), baked.stats, rec
 
