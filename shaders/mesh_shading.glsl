@@ -26,6 +26,19 @@ layout(set = 2, binding = 3) uniform sampler2D dfg_lut;
 // (128 + 127 t) / 255 in rgb ("MonoSH", shading.md §4.2); `lightmap` then holds b0 (rgb) and
 // the sun's visibility (a).
 layout(set = 2, binding = 4) uniform sampler2DArray lightmap_direction;
+// Reflection probes (REFLECTIONS; shading.md §3): per probe a cube of radiance prefiltered for
+// GGX, level k holding roughness k / (levels - 1), as layers of one cube-map array; and the
+// probes, smallest box first (engine/src/assets.rs `reflection_probe_bytes`).
+layout(set = 2, binding = 5) uniform samplerCubeArray reflection_cubes;
+struct ReflectionProbe {
+    vec4 box_min;   // xyz: the box (world, axis-aligned); w: blend distance (m)
+    vec4 box_max;   // xyz; w: the probe's cube in reflection_cubes
+    vec4 position;  // xyz: where the cube was captured
+};
+layout(std430, set = 2, binding = 6) readonly buffer ReflectionProbes {
+    uvec4 info;     // x: probes, y: levels
+    ReflectionProbe probe[];
+} reflections;
 
 // The sun's shadow map (depth, 0 nearest the sun), sampled with a LESS_OR_EQUAL comparison and
 // linear filtering: each lookup is a 2x2 PCF in hardware. Set 0 is the renderer's.
@@ -78,6 +91,9 @@ layout(constant_id = 4) const bool DIRECTIONAL = false;
 // Set by the renderer (`Renderer::bicubic_lightmaps`) for LIGHTMAPPED variants: lightmaps are
 // read through a cubic B-spline instead of bilinearly.
 layout(constant_id = 5) const bool BICUBIC = false;
+// Set by the renderer when the scene has reflection probes (`Renderer::reflections`): the
+// specular environment is theirs, box-projected and blended, over the fallback.
+layout(constant_id = 6) const bool REFLECTIONS = false;
 
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
@@ -306,15 +322,44 @@ vec3 sun_reflected(vec3 n, vec3 v, vec3 kd, vec3 f0, float alpha, float nv, bool
     return brdf * frame.sun_color.rgb * nl * visibility;
 }
 
+// The prefiltered radiance toward r (the split sum's first term, shading.md §3) at p for
+// perceptual roughness `rough`: each probe whose box holds p, weighted by how deep inside it is
+// (1 past its blend distance from every face), takes that share of what the smaller probes
+// before it left; `fallback` takes the rest (§3.6). Its direction is box-projected: where the
+// ray from p leaves the box, seen from the capture point (§3.5; exact for mirrors).
+vec3 probe_reflection(vec3 p, vec3 r, float rough, vec3 fallback) {
+    float lod = rough * float(reflections.info.y - 1u);
+    vec3 c = vec3(0.0);
+    float rest = 1.0;
+    for (uint i = 0u; i < reflections.info.x && rest > 0.0; ++i) {
+        vec3 lo = reflections.probe[i].box_min.xyz;
+        vec3 hi = reflections.probe[i].box_max.xyz;
+        vec3 d = min(p - lo, hi - p);
+        float inside = min(d.x, min(d.y, d.z));
+        if (inside <= 0.0) {
+            continue;
+        }
+        float blend = reflections.probe[i].box_min.w;
+        float w = blend > 0.0 ? min(inside / blend, 1.0) : 1.0;
+        // The ray's exit: the nearest of the far slab planes (r's zero components give +inf).
+        vec3 far = max((hi - p) / r, (lo - p) / r);
+        float t = min(far.x, min(far.y, far.z));
+        vec3 dir = p + t * r - reflections.probe[i].position.xyz;
+        c += rest * w * textureLod(reflection_cubes, vec4(dir, reflections.probe[i].box_max.w), lod).rgb;
+        rest *= 1.0 - w;
+    }
+    return c + rest * fallback;
+}
+
 // The fragment's linear radiance for the HDR target; alpha 1 marks it covered (the tone-map pass
 // leaves alpha-0 pixels, the clear colour, as they are). glTF metallic-roughness
 // (engine/shading is the same model on the CPU, ../shared/notes/shading.md 2.2 and 5):
 //   sun:      [(1 - m)(1 - F_d) base / pi + F D Vis] E n.l visibility   (dynamic objects)
 //   indirect: (1 - m) base w_d B ao + env (f0 A + B) ao,  w_d = 1 - (0.04 A + B)
-// B is the lightmap (static: it holds the sun's diffuse light too, not its highlight, which
-// the directional lightmaps of the next issue bring) or the probes (dynamic); env, until
-// reflection probes exist, is a rough environment: the probes' B in the reflected direction, or
-// the lightmap's B on lightmapped surfaces.
+// B is the lightmap (static; directional ones leave the sun to the sun term, which then draws
+// its highlight too) or the probes (dynamic); env is the reflection probes' prefiltered
+// radiance (REFLECTIONS), over a rough stand-in where they do not reach: the irradiance probes'
+// B in the reflected direction, or the lightmap's B on lightmapped surfaces.
 vec4 shade(vec4 a) {
     // Read member by member: copying the whole block costs every field's load on lavapipe.
     uint m = uint(draw.material.y);
@@ -374,6 +419,9 @@ vec4 shade(vec4 a) {
         vec4 pl = probe_light(in_world, n, r_dom, env);
         b = pl.rgb;
         l += sun_reflected(n, v, kd, f0, alpha, nv, specular, sun_visibility(in_world, n, pl.w));
+    }
+    if (REFLECTIONS && specular) {
+        env = probe_reflection(in_world, r_dom, rough, env);
     }
     float wd = 1.0 - (0.04 * dfg.x + dfg.y);
     l += (kd * wd * b + env * (f0 * dfg.x + dfg.y)) * ao;

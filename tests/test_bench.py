@@ -253,7 +253,7 @@ OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # build/temple.pack from the camera flight's last measured frame (2/3 of the loop: above the
 # roofs, the whole level in view): 8 level instances plus 32 doves, the priest's and the
 # pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
-DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off", "transparency_off", "lightmaps_bicubic"]
+DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off", "transparency_off", "lightmaps_bicubic", "reflections_off"]
 DEMO_COUNTERS = {
     "instances": 16,  # the level's 6 meshes, 2 golems and 2 lanterns of 4 parts
     "drawn": 48,

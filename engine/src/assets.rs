@@ -162,12 +162,15 @@ impl GpuScene {
             }
             None => Image::sampled_array(gpu, "no lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[128, 128, 128, 255]])?,
         });
+        let reflection_cubes = gpu.own(reflection_cubes(gpu, pack)?);
+        let reflection_bytes = reflection_probe_bytes(pack);
+        let reflection_probes = gpu.own(Buffer::with_data(gpu, "reflection probes", &reflection_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
         let mut samplers = gpu.own(SamplerCache::default());
 
         let material_count = m.materials.len() as u32;
         let pool_sizes = [
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: MATERIAL_SLOTS * material_count + 3 },
-            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 2 },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::COMBINED_IMAGE_SAMPLER, descriptor_count: MATERIAL_SLOTS * material_count + 4 },
+            vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 3 },
         ];
         let pool = gpu.own(unsafe {
             gpu.device.create_descriptor_pool(
@@ -251,6 +254,10 @@ impl GpuScene {
         let dfg_lut = gpu.own(Image::sampled_with_mips(gpu, "dfg lut", vk::Format::R16G16_SFLOAT, lut_extent, &[dfg_lut_texels()])?);
         let lut_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: dfg_lut.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
+        // Trilinear between the roughness levels; cube sampling is seamless across faces.
+        let trilinear = pack::Sampler { wrap_s: pack::Wrap::Clamp, wrap_t: pack::Wrap::Clamp, mipmap_filter: Some(pack::Filter::Linear), ..Default::default() };
+        let cube_info = [vk::DescriptorImageInfo { sampler: samplers.get(gpu, trilinear, false)?, image_view: reflection_cubes.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
+        let reflection_info = [vk::DescriptorBufferInfo { buffer: reflection_probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         let constants_info = [vk::DescriptorBufferInfo { buffer: material_constants.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         let writes = [
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(0).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&image_info),
@@ -258,6 +265,8 @@ impl GpuScene {
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(2).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&constants_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(3).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&lut_info),
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(4).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&direction_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(5).descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER).image_info(&cube_info),
+            vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(6).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&reflection_info),
         ];
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
@@ -284,6 +293,9 @@ impl GpuScene {
             lightmap_directions: lightmap_directions.keep(),
             directional_lightmaps: !directions.is_empty(),
             dfg_lut: dfg_lut.keep(),
+            reflection_cubes: reflection_cubes.keep(),
+            reflection_probes: reflection_probes.keep(),
+            reflection_probe_count: m.reflection_probes.as_ref().map_or(0, |r| r.probes.len() as u32),
             samplers: samplers.keep(),
             pool: pool.keep(),
             scene_set,
@@ -314,6 +326,44 @@ fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
         out.extend_from_slice(&vis[i * 4..(i + 1) * 4]);
     }
     out
+}
+
+/// The reflection probes' cubes as one cube-map array (half RGBA), in the pack's probe order;
+/// one black 1-texel cube when there are none (the binding must hold a view).
+fn reflection_cubes(gpu: &Gpu, pack: &Pack) -> Result<Image> {
+    let format = vk::Format::R16G16B16A16_SFLOAT;
+    match pack.manifest.reflection_probes.as_ref().filter(|r| !r.probes.is_empty()) {
+        Some(r) => {
+            let cubes: Vec<&[u8]> = r.probes.iter().map(|p| pack.bytes(p.data)).collect();
+            Image::sampled_cubes(gpu, "reflection probes", format, r.face_size, r.levels, 8, &cubes)
+                .with_context(|| format!("uploading {} reflection probes of {} texels a face", cubes.len(), r.face_size))
+        }
+        None => Image::sampled_cubes(gpu, "no reflection probes", format, 1, 1, 8, &[&[0u8; 6 * 8]]),
+    }
+}
+
+/// The reflection probes as the shaders walk them (std430, `ReflectionProbes` in
+/// mesh_shading.glsl): (count, levels, 0, 0), then per probe three vec4s, the box's min with
+/// the blend distance, its max with the probe's layer in the cube array, the capture point.
+/// Smaller boxes come first: a room's probe stays on top of the courtyard's that contains it,
+/// each taking its weight of what the ones before left (shading.md §3.6).
+fn reflection_probe_bytes(pack: &Pack) -> Vec<u8> {
+    let r = pack.manifest.reflection_probes.as_ref();
+    let probes: &[pack::ReflectionProbe] = r.map_or(&[], |r| &r.probes);
+    let volume = |p: &pack::ReflectionProbe| (0..3).map(|i| p.box_max[i] - p.box_min[i]).product::<f32>();
+    let mut order: Vec<usize> = (0..probes.len()).collect();
+    order.sort_by(|&a, &b| volume(&probes[a]).total_cmp(&volume(&probes[b])));
+    let mut floats = vec![f32::from_bits(probes.len() as u32), f32::from_bits(r.map_or(1, |r| r.levels)), 0.0, 0.0];
+    for i in order {
+        let p = &probes[i];
+        floats.extend([p.box_min[0], p.box_min[1], p.box_min[2], p.blend_distance]);
+        floats.extend([p.box_max[0], p.box_max[1], p.box_max[2], i as f32]);
+        floats.extend([p.position[0], p.position[1], p.position[2], 0.0]);
+    }
+    if probes.is_empty() {
+        floats.extend([0.0; 12]);
+    }
+    bytemuck::cast_slice(&floats).to_vec()
 }
 
 /// Sun and exposure for a baked pack: exposure k / L with k = 0.18 and L the log-average

@@ -99,6 +99,8 @@ pub struct Capabilities {
     /// The sample count MSAA renders with: 4 where the device renders the HDR format and the
     /// depth format with 4 samples (lavapipe does), else 1 (MSAA unavailable).
     pub msaa_samples: vk::SampleCountFlags,
+    /// Cube-map array views (`imageCubeArray`): the reflection probes are one such array.
+    pub cube_arrays: bool,
 }
 
 pub struct Gpu {
@@ -219,6 +221,7 @@ impl Gpu {
             } else {
                 vk::SampleCountFlags::TYPE_1
             },
+            cube_arrays: features.image_cube_array == vk::TRUE,
         };
 
         let priorities = [1.0f32];
@@ -226,7 +229,8 @@ impl Gpu {
         let enabled = vk::PhysicalDeviceFeatures::default()
             .pipeline_statistics_query(caps.pipeline_statistics)
             .fragment_stores_and_atomics(caps.fragment_atomics)
-            .sampler_anisotropy(caps.sampler_anisotropy.is_some());
+            .sampler_anisotropy(caps.sampler_anisotropy.is_some())
+            .image_cube_array(caps.cube_arrays);
         // maintenance4 (required of every 1.3 device): glslc's Vulkan 1.3 compute shaders declare
         // their workgroup size with LocalSizeId, which needs it.
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true).synchronization2(true).maintenance4(true);

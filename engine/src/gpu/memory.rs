@@ -1,7 +1,7 @@
 //! Buffers and images with their memory, and uploads through a staging buffer.
 
 use super::Gpu;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use std::sync::atomic::Ordering;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
@@ -195,6 +195,35 @@ impl Image {
             .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST);
         let image = gpu.own(Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D_ARRAY, vk::ImageAspectFlags::COLOR)?);
         let parts: Vec<(&[u8], u32, u32)> = layers.iter().enumerate().map(|(layer, bytes)| (*bytes, 0, layer as u32)).collect();
+        image.upload(gpu, &parts)?;
+        Ok(image.keep())
+    }
+
+    /// Cube maps of `size`² texels a face and `levels` mips as one cube-map array (view
+    /// CUBE_ARRAY, `imageCubeArray`), cube i uploaded from `cubes[i]`: [level][face +X, −X, +Y,
+    /// −Y, +Z, −Z][row][column], tightly packed. Left in SHADER_READ_ONLY_OPTIMAL.
+    pub fn sampled_cubes(gpu: &Gpu, name: &str, format: vk::Format, size: u32, levels: u32, texel_bytes: usize, cubes: &[&[u8]]) -> Result<Image> {
+        anyhow::ensure!(gpu.caps.cube_arrays, "{name}: the device cannot sample cube-map arrays (imageCubeArray)");
+        let info = vk::ImageCreateInfo::default()
+            .flags(vk::ImageCreateFlags::CUBE_COMPATIBLE)
+            .format(format)
+            .extent(vk::Extent3D { width: size, height: size, depth: 1 })
+            .mip_levels(levels)
+            .array_layers(6 * cubes.len() as u32)
+            .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST);
+        let image = gpu.own(Image::create(gpu, name, &info, vk::ImageViewType::CUBE_ARRAY, vk::ImageAspectFlags::COLOR)?);
+        let mut parts = Vec::with_capacity(cubes.len() * 6 * levels as usize);
+        for (c, bytes) in cubes.iter().enumerate() {
+            let mut at = 0usize;
+            for level in 0..levels {
+                let face = ((size >> level).max(1) as usize).pow(2) * texel_bytes;
+                for f in 0..6u32 {
+                    let part = bytes.get(at..at + face).with_context(|| format!("{name}: cube {c} is shorter than {levels} levels of {size}-texel faces"))?;
+                    parts.push((part, level, 6 * c as u32 + f));
+                    at += face;
+                }
+            }
+        }
         image.upload(gpu, &parts)?;
         Ok(image.keep())
     }

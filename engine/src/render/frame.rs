@@ -50,6 +50,8 @@ pub struct Settings {
     pub directional_lightmaps: bool,
     /// Lightmaps read through a cubic B-spline (`Renderer::bicubic_lightmaps`).
     pub bicubic_lightmaps: bool,
+    /// The scene has reflection probes and the renderer uses them (`Renderer::reflections`).
+    pub reflection_probes: bool,
     /// Depth testing in the shading pass without a pre-pass.
     pub depth_test: bool,
     /// Show the depth buffer instead of the shaded frame (a debug view).
@@ -68,6 +70,7 @@ impl Settings {
             lightmapped,
             directional: lightmapped && self.directional_lightmaps,
             bicubic: lightmapped && self.bicubic_lightmaps,
+            reflections: self.reflection_probes,
             counting: self.count_fragments && phase != LitPhase::Blend,
             slots: material.slots.with_maps(self.material_maps),
         }

@@ -45,6 +45,8 @@ pub struct LitKey {
     pub directional: bool,
     /// BICUBIC: the lightmap is read through a cubic B-spline.
     pub bicubic: bool,
+    /// REFLECTIONS: the environment comes from the scene's reflection probes.
+    pub reflections: bool,
     /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
     pub counting: bool,
     /// SLOTS: the material's texture slots (less those the renderer's switches leave out).
@@ -78,11 +80,13 @@ struct Variant {
     directional: bool,
     /// BICUBIC: a LIGHTMAPPED variant reads its lightmap through a cubic B-spline.
     bicubic: bool,
+    /// REFLECTIONS: the specular environment comes from the reflection probes.
+    reflections: bool,
 }
 
 impl Default for Variant {
     fn default() -> Self {
-        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false, bicubic: false }
+        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false, bicubic: false, reflections: false }
     }
 }
 
@@ -130,8 +134,17 @@ impl MeshKit {
         // metallic-roughness (3), occlusion (4).
         let material_binding = [0, 1, 2, 3, 4].map(|b| binding(b, sampled, frag));
         // Set 2: the lightmap array, the probes, the material constants (their UV transforms
-        // are applied per vertex), the specular (A, B) table and the lightmaps' directions.
-        let scene_bindings = [binding(0, sampled, frag), binding(1, storage, frag), binding(2, storage, MESH_STAGES), binding(3, sampled, frag), binding(4, sampled, frag)];
+        // are applied per vertex), the specular (A, B) table, the lightmaps' directions, the
+        // reflection probes' cube array and the probes' boxes.
+        let scene_bindings = [
+            binding(0, sampled, frag),
+            binding(1, storage, frag),
+            binding(2, storage, MESH_STAGES),
+            binding(3, sampled, frag),
+            binding(4, sampled, frag),
+            binding(5, sampled, frag),
+            binding(6, storage, frag),
+        ];
         let layout = |b: &[vk::DescriptorSetLayoutBinding]| unsafe { d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(b), None) };
         // Everything is owned until the kit is whole: an error frees what was made before it.
         let frame_layout = gpu.own(layout(&frame_binding)?);
@@ -322,7 +335,15 @@ fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFl
 /// after a pre-pass the EQUAL test already keeps the samples the pre-pass covered.
 fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags, key: LitKey) -> Result<vk::Pipeline> {
     let depth_format = gpu.caps.depth_format;
-    let variant = Variant { count_fragments: key.counting, lightmapped: key.lightmapped, slots: key.slots, samples: 1, directional: key.directional, bicubic: key.bicubic };
+    let variant = Variant {
+        count_fragments: key.counting,
+        lightmapped: key.lightmapped,
+        slots: key.slots,
+        samples: 1,
+        directional: key.directional,
+        bicubic: key.bicubic,
+        reflections: key.reflections,
+    };
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
@@ -350,8 +371,8 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0 to 5: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS,
-    // DIRECTIONAL and BICUBIC (mesh_shading.glsl).
+    // Specialisation constants 0 to 6: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS,
+    // DIRECTIONAL, BICUBIC and REFLECTIONS (mesh_shading.glsl).
     let values = [
         vk::Bool32::from(variant.count_fragments),
         vk::Bool32::from(variant.lightmapped),
@@ -359,10 +380,11 @@ fn create_mesh_pipeline(
         variant.slots.0,
         vk::Bool32::from(variant.directional),
         vk::Bool32::from(variant.bicubic),
+        vk::Bool32::from(variant.reflections),
     ]
     .map(u32::to_le_bytes);
     let bytes = values.concat();
-    let entries: [vk::SpecializationMapEntry; 6] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
+    let entries: [vk::SpecializationMapEntry; 7] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.

@@ -136,10 +136,15 @@ pub struct Renderer {
     /// lit like dynamic geometry, by the probes and the sun, to compare the two.
     pub lightmaps: bool,
     /// Read lightmaps through a cubic B-spline (four bilinear taps) instead of one bilinear
-    /// tap: a baked shadow's edge without the kinks bilinear puts at every texel. Off by
-    /// default: on lavapipe each lookup of the most-drawn surfaces costs milliseconds, and the
-    /// filter reaches two texels past a chart, more than the atlas's 2-texel padding keeps clear.
+    /// tap: a baked shadow's edge without the kinks bilinear puts at every texel (the filter
+    /// reaches two texels past a chart; the atlas keeps 4 clear). On by default where it pays:
+    /// on a GPU four taps are noise; on a CPU device (lavapipe) each lookup of the most-drawn
+    /// surfaces costs milliseconds, so it starts off there.
     pub bicubic_lightmaps: bool,
+    /// Specular light from the scene's reflection probes (on by default); off, or without
+    /// probes, the environment is the lightmap's or irradiance probes' light in the reflected
+    /// direction.
+    pub reflections: bool,
     /// Show the depth buffer instead of the shaded frame (the `depth view` debug pass).
     pub depth_view: bool,
     /// Draw a baked level's sky and sun disc as the background (on by default; off, the clear
@@ -236,7 +241,8 @@ impl Renderer {
             count_fragments: false,
             depth_test: true,
             lightmaps: true,
-            bicubic_lightmaps: false,
+            bicubic_lightmaps: gpu.caps.device_type != vk::PhysicalDeviceType::CPU,
+            reflections: true,
             depth_view: false,
             sky: true,
             material_maps: true,
@@ -391,6 +397,7 @@ impl Renderer {
             material_maps: self.material_maps,
             directional_lightmaps: scene.directional_lightmaps,
             bicubic_lightmaps: self.bicubic_lightmaps,
+            reflection_probes: self.reflections && scene.reflection_probe_count > 0,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
             fxaa: self.aa == AntiAliasing::Fxaa,

@@ -166,6 +166,12 @@ pub struct GpuScene {
     pub directional_lightmaps: bool,
     /// The specular lobe's (A, B) table the mesh shaders read (`shading::DfgLut`).
     pub(crate) dfg_lut: Image,
+    /// The reflection probes' prefiltered cubes as one cube-map array (one black cube without
+    /// probes), and the probes the shaders walk (boxes, capture points; `assets`).
+    pub(crate) reflection_cubes: Image,
+    pub(crate) reflection_probes: Buffer,
+    /// How many reflection probes the scene has (0: the lit pipelines leave them out).
+    pub reflection_probe_count: u32,
     pub(crate) samplers: SamplerCache,
     pub(crate) pool: vk::DescriptorPool,
     /// Set 2, bound once per pass: the lightmap array, the probe grid and every material's
@@ -290,6 +296,8 @@ impl GpuScene {
         self.lightmaps.destroy(gpu);
         self.lightmap_directions.destroy(gpu);
         self.dfg_lut.destroy(gpu);
+        self.reflection_cubes.destroy(gpu);
+        self.reflection_probes.destroy(gpu);
         self.probes.destroy(gpu);
         self.material_constants.destroy(gpu);
         self.vertex_buffer.destroy(gpu);

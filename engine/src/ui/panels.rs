@@ -64,6 +64,7 @@ impl RendererPanel<'_> {
         control("specular", ui.checkbox(&mut r.specular, "specular (off: diffuse only)"));
         control("transparency", ui.checkbox(&mut r.transparency, "transparency (BLEND materials; off: not drawn)"));
         control("bicubic lightmaps", ui.checkbox(&mut r.bicubic_lightmaps, "bicubic lightmaps (a cubic B-spline; off: bilinear)"));
+        control("reflection probes", ui.checkbox(&mut r.reflections, "reflection probes (off: the lightmap's light as the environment)"));
         // Each mode's cost shows in the pass list above: MSAA's in every camera pass and the
         // resolve pass, FXAA's as the fxaa pass.
         ui.horizontal(|ui| {

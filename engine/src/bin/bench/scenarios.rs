@@ -69,7 +69,7 @@ Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
                     animating at a fixed step; frames cycle through the default (no anti-aliasing)
                     and the variants aa_msaa, aa_fxaa, sky_off, material_maps_off, specular_off,
-                    transparency_off, lightmaps_bicubic
+                    transparency_off, lightmaps_bicubic, reflections_off
   culling-100k      100 000 cubes on a grid, a quarter in view: frustum culling and LOD selection;
                     frames alternate with instancing on (the scenario's times) and off, one draw
                     call per cube (its `variants.instancing_off`)
@@ -202,6 +202,7 @@ enum Switch {
     SpecularOff,
     TransparencyOff,
     BicubicLightmaps,
+    ReflectionsOff,
 }
 
 impl Switch {
@@ -217,6 +218,7 @@ impl Switch {
             Switch::SpecularOff => "specular_off",
             Switch::TransparencyOff => "transparency_off",
             Switch::BicubicLightmaps => "lightmaps_bicubic",
+            Switch::ReflectionsOff => "reflections_off",
         }
     }
 
@@ -231,6 +233,7 @@ impl Switch {
             Switch::SpecularOff => "specular off",
             Switch::TransparencyOff => "transparency off",
             Switch::BicubicLightmaps => "bicubic lightmaps",
+            Switch::ReflectionsOff => "reflection probes off",
         }
     }
 
@@ -246,6 +249,7 @@ impl Switch {
             Switch::SpecularOff => r.specular = !on,
             Switch::TransparencyOff => r.transparency = !on,
             Switch::BicubicLightmaps => r.bicubic_lightmaps = on,
+            Switch::ReflectionsOff => r.reflections = !on,
         }
     }
 }

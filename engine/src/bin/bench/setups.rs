@@ -48,7 +48,7 @@ fn demo_flythrough(gpu: &Gpu, o: &Options, renderer: &mut Renderer) -> anyhow::R
         camera: Box::new(camera),
         lighting: Lighting::for_pack(&pack.manifest),
         // The look's features, each off (or, for anti-aliasing, on) in a variant of its own.
-        variants: vec![Switch::Msaa, Switch::Fxaa, Switch::SkyOff, Switch::MaterialMapsOff, Switch::SpecularOff, Switch::TransparencyOff, Switch::BicubicLightmaps],
+        variants: vec![Switch::Msaa, Switch::Fxaa, Switch::SkyOff, Switch::MaterialMapsOff, Switch::SpecularOff, Switch::TransparencyOff, Switch::BicubicLightmaps, Switch::ReflectionsOff],
         content,
     })
 }
