@@ -323,10 +323,13 @@ vec3 sun_reflected(vec3 n, vec3 v, vec3 kd, vec3 f0, float alpha, float nv, bool
 }
 
 // The prefiltered radiance toward r (the split sum's first term, shading.md §3) at p for
-// perceptual roughness `rough`: each probe whose box holds p, weighted by how deep inside it is
-// (1 past its blend distance from every face), takes that share of what the smaller probes
-// before it left; `fallback` takes the rest (§3.6). Its direction is box-projected: where the
-// ray from p leaves the box, seen from the capture point (§3.5; exact for mirrors).
+// perceptual roughness `rough`: each probe takes its weight's share of what the smaller probes
+// before it left, `fallback` the rest (§3.6). The weight is 1 in the probe's box, faces
+// included, and fades to 0 over its blend distance outside them: a room's box is the room, and
+// its floor and walls, which lie on the box's faces, are what it must light (fading inside the
+// faces, as §3.6 has it, left them to the fallback). The direction is box-projected: where the
+// ray from p (clamped into the box) leaves the box, seen from the capture point (§3.5; exact
+// for mirrors).
 vec3 probe_reflection(vec3 p, vec3 r, float rough, vec3 fallback) {
     float lod = rough * float(reflections.info.y - 1u);
     vec3 c = vec3(0.0);
@@ -334,17 +337,18 @@ vec3 probe_reflection(vec3 p, vec3 r, float rough, vec3 fallback) {
     for (uint i = 0u; i < reflections.info.x && rest > 0.0; ++i) {
         vec3 lo = reflections.probe[i].box_min.xyz;
         vec3 hi = reflections.probe[i].box_max.xyz;
-        vec3 d = min(p - lo, hi - p);
-        float inside = min(d.x, min(d.y, d.z));
-        if (inside <= 0.0) {
+        vec3 q = clamp(p, lo, hi);
+        float outside = distance(p, q);
+        // At least a centimetre of fade: a floor on the box's face is not outside by rounding.
+        float blend = max(reflections.probe[i].box_min.w, 0.01);
+        float w = max(1.0 - outside / blend, 0.0);
+        if (w <= 0.0) {
             continue;
         }
-        float blend = reflections.probe[i].box_min.w;
-        float w = blend > 0.0 ? min(inside / blend, 1.0) : 1.0;
         // The ray's exit: the nearest of the far slab planes (r's zero components give +inf).
-        vec3 far = max((hi - p) / r, (lo - p) / r);
+        vec3 far = max((hi - q) / r, (lo - q) / r);
         float t = min(far.x, min(far.y, far.z));
-        vec3 dir = p + t * r - reflections.probe[i].position.xyz;
+        vec3 dir = q + t * r - reflections.probe[i].position.xyz;
         c += rest * w * textureLod(reflection_cubes, vec4(dir, reflections.probe[i].box_max.w), lod).rgb;
         rest *= 1.0 - w;
     }
@@ -421,7 +425,9 @@ vec4 shade(vec4 a) {
         l += sun_reflected(n, v, kd, f0, alpha, nv, specular, sun_visibility(in_world, n, pl.w));
     }
     if (REFLECTIONS && specular) {
-        env = probe_reflection(in_world, r_dom, rough, env);
+        // The roughness as authored picks the level: a mirror (0) reads the capture itself,
+        // not the blur MIN_ROUGHNESS (a guard for the sun's peak) would mix in.
+        env = probe_reflection(in_world, r_dom, clamp(pbr.y * mr.g, 0.0, 1.0), env);
     }
     float wd = 1.0 - (0.04 * dfg.x + dfg.y);
     l += (kd * wd * b + env * (f0 * dfg.x + dfg.y)) * ao;

@@ -250,8 +250,8 @@ pub struct ReflectionProbe {
     /// Where the cube was captured (world space), inside the box.
     pub position: [f32; 3],
     /// The world-space axis-aligned box of the room it reflects: the parallax-correction box
-    /// and the probe's influence, whose weight fades to 0 over `blend_distance` metres inside
-    /// its faces.
+    /// and the probe's influence, whole inside the box (faces included: a room's floor and
+    /// walls lie on them) and fading to 0 over `blend_distance` metres outside it.
     pub box_min: [f32; 3],
     pub box_max: [f32; 3],
     pub blend_distance: f32,
