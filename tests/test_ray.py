@@ -4,6 +4,7 @@ stops: a head node and one extra worker node, one CPU each (two worker processes
 - the demo level cooked with `--executor ray` is byte-identical to `--executor local` (pack and
   EXR pages), and the scene reached every worker once, not once per task;
 - a worker process killed mid-bake has its tile retried; the pack is still identical;
+- reflection probes, one task each, give the local cook's bytes;
 - with every stage cached, a Ray cook submits no task;
 - Ctrl-C (an exception from the progress callback, and SIGINT to a `cook` process) cancels the
   submitted tasks and leaves the previous pack as it was;
@@ -165,6 +166,26 @@ def test_a_directional_bake_on_ray_is_byte_identical_to_local(cluster, room, tmp
     a, b = _files(local), _files(remote)
     assert sorted(a) == sorted(b) == ["room.lightmap0.exr", "room.pack"], (sorted(a), sorted(b))
     assert a == b, [k for k in a if a[k] != b.get(k)]
+
+
+def test_reflection_probes_on_ray_are_byte_identical_to_local(cluster, room, tmp_path):
+    # One task per reflection probe, its random streams keyed by its index as in the local bake.
+    from test_reflection_probes import PROBES
+
+    level = room.parent / "room_probes.toml"
+    level.write_text(room.read_text() + textwrap.dedent(PROBES))
+    settings = dataclasses.replace(ROOM_BAKE, reflection_face=16, reflection_samples=8)
+    local, remote = tmp_path / "local" / "room.pack", tmp_path / "ray" / "room.pack"
+    results = []
+    for out, executor in ((local, "local"), (remote, RayExecutor())):
+        out.parent.mkdir()
+        results.append(cook(level, out, CookSettings(bake=settings, lods=False, report=True, cache_dir=out.parent / "cache", executor=executor)))
+    assert [len(r.scene.reflection_cubes.cubes) for r in results] == [2, 2]
+    a, b = _files(local), _files(remote)
+    assert sorted(a) == sorted(b) and "room.pack" in a, (sorted(a), sorted(b))
+    assert a == b, [k for k in a if a[k] != b.get(k)]
+    report = results[1].report.read_text()
+    assert "2 reflection probe task(s)" in report and "Reflection probes: 2, cube faces 16 px with 3 levels" in report, report
 
 
 def test_scene_is_built_once_per_worker_not_per_task(cluster, room, tmp_path):
