@@ -96,12 +96,24 @@ pub struct SceneIr {
     pub sky: Option<Sky>,
     pub lightmap: Option<LightmapLayout>,
     pub probes: Option<ProbesIr>,
+    /// Baked reflection probes (`pack::ReflectionProbes`), their cubes' bytes inline.
+    pub reflection_probes: Option<ReflectionProbesIr>,
     pub skins: Vec<SkinIr>,
     pub clips: Vec<ClipIr>,
     /// Mesh nodes bound to a skin or carrying their own morph weights.
     pub bindings: Vec<pack::NodeBinding>,
     /// Problems the import fixed on its own (e.g. influences reduced to 4), one line each.
     pub warnings: Vec<String>,
+}
+
+/// Baked reflection probes: the pack's `ReflectionProbes` with each probe's cube (half RGBA,
+/// `pack::ReflectionProbe::data`'s layout) held here instead of a range of the pack.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReflectionProbesIr {
+    pub face_size: u32,
+    pub levels: u32,
+    /// Each probe with a placeholder `data` range, and its cube's bytes.
+    pub probes: Vec<(pack::ReflectionProbe, Vec<u8>)>,
 }
 
 /// Baked irradiance probes on a grid (see `pack::ProbeGrid`): per probe 27 SH floats (9 x rgb)

@@ -39,6 +39,10 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
         let (sh, sun_visibility) = (b.push_bytes(&sh), b.push_bytes(&vis));
         b.manifest.probes = Some(pack::ProbeGrid { origin: p.origin, spacing: p.spacing, counts: p.counts, sh, sun_visibility });
     }
+    if let Some(rp) = &scene.reflection_probes {
+        let probes = rp.probes.iter().map(|(p, bytes)| pack::ReflectionProbe { data: b.push_bytes(bytes), ..p.clone() }).collect();
+        b.manifest.reflection_probes = Some(pack::ReflectionProbes { face_size: rp.face_size, levels: rp.levels, probes });
+    }
     let pack = b.finish();
     // The pack crate's own consistency check, so a cooker bug is caught here and not at load.
     pack.manifest.validate(pack.data.len() as u64).map_err(|e| e.to_string())?;

@@ -2,7 +2,7 @@
 //! in which every array is replaced by an index into a list of raw arrays (numpy dtype string,
 //! shape, little-endian bytes). See `to_wire` / `from_wire` in ir.py for the other side.
 
-use crate::ir::{ChannelIr, ClipIr, LodIr, MeshIr, ProbesIr, SceneIr, SkinIr, TextureIr};
+use crate::ir::{ChannelIr, ClipIr, LodIr, MeshIr, ProbesIr, ReflectionProbesIr, SceneIr, SkinIr, TextureIr};
 use crate::mips::Usage;
 use pack::{LightmapLayout, Material, Node, Sky, Spawn, TextureFormat};
 use serde::{Deserialize, Serialize};
@@ -36,6 +36,8 @@ struct WireScene {
     lightmap: Option<LightmapLayout>,
     #[serde(default)]
     probes: Option<WireProbes>,
+    #[serde(default)]
+    reflection_probes: Option<WireReflectionProbes>,
     #[serde(default)]
     skins: Vec<WireSkin>,
     #[serde(default)]
@@ -84,6 +86,24 @@ struct WireChannel {
 struct WireClip {
     name: String,
     channels: Vec<WireChannel>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireReflectionProbes {
+    face_size: u32,
+    levels: u32,
+    probes: Vec<WireReflectionProbe>,
+}
+
+/// `pack::ReflectionProbe` with `data` the index of its float16 (T, 4) cube array.
+#[derive(Serialize, Deserialize)]
+struct WireReflectionProbe {
+    name: String,
+    position: [f32; 3],
+    box_min: [f32; 3],
+    box_max: [f32; 3],
+    blend_distance: f32,
+    data: usize,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -285,6 +305,22 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             Some(ProbesIr { origin: p.origin, spacing: p.spacing, counts: p.counts, sh, sun_visibility })
         }
     };
+    let reflection_probes = match &w.reflection_probes {
+        None => None,
+        Some(rp) => {
+            let mut probes = Vec::with_capacity(rp.probes.len());
+            for (i, p) in rp.probes.iter().enumerate() {
+                let what = format!("reflection probe {i} '{}'", p.name);
+                let a = r.get(p.data, &what)?;
+                if a.dtype != "<f2" || a.shape.len() != 2 || a.shape[1] != 4 || a.bytes.len() != a.shape[0] * 8 {
+                    return Err(format!("{what}: expected a <f2(n, 4) cube, got {}{:?}", a.dtype, a.shape));
+                }
+                let probe = pack::ReflectionProbe { name: p.name.clone(), position: p.position, box_min: p.box_min, box_max: p.box_max, blend_distance: p.blend_distance, data: Default::default() };
+                probes.push((probe, a.bytes.clone()));
+            }
+            Some(ReflectionProbesIr { face_size: rp.face_size, levels: rp.levels, probes })
+        }
+    };
     let mut skins = Vec::with_capacity(w.skins.len());
     for (i, s) in w.skins.iter().enumerate() {
         let inverse_bind = r.rows::<f32, 16>(s.inverse_bind, &format!("skin {i} '{}' inverse_bind", s.name))?;
@@ -328,6 +364,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         sky: w.sky,
         lightmap: w.lightmap,
         probes,
+        reflection_probes,
         skins,
         clips,
         bindings,
@@ -442,6 +479,22 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         sh: w.rows(&p.sh),
         sun_visibility: w.scalars(&p.sun_visibility),
     });
+    let reflection_probes = scene.reflection_probes.as_ref().map(|rp| WireReflectionProbes {
+        face_size: rp.face_size,
+        levels: rp.levels,
+        probes: rp
+            .probes
+            .iter()
+            .map(|(p, bytes)| WireReflectionProbe {
+                name: p.name.clone(),
+                position: p.position,
+                box_min: p.box_min,
+                box_max: p.box_max,
+                blend_distance: p.blend_distance,
+                data: w.push("<f2", vec![bytes.len() / 8, 4], bytes.clone()),
+            })
+            .collect(),
+    });
     let doc = WireScene {
         name: scene.name.clone(),
         source: scene.source.clone(),
@@ -472,6 +525,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         sky: scene.sky,
         lightmap: scene.lightmap.clone(),
         probes,
+        reflection_probes,
         skins: scene.skins.iter().map(|s| WireSkin { name: s.name.clone(), joints: s.joints.clone(), inverse_bind: w.rows(&s.inverse_bind) }).collect(),
         clips: scene
             .clips
