@@ -207,6 +207,7 @@ impl GpuScene {
                 double_sided: mat.double_sided,
                 blend: mat.alpha_mode == pack::AlphaMode::Blend,
                 slots: TextureSlots::of(mat),
+                glossy: GpuMaterial::reflects_probes(mat),
                 descriptor_set: set,
             });
         }

@@ -70,7 +70,7 @@ impl Settings {
             lightmapped,
             directional: lightmapped && self.directional_lightmaps,
             bicubic: lightmapped && self.bicubic_lightmaps,
-            reflections: self.reflection_probes,
+            reflections: self.reflection_probes && material.glossy,
             counting: self.count_fragments && phase != LitPhase::Blend,
             slots: material.slots.with_maps(self.material_maps),
         }

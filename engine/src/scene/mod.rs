@@ -55,7 +55,26 @@ pub struct GpuMaterial {
     pub blend: bool,
     /// The texture slots its fragments sample: the renderer draws it with pipelines made for them.
     pub slots: TextureSlots,
+    /// Reflection probes show on it (`GpuMaterial::reflects_probes`).
+    pub glossy: bool,
     pub descriptor_set: vk::DescriptorSet,
+}
+
+impl GpuMaterial {
+    /// Roughness from which a dielectric takes its specular environment from the baked diffuse
+    /// light (the lightmap's or probes' B toward the lobe's dominant direction) instead of the
+    /// reflection probes: at r 0.6 (α 0.36) the GGX lobe is within a factor of two as wide as
+    /// the cosine lobe B is convolved with, and a dielectric reflects 4 % of it head-on. On
+    /// lavapipe the probes' cube lookups cost a third of the frame (measured on the demo
+    /// flythrough, `bench` variant reflections_off), and rough stone is most of the screen.
+    pub const GLOSSY_ROUGHNESS: f32 = 0.6;
+
+    /// Whether a material reflects the probes: any metal (a metal's look is its environment),
+    /// or a dielectric whose roughness factor is below `GLOSSY_ROUGHNESS` (a roughness texture
+    /// multiplies the factor, so no texel is rougher than it).
+    pub fn reflects_probes(m: &pack::Material) -> bool {
+        m.metallic > 0.0 || m.roughness < Self::GLOSSY_ROUGHNESS
+    }
 }
 
 /// A set of a material's texture slots, as the shading shaders' SLOTS specialisation constant
