@@ -20,7 +20,7 @@
 //!
 //! Deterministic like the lightmaps: probe i's random streams are keyed by (seed, `ids[i]`, sample).
 
-use super::bvh::Ray;
+use super::bvh::{Hit, Ray};
 use super::integrator::{direct, par_bake, sample_path, BakeSettings, Cancelled};
 use super::lights::Light;
 use super::sampling::*;
@@ -143,10 +143,19 @@ fn incoming(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: 
     let Some(h) = scene.closest(&Ray { origin: x, dir: w, tmin: 0.0, tmax: f32::INFINITY }) else {
         return (scene.sky.unwrap_or([0.0; 3]), false);
     };
-    let Some(s) = scene.surface(x, w, &h) else {
-        return ([0.0; 3], true);
-    };
+    match leaving(scene, x, w, &h, bounces, rng, rays) {
+        Some(l) => (l, false),
+        None => ([0.0; 3], true),
+    }
+}
+
+/// The radiance leaving the surface that the ray from x along unit w reached at `h`, back
+/// toward x: its emission plus albedo x B there (B with `bounces - 1` further bounces, or
+/// direct light only at 0). None on a single-sided material's back face (opaque and black).
+/// Shared with the reflection probes' capture.
+pub(super) fn leaving(scene: &BakeScene, x: V3, w: V3, h: &Hit, bounces: u32, rng: &mut Rng, rays: &mut u64) -> Option<V3> {
+    let s = scene.surface(x, w, h)?;
     let b = if bounces == 0 { scale(direct(scene, s.p, s.n, rng, rays), FRAC_1_PI) } else { sample_path(scene, s.p, s.n, bounces - 1, rng, rays) };
     let shade = scene.surfaces.shade(s.prim, s.bary);
-    (add(shade.emission, mul(shade.albedo, b)), false)
+    Some(add(shade.emission, mul(shade.albedo, b)))
 }

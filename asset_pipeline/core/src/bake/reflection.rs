@@ -23,11 +23,12 @@
 //! Deterministic like the lightmaps: texel streams are keyed by (seed, probe id, texel, sample).
 
 use super::bvh::Ray;
-use super::integrator::{par_bake, sample_path, Cancelled};
+use super::integrator::{par_bake, Cancelled};
+use super::probes::leaving;
 use super::sampling::*;
 use super::scene::BakeScene;
 use rayon::prelude::*;
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::PI;
 use std::sync::atomic::AtomicBool;
 
 /// Keys the reflection probes' random streams apart from the texels' and irradiance probes'.
@@ -137,8 +138,8 @@ impl Cube {
     }
 }
 
-/// What the camera at `x` sees along unit `w` (module doc); `bounces` as the irradiance
-/// probes' `incoming`: B at the surface with `bounces − 1` further bounces (direct light at 0).
+/// What the camera at `x` sees along unit `w` (module doc); a surface as the irradiance probes
+/// see it (`probes::leaving`, with `bounces`).
 fn radiance(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: &mut u64) -> V3 {
     *rays += 1;
     let hit = scene.closest(&Ray { origin: x, dir: w, tmin: 0.0, tmax: f32::INFINITY });
@@ -152,15 +153,10 @@ fn radiance(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: 
             }
         }
     }
-    let Some(h) = hit else { return add(l, scene.sky.unwrap_or([0.0; 3])) };
-    let Some(s) = scene.surface(x, w, &h) else { return l };
-    let b = if bounces == 0 {
-        scale(super::integrator::direct(scene, s.p, s.n, rng, rays), FRAC_1_PI)
-    } else {
-        sample_path(scene, s.p, s.n, bounces - 1, rng, rays)
-    };
-    let shade = scene.surfaces.shade(s.prim, s.bary);
-    add(l, add(shade.emission, mul(shade.albedo, b)))
+    match hit {
+        None => add(l, scene.sky.unwrap_or([0.0; 3])),
+        Some(h) => add(l, leaving(scene, x, w, &h, bounces, rng, rays).unwrap_or([0.0; 3])),
+    }
 }
 
 /// The radiance cube seen from `x` (`size`² texels a face, `samples` jittered rays a texel,
