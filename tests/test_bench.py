@@ -75,6 +75,11 @@ def test_every_scenario_writes_complete_results(results):
         assert doc["floor_ratio"]["p50"] == pytest.approx(cpu["p50"] / doc["floor_ms"]["p50"])
         for p in ("skinning", "shadow", "prepass", "shading", "particles", "tonemap"):
             assert set(doc["pass_gpu_ms"][p]) >= {"p50", "p95", "p99", "max"}, (name, p)
+        # The frame's parts (update, prepare and record, fence wait) are parts of it: their
+        # means add up to the frame's (the same frames, timed by one clock).
+        parts = [doc[k] for k in ("cpu_update_ms", "cpu_record_ms", "fence_wait_ms")]
+        assert all(p["count"] == FRAMES and p["p50"] >= 0 for p in parts), (name, parts)
+        assert sum(p["mean"] for p in parts) == pytest.approx(cpu["mean"], rel=0.02, abs=0.05), (name, parts, cpu)
     assert not list(out.glob("*.tmp*")), "temporary files left behind"
 
 

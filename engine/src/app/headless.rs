@@ -22,6 +22,11 @@ pub const OFFSCREEN_FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
 pub struct FrameTiming {
     /// Wall time from the start of recording to the GPU finishing the frame.
     pub frame_ms: f64,
+    /// Of it, the CPU's part: preparing (culling, LOD, batches, uploads) and recording, up to
+    /// the submit.
+    pub record_ms: f64,
+    /// Of it, the wait for the frame's fence after the submit (on lavapipe: the GPU work).
+    pub wait_ms: f64,
     /// GPU time between the first and last command (timestamps), when the queue supports them.
     pub gpu_ms: Option<f64>,
 }
@@ -144,6 +149,9 @@ impl Offscreen {
             let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cb)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cbs)];
             d.queue_submit2(gpu.queue, &submit, self.fence)?;
+        }
+        let record_ms = start.elapsed().as_secs_f64() * 1e3;
+        unsafe {
             gpu.wait_fence(self.fence, "a frame")?;
             d.reset_fences(&[self.fence])?;
         }
@@ -156,7 +164,7 @@ impl Offscreen {
             }
             None => None,
         };
-        Ok(FrameTiming { frame_ms, gpu_ms })
+        Ok(FrameTiming { frame_ms, record_ms, wait_ms: frame_ms - record_ms, gpu_ms })
     }
 
     /// RGBA8 (sRGB-encoded) pixels of the last captured frame, top row first.

@@ -80,7 +80,7 @@ Scenarios:
                     depth pre-pass on (the scenario's times) and off (its `variants.prepass_off`)
 
 Each scenario writes DIR/<scenario>.json: CPU frame time (wall time of the whole frame, fence
-wait included) and per-pass GPU time (p50/p95/p99/max), the floor (clear and wait for an empty
+wait included) and its parts (update, prepare and record, fence wait), per-pass GPU time (p50/p95/p99/max), the floor (clear and wait for an empty
 frame of the same size) and each percentile as a multiple of it, and the last frame's counters;
 its `variants` hold the same for each variant.
 Exit status: 0 ok, 1 a scenario failed, 2 bad arguments, 3 Vulkan validation errors.";
@@ -268,6 +268,11 @@ fn select(r: &mut Renderer, variants: &[Switch], index: usize) {
 #[derive(Default)]
 struct Series {
     cpu_ms: Vec<f64>,
+    /// The CPU frame's parts: simulation and animation update, preparing and recording the
+    /// frame up to the submit, and the wait for its fence (`FrameTiming`).
+    update_ms: Vec<f64>,
+    record_ms: Vec<f64>,
+    wait_ms: Vec<f64>,
     gpu_ms: Vec<f64>,
     passes: Vec<FrameProfile>,
     counters: Map<String, Value>,
@@ -389,6 +394,10 @@ fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<
 fn series_json(s: &Series, floor: &Value, pass_names: &[&'static str]) -> Map<String, Value> {
     let doc = json!({
         "cpu_frame_ms": summary(&s.cpu_ms),
+        // Where the CPU frame goes: update + record + fence wait = the frame (to rounding).
+        "cpu_update_ms": summary(&s.update_ms),
+        "cpu_record_ms": summary(&s.record_ms),
+        "fence_wait_ms": summary(&s.wait_ms),
         "floor_ratio": ratios(&s.cpu_ms, floor),
         "gpu_frame_ms": summary(&s.gpu_ms),
         "pass_gpu_ms": pass_summary(&s.passes, pass_names),
@@ -413,6 +422,13 @@ fn print_summary(o: &Options, name: &str, doc: &Value, variants: &[Switch]) {
         f(&cpu["max"]),
         f(&ratio["p50"]),
         f(&ratio["p95"])
+    );
+    println!(
+        "{:<17} of it (p50): update {:.3} ms, prepare and record {:.3} ms, fence wait {:.3} ms",
+        "",
+        f(&doc["cpu_update_ms"]["p50"]),
+        f(&doc["cpu_record_ms"]["p50"]),
+        f(&doc["fence_wait_ms"]["p50"])
     );
     for switch in variants {
         let c = &doc["variants"][switch.key()]["cpu_frame_ms"];
@@ -447,6 +463,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         }
         let camera = (s.camera)(frame);
         level::prepare_frame(&s.world, renderer, &s.scene, &camera);
+        let update_ms = t.elapsed().as_secs_f64() * 1e3;
         let timing = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false)?;
         let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
         if frame < o.warmup {
@@ -454,6 +471,9 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         }
         let out = &mut series[variant];
         out.cpu_ms.push(cpu_ms);
+        out.update_ms.push(update_ms);
+        out.record_ms.push(timing.record_ms);
+        out.wait_ms.push(timing.wait_ms);
         out.gpu_ms.extend(timing.gpu_ms);
         out.passes.extend(renderer.profile(gpu, 0));
         out.counters = counters(gpu, renderer, &s.scene, &s.world);
