@@ -12,7 +12,7 @@ use cook_core::bake::scene::{BakeScene, Geometry};
 use engine::render::renderer::Lighting;
 use engine::scene::camera::Camera;
 use glam::{Mat4, Vec3, Vec4Swizzles};
-use pack::{Material, Pack, PackBuilder, ReflectionProbe, ReflectionProbes, Vertex};
+use pack::{Material, PackBuilder, ReflectionProbe, ReflectionProbes, Vertex};
 use std::sync::atomic::AtomicBool;
 
 mod common;
