@@ -64,29 +64,20 @@ pub enum LitPhase {
     Blend,
 }
 
-/// Specialisation constants of the mesh fragment shaders (mesh_shading.glsl).
+/// Specialisation constants of the mesh fragment shaders (mesh_shading.glsl): a lit key's
+/// (its phase aside, which picks the shader and fixed state) and SAMPLES, the target's samples
+/// per pixel; above 1 alpha-tested (MASK) fragments cover as many samples as their alpha says
+/// instead of discarding (alpha to coverage). Depth-only pipelines take `Variant::default()`.
 #[derive(Debug, Clone, Copy)]
 struct Variant {
-    /// COUNT_FRAGMENTS: each shaded fragment adds one to the frame's counter.
-    count_fragments: bool,
-    /// LIGHTMAPPED: lit by the instance's lightmap region, not by the probes and the sun.
-    lightmapped: bool,
-    /// SAMPLES: the target's samples per pixel; above 1 alpha-tested (MASK) fragments cover as
-    /// many samples as their alpha says instead of discarding (alpha to coverage).
+    key: LitKey,
     samples: u32,
-    /// SLOTS: the texture slots the shader samples.
-    slots: TextureSlots,
-    /// DIRECTIONAL: a LIGHTMAPPED variant reads directional lightmaps.
-    directional: bool,
-    /// BICUBIC: a LIGHTMAPPED variant reads its lightmap through a cubic B-spline.
-    bicubic: bool,
-    /// REFLECTIONS: the specular environment comes from the reflection probes.
-    reflections: bool,
 }
 
 impl Default for Variant {
     fn default() -> Self {
-        Variant { count_fragments: false, lightmapped: false, samples: 1, slots: TextureSlots::ALL, directional: false, bicubic: false, reflections: false }
+        let key = LitKey { phase: LitPhase::Plain, lightmapped: false, directional: false, bicubic: false, reflections: false, counting: false, slots: TextureSlots::ALL };
+        Variant { key, samples: 1 }
     }
 }
 
@@ -335,15 +326,7 @@ fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFl
 /// after a pre-pass the EQUAL test already keeps the samples the pre-pass covered.
 fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags, key: LitKey) -> Result<vk::Pipeline> {
     let depth_format = gpu.caps.depth_format;
-    let variant = Variant {
-        count_fragments: key.counting,
-        lightmapped: key.lightmapped,
-        slots: key.slots,
-        samples: 1,
-        directional: key.directional,
-        bicubic: key.bicubic,
-        reflections: key.reflections,
-    };
+    let variant = Variant { key, samples: 1 };
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
@@ -373,14 +356,15 @@ fn create_mesh_pipeline(
 ) -> Result<vk::Pipeline> {
     // Specialisation constants 0 to 6: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS,
     // DIRECTIONAL, BICUBIC and REFLECTIONS (mesh_shading.glsl).
+    let k = &variant.key;
     let values = [
-        vk::Bool32::from(variant.count_fragments),
-        vk::Bool32::from(variant.lightmapped),
+        vk::Bool32::from(k.counting),
+        vk::Bool32::from(k.lightmapped),
         variant.samples.max(1),
-        variant.slots.0,
-        vk::Bool32::from(variant.directional),
-        vk::Bool32::from(variant.bicubic),
-        vk::Bool32::from(variant.reflections),
+        k.slots.0,
+        vk::Bool32::from(k.directional),
+        vk::Bool32::from(k.bicubic),
+        vk::Bool32::from(k.reflections),
     ]
     .map(u32::to_le_bytes);
     let bytes = values.concat();
