@@ -86,6 +86,13 @@ class LodSettings:
     error_safety: float = 0.05  # stored error = sampled Hausdorff maximum x (1 + error_safety)
     sample_spacing: float = 2.0  # Hausdorff sample spacing, in LOD 0 mean edge lengths
     min_subdivisions: int = 2  # grid subdivisions per edge of a level's triangles (then a local search)
+    # Keep every open-border vertex where it is, at every level (fast-simplification's
+    # preserve_border: no collapse touches a border vertex, so no border edge changes). For the
+    # pieces of a mesh cut apart (level chunks): two neighbours' shared border then stays the same
+    # chain of edges in each of their chains, whatever LOD each is drawn at, so no crack opens
+    # between them. Seam flaps make their seam's vertices borders too, so with it flapped seams
+    # keep all their vertices (less reduction along smooth seams, never a moved seam).
+    lock_borders: bool = False
 
 
 # Benchmarks switch this off to time the stage without its error measurement (every level then
@@ -130,7 +137,7 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
         if any(stored(e) > limit for e in chain.errors()):
             break  # a level already measured is past the limit: the chain ends there
         target = max(level.triangle_count // 2, floor)
-        new = _simplify(level, target, s.aggressiveness, s.seam_angle_deg)
+        new = _simplify(level, target, s.aggressiveness, s.seam_angle_deg, s.lock_borders)
         if new is None or new.triangle_count > (1.0 - s.min_saving) * level.triangle_count:
             break
         level = new
@@ -198,7 +205,7 @@ def _walk_keys(lod0: ir.Lod) -> np.ndarray:
 # ---- one level --------------------------------------------------------------------------------
 
 
-def _simplify(level: _Level, target: int, agg: float, seam_angle_deg: float) -> _Level | None:
+def _simplify(level: _Level, target: int, agg: float, seam_angle_deg: float, lock_borders: bool = False) -> _Level | None:
     """Simplify a welded level to about `target` triangles, keeping its smooth seams as seams.
 
     Seams (edges where the faces on either side have different split vertices) on a smooth surface
@@ -249,7 +256,8 @@ def _simplify(level: _Level, target: int, agg: float, seam_angle_deg: float) -> 
         flaps = np.stack([flapped[:, 0], flapped[:, 1], n + np.arange(len(flapped))], 1)
         faces = np.concatenate([faces, flaps.astype(np.int32)])
     out_points, out_faces, collapses = fast_simplification.simplify(
-        np.ascontiguousarray(points), np.ascontiguousarray(faces), target_count=int(target), agg=float(agg), return_collapses=True
+        np.ascontiguousarray(points), np.ascontiguousarray(faces), target_count=int(target), agg=float(agg), return_collapses=True,
+        preserve_border=bool(lock_borders),
     )
     if len(collapses) == 0:
         collapses = np.zeros((0, 2), dtype=np.int32)
