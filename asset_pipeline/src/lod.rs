@@ -3,9 +3,9 @@
 //! the next level).
 
 use crate::measure::{rows, rows3, vec1};
-use cook_core::lod::{self, Attributes, ErrorSettings, Job, Lod0Data, Tracked};
+use cook_core::lod::{self, Attributes, ErrorSettings, Job, Lod0Data, Morphs, Tracked};
 use cook_core::measure;
-use numpy::{Element, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{Element, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -38,14 +38,41 @@ fn attribute<'py, T: Element + Copy, const W: usize>(attributes: &Bound<'py, PyD
     Ok(Some(rows))
 }
 
+/// Morph deltas as a float32 (targets, n, 3) array, one list per target, checked to have `n`
+/// rows per target (and `targets` targets, when given) and finite values.
+fn deltas(a: Option<PyReadonlyArray3<'_, f32>>, name: &str, n: usize, targets: Option<usize>) -> PyResult<Vec<Vec<[f32; 3]>>> {
+    let Some(a) = a else { return Ok(Vec::new()) };
+    let shape = a.shape();
+    if shape[1] != n || shape[2] != 3 || targets.is_some_and(|t| t != shape[0]) {
+        return Err(err(format!("{name} is {shape:?}, expected ({}, {n}, 3)", targets.map_or("targets".into(), |t| t.to_string()))));
+    }
+    let flat: Vec<f32> = a.as_array().iter().copied().collect();
+    if flat.iter().any(|x| !x.is_finite()) {
+        return Err(err(format!("{name}: a delta is not finite")));
+    }
+    Ok((0..shape[0]).map(|t| flat[3 * n * t..3 * n * (t + 1)].chunks_exact(3).map(|d| [d[0], d[1], d[2]]).collect()).collect())
+}
+
+/// Per-target lists as a float32 (targets, n, 3) array, or None when there are no targets.
+fn deltas_array<'py>(py: Python<'py>, d: Vec<Vec<[f32; 3]>>, n: usize) -> PyResult<Option<Bound<'py, PyArray3<f32>>>> {
+    if d.is_empty() {
+        return Ok(None);
+    }
+    let t = d.len();
+    Ok(Some(PyArray1::from_vec(py, d.into_iter().flatten().flatten().collect()).reshape([t, n, 3])?))
+}
+
 /// The attribute-carrying and error-measuring side of the LOD stage, on its own thread (see
 /// `cook_core::lod::Chain` and `asset_pipeline.lod`): levels go in with `submit` as they are
 /// simplified, `finish` returns them split, with attributes and errors.
 ///
 /// `LodChain(positions0 float32 (n0, 3), triangles0 uint32 (m0, 3), keys0 uint32 (m0,),
 /// attributes0 {name: array} as ir.ATTRIBUTES, near0 uint32 (w,), measure: bool,
-/// sample_spacing: float, min_subdiv: int)`. `near0`: a LOD 0 face around each vertex of LOD 0's
-/// welded level.
+/// sample_spacing: float, min_subdiv: int, morph_positions0=None, morph_normals0=None)`.
+/// `near0`: a LOD 0 face around each vertex of LOD 0's welded level. `morph_positions0` /
+/// `morph_normals0`: LOD 0's morph deltas, float32 (targets, n0, 3) (normals only with
+/// positions); each level gets its own, and its error is the largest of the rest pose and each
+/// target at weight 1.
 #[pyclass(name = "LodChain", module = "asset_pipeline._core")]
 pub struct PyLodChain {
     chain: Option<lod::Chain>,
@@ -56,6 +83,7 @@ pub struct PyLodChain {
 #[pymethods]
 impl PyLodChain {
     #[new]
+    #[pyo3(signature = (positions0, triangles0, keys0, attributes0, near0, measure, sample_spacing, min_subdiv, morph_positions0=None, morph_normals0=None))]
     #[allow(clippy::too_many_arguments)]
     fn new<'py>(
         positions0: PyReadonlyArray2<'py, f32>,
@@ -66,6 +94,8 @@ impl PyLodChain {
         measure: bool,
         sample_spacing: f64,
         min_subdiv: u32,
+        morph_positions0: Option<PyReadonlyArray3<'py, f32>>,
+        morph_normals0: Option<PyReadonlyArray3<'py, f32>>,
     ) -> PyResult<Self> {
         let (positions, triangles) = (rows3(&positions0, "positions0")?.into_owned(), rows3(&triangles0, "triangles0")?.into_owned());
         measure::check_mesh(&positions, &triangles).map_err(|e| err(format!("LOD 0: {e}")))?;
@@ -90,9 +120,14 @@ impl PyLodChain {
             joints: attribute(attributes0, "joints", n)?,
             weights: attribute(attributes0, "weights", n)?,
         };
+        let morph_positions = deltas(morph_positions0, "morph_positions0", n, None)?;
+        if morph_positions.is_empty() && morph_normals0.is_some() {
+            return Err(err("morph_normals0 without morph_positions0".into()));
+        }
+        let morphs = Morphs { normals: deltas(morph_normals0, "morph_normals0", n, Some(morph_positions.len()))?, positions: morph_positions };
         let settings = measure.then_some(ErrorSettings { sample_spacing, min_subdiv, max_samples: 50_000_000 });
         let vertices = near0.len();
-        let lod0 = Lod0Data { positions, triangles, keys, attributes };
+        let lod0 = Lod0Data { positions, triangles, keys, attributes, morphs };
         Ok(PyLodChain { chain: Some(lod::Chain::start(lod0, near0, settings)), lod0_faces: m0, vertices })
     }
 
@@ -135,14 +170,17 @@ impl PyLodChain {
     }
 
     /// Wait for every level: a list of `(attributes {name: array} incl. position, triangles
-    /// uint32 (m, 3), error)`.
-    fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Vec<(Bound<'py, PyDict>, Bound<'py, PyArray2<u32>>, f64)>> {
+    /// uint32 (m, 3), error, morph_positions, morph_normals)`, the morph deltas float32
+    /// (targets, n, 3) like LOD 0's, or None where LOD 0 has none.
+    #[allow(clippy::type_complexity)]
+    fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Vec<(Bound<'py, PyDict>, Bound<'py, PyArray2<u32>>, f64, Option<Bound<'py, PyArray3<f32>>>, Option<Bound<'py, PyArray3<f32>>>)>> {
         let chain = self.chain.take().ok_or_else(|| err("the chain is finished".into()))?;
         let levels = py.detach(|| chain.finish()).map_err(err)?;
         levels
             .into_iter()
             .map(|c| {
                 let d = PyDict::new(py);
+                let n = c.positions.len();
                 d.set_item("position", array2(py, c.positions)?)?;
                 let a = c.attributes;
                 set(&d, "normal", a.normal)?;
@@ -152,7 +190,8 @@ impl PyLodChain {
                 set(&d, "color", a.color)?;
                 set(&d, "joints", a.joints)?;
                 set(&d, "weights", a.weights)?;
-                Ok((d, array2(py, c.triangles)?, c.error))
+                let (mp, mn) = (deltas_array(py, c.morphs.positions, n)?, deltas_array(py, c.morphs.normals, n)?);
+                Ok((d, array2(py, c.triangles)?, c.error, mp, mn))
             })
             .collect()
     }

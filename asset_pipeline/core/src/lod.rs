@@ -9,7 +9,8 @@
 //! corners that reach the same point of LOD 0 into one output vertex; a vertex with no seam among
 //! its merged LOD 0 vertices is walked once. The attribute functions then interpolate LOD 0's
 //! values at those points: plain barycentric blends, renormalised normals, re-orthonormalised
-//! tangents, rounded colours, per-joint blended skin weights.
+//! tangents, rounded colours, per-joint blended skin weights, and morph target deltas (blended
+//! per target; see [`Morphs::carry`]).
 //!
 //! Everything is deterministic (parallel work writes fixed slots; merging runs in corner order).
 
@@ -362,6 +363,23 @@ impl Sources<'_> {
         })
     }
 
+    /// A morph target's normal deltas `deltas` at the points, for output normals made by
+    /// [`Sources::normals`] from LOD 0's `normals`: the barycentric blend divided by the length of
+    /// the blended normal (the factor the output normal was divided by), so the output's
+    /// `n + w dn` is LOD 0's blended `n + w dn` scaled by one positive factor at every weight `w`
+    /// (the skinning pass normalises it: the same direction). Where the normal blend cancels out
+    /// (the dominant corner's normal was taken), the dominant corner's delta.
+    pub fn normal_deltas(&self, deltas: &[[f32; 3]], normals: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        self.map(|i| {
+            let l = norm(self.blend(normals, i));
+            if l > 1e-12 {
+                self.blend(deltas, i).map(|x| (x / l) as f32)
+            } else {
+                deltas[self.dominant(i)]
+            }
+        })
+    }
+
     /// Blended tangents, Gram-Schmidt against the output `normals`; handedness (w) from the
     /// dominant corner. Where the blend is parallel to the normal, any perpendicular unit vector.
     pub fn tangents(&self, tangents: &[[f32; 4]], normals: &[[f32; 3]]) -> Vec<[f32; 4]> {
@@ -498,13 +516,55 @@ impl Attributes {
     }
 }
 
+/// A mesh's morph target deltas (as the IR's `morph_positions` / `morph_normals`): LOD 0's, or
+/// a level's. Tangents have no deltas (the IR keeps none).
+#[derive(Default)]
+pub struct Morphs {
+    /// Position deltas, [target][vertex]; empty when the mesh has no morph targets.
+    pub positions: Vec<Vec<[f32; 3]>>,
+    /// Normal deltas, [target][vertex]; empty, or one list per target.
+    pub normals: Vec<Vec<[f32; 3]>>,
+}
+
+impl Morphs {
+    /// Row counts of every target's deltas.
+    pub fn lens(&self) -> impl Iterator<Item = usize> + '_ {
+        self.positions.iter().chain(&self.normals).map(Vec::len)
+    }
+
+    /// These deltas at the points `src` names, per target: position deltas blended
+    /// (barycentric, like UVs: a carried vertex moves by LOD 0's displacement at the point its
+    /// attributes come from), normal deltas blended and scaled with the normal (see
+    /// [`Sources::normal_deltas`]; plain blends when LOD 0 has no normals).
+    pub fn carry(&self, src: &Sources, normals0: Option<&[[f32; 3]]>) -> Morphs {
+        Morphs {
+            positions: self.positions.iter().map(|d| src.interpolate(d)).collect(),
+            normals: self
+                .normals
+                .iter()
+                .map(|d| match normals0 {
+                    Some(n) => src.normal_deltas(d, n),
+                    None => src.interpolate(d),
+                })
+                .collect(),
+        }
+    }
+
+    /// `positions` with target `t` at weight 1.
+    pub fn morphed(&self, positions: &[[f32; 3]], t: usize) -> Vec<[f32; 3]> {
+        positions.iter().zip(&self.positions[t]).map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]).collect()
+    }
+}
+
 /// LOD 0 as the chain needs it: split mesh, a key per face (walks cross only between faces of one
-/// key: material and lightmap page), attributes. Indices must be valid (see [`Chain::start`]).
+/// key: material and lightmap page), attributes and morph deltas. Indices must be valid (see
+/// [`Chain::start`]).
 pub struct Lod0Data {
     pub positions: Vec<[f32; 3]>,
     pub triangles: Vec<[u32; 3]>,
     pub keys: Vec<u32>,
     pub attributes: Attributes,
+    pub morphs: Morphs,
 }
 
 /// One simplified level, welded (see [`Level`]); `survivor[i]` is the vertex of the level before
@@ -517,12 +577,14 @@ pub struct Job {
     pub survivor: Vec<u32>,
 }
 
-/// A finished level: its split mesh and attributes, and its measured error (the sampled
-/// symmetric Hausdorff distance to LOD 0, in LOD 0's units; 0 when not measured).
+/// A finished level: its split mesh, attributes and morph deltas, and its measured error (the
+/// sampled symmetric Hausdorff distance to LOD 0, in LOD 0's units, the largest of the rest pose
+/// and each morph target at weight 1; 0 when not measured).
 pub struct Carried {
     pub positions: Vec<[f32; 3]>,
     pub triangles: Vec<[u32; 3]>,
     pub attributes: Attributes,
+    pub morphs: Morphs,
     pub error: f64,
 }
 
@@ -563,10 +625,21 @@ impl Chain {
                 (Some(pool), false) => pool.install(f),
                 _ => f(),
             };
-            let (mut adjacency, mut bvh0, mut spacing) = (Vec::new(), None, 0.0);
+            // LOD 0 with each morph target at weight 1 (positions and BVH, None where it cannot
+            // be built), where levels are measured with their own deltas, besides the rest pose.
+            let (mut adjacency, mut bvh0, mut morphed0, mut spacing) = (Vec::new(), None, Vec::<(Vec<[f32; 3]>, Option<Bvh>)>::new(), 0.0);
             in_pool(&mut || {
                 adjacency = measure::face_adjacency(&lod0.triangles, &lod0.keys);
                 bvh0 = measure.and_then(|_| Bvh::build(&lod0.positions, &lod0.triangles).ok());
+                if measure.is_some() {
+                    morphed0 = (0..lod0.morphs.positions.len())
+                        .map(|t| {
+                            let p = lod0.morphs.morphed(&lod0.positions, t);
+                            let bvh = Bvh::build(&p, &lod0.triangles).ok();
+                            (p, bvh)
+                        })
+                        .collect();
+                }
                 spacing = measure.map_or(0.0, |m| m.sample_spacing * mean_edge(&lod0.positions, &lod0.triangles));
             });
             let view = Lod0 { positions: &lod0.positions, triangles: &lod0.triangles, adjacency: &adjacency };
@@ -576,14 +649,23 @@ impl Chain {
                     let start: Vec<u32> = job.survivor.iter().map(|&s| near[s as usize]).collect();
                     let level = Level { points: &job.points, faces: &job.faces, face_origin: &job.face_origin, seamy: &job.seamy, near: &start };
                     let sp = split(&view, &level);
-                    let attributes = lod0.attributes.carry(&Sources { triangles: &lod0.triangles, source: &sp.source, bary: &sp.bary });
+                    let src = Sources { triangles: &lod0.triangles, source: &sp.source, bary: &sp.bary };
+                    let attributes = lod0.attributes.carry(&src);
+                    let morphs = lod0.morphs.carry(&src, lod0.attributes.normal.as_deref());
                     let error = match (measure, &bvh0) {
-                        (Some(m), Some(bvh0)) => level_error(&lod0, bvh0, &sp, spacing, m),
+                        (Some(m), Some(bvh0)) => {
+                            // At rest, then with each morph target at weight 1 (LOD 0 and the
+                            // level each moved by its own deltas): the largest bounds them all.
+                            let rest = level_error(&lod0.positions, &lod0.triangles, bvh0, &sp.positions, &sp, spacing, m);
+                            morphed0.iter().enumerate().fold(rest, |e, (t, (p0, b0))| {
+                                e.max(b0.as_ref().map_or(f64::INFINITY, |b0| level_error(p0, &lod0.triangles, b0, &morphs.morphed(&sp.positions, t), &sp, spacing, m)))
+                            })
+                        }
                         _ => 0.0,
                     };
                     report.lock().unwrap().push(error);
                     near = sp.near;
-                    out.push(Carried { positions: sp.positions, triangles: sp.triangles, attributes, error });
+                    out.push(Carried { positions: sp.positions, triangles: sp.triangles, attributes, morphs, error });
                 });
             }
             out
@@ -611,13 +693,14 @@ impl Chain {
 }
 
 /// Sampled symmetric Hausdorff distance between a split level and LOD 0 (see
-/// `Bvh::directed_hausdorff`): LOD 0's small triangles sampled at least at corners and edge
-/// midpoints against the level, the level's big ones at `min_subdiv` cells per edge against
-/// LOD 0 (its vertices' LOD 0 faces as hints).
-pub fn level_error(lod0: &Lod0Data, bvh0: &Bvh, level: &Split, spacing: f64, m: ErrorSettings) -> f64 {
-    let Ok(bvh) = Bvh::build(&level.positions, &level.triangles) else { return f64::INFINITY };
-    let a = bvh.directed_hausdorff(&lod0.positions, &lod0.triangles, spacing, 2, m.max_samples, None).map_or(f64::INFINITY, |d| d.max);
-    let b = bvh0.directed_hausdorff(&level.positions, &level.triangles, spacing, m.min_subdiv, m.max_samples, Some(&level.source)).map_or(f64::INFINITY, |d| d.max);
+/// `Bvh::directed_hausdorff`), both in one pose: LOD 0 at `positions0` (`bvh0` built over them),
+/// the level at `positions` (its own at rest, or moved by its morph deltas). LOD 0's small
+/// triangles are sampled at least at corners and edge midpoints against the level, the level's
+/// big ones at `min_subdiv` cells per edge against LOD 0 (its vertices' LOD 0 faces as hints).
+pub fn level_error(positions0: &[[f32; 3]], triangles0: &[[u32; 3]], bvh0: &Bvh, positions: &[[f32; 3]], level: &Split, spacing: f64, m: ErrorSettings) -> f64 {
+    let Ok(bvh) = Bvh::build(positions, &level.triangles) else { return f64::INFINITY };
+    let a = bvh.directed_hausdorff(positions0, triangles0, spacing, 2, m.max_samples, None).map_or(f64::INFINITY, |d| d.max);
+    let b = bvh0.directed_hausdorff(positions, &level.triangles, spacing, m.min_subdiv, m.max_samples, Some(&level.source)).map_or(f64::INFINITY, |d| d.max);
     a.max(b)
 }
 
@@ -739,5 +822,14 @@ mod tests {
         assert!((sw[0].iter().sum::<f32>() - 1.0).abs() < 1e-6 && sw[0][3] == 0.0);
         assert!((sw[0][0] - 0.625).abs() < 1e-6 && (sw[0][1] - 0.25).abs() < 1e-6);
         assert_eq!((sj[1], sw[1]), ([7, 2, 0, 0], [0.5, 0.5, 0.0, 0.0]));
+        // Morph deltas: positions blended; normal deltas blended and scaled like the normal, so
+        // n + dn stays parallel to LOD 0's blended n + dn (here (0, 0, 1) blends to length 0.5).
+        let morphs = Morphs { positions: vec![vec![[4.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 8.0]]], normals: vec![vec![[2.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]] };
+        let normals0 = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+        let out = morphs.carry(&src, Some(&normals0));
+        assert_eq!(out.positions, vec![vec![[2.0, 2.0, 2.0], [0.0, 8.0, 0.0]]]);
+        assert_eq!(out.normals, vec![vec![[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]]], "(1, 0, 0) / 0.5");
+        assert_eq!(src.normals(&normals0)[0], [0.0, 0.0, 1.0]);
+        assert_eq!(out.morphed(&[[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]], 0), vec![[3.0, 3.0, 3.0], [0.0, 8.0, 0.0]]);
     }
 }

@@ -57,7 +57,7 @@ class Lod:
     lightmap_blocks: np.ndarray | None = None
     error: float = 0.0  # geometric error to LOD 0 in metres, object space (0 for LOD 0)
     # Morph target deltas added to position/normal before skinning: (targets, n, 3) float32.
-    # Only LOD 0 carries them (the lod stage leaves meshes with morph targets at one level).
+    # Every LOD has its own (the lod stage carries LOD 0's to each level's vertices).
     morph_positions: np.ndarray | None = None
     morph_normals: np.ndarray | None = None
 

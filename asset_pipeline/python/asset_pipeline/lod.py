@@ -38,14 +38,23 @@ How a level is made
    walked once, not per corner, from where its survivor's walk ended a level before.) Then
    normals are renormalised, tangents re-orthonormalised (handedness from the nearest corner),
    colours rounded, and skin weights blended per joint over the three corners, the four largest
-   kept and renormalised to sum 1 (joints stay indices LOD 0 used). Faces keep their material and
-   lightmap page. (Rust: ``cook_core::lod``.)
+   kept and renormalised to sum 1 (joints stay indices LOD 0 used). Morph targets come along the
+   same way, per target: a vertex's position deltas are LOD 0's blended at its point (so at any
+   weight it moves as LOD 0's surface moves there), its normal deltas blended and divided by the
+   length of the blended normal, the factor its normal was renormalised by (so ``n + w dn``
+   points where LOD 0's blended ``n + w dn`` does, at every weight ``w``). Faces keep their
+   material and lightmap page. (Rust: ``cook_core::lod``.)
 5. **Measure the error**: the symmetric Hausdorff distance between the level and LOD 0, estimated
    by sampling both ways in Rust (``cook_core::lod::level_error``): each triangle on a barycentric
    grid (corners included; LOD 0's with at least 2 and the level's with at least
    ``min_subdivisions`` subdivisions per edge, and no coarser than ``sample_spacing`` LOD 0 mean
    edge lengths), each sample's exact distance to the other mesh, then a local search around the
    largest samples (a grid misses sharp maxima, such as where a simplified edge cuts a crease).
+   A mesh with morph targets is measured in several poses, at rest and with each target at
+   weight 1 (the level's positions plus its carried deltas against LOD 0's plus its own), and the
+   largest counts: the simplifier only sees the rest pose, and a target that swells a region the
+   rest pose let it flatten shows its error there. (Weights in between and mixes of targets are not
+   measured; the displacement is linear in the weights, so they stay near these.)
    Stored error = that maximum x (1 + ``error_safety``) + 1e-6 of the bounding-box diagonal
    (float32 resolution), in metres, object space, and never below the previous level's.
 
@@ -130,6 +139,8 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
     chain = LodChain(
         np.ascontiguousarray(pos0), np.ascontiguousarray(lod0.triangles), _walk_keys(lod0), lod0.attributes,
         ctx.near0, MEASURE_ERRORS, float(s.sample_spacing), int(s.min_subdivisions),
+        None if lod0.morph_positions is None else np.ascontiguousarray(lod0.morph_positions),
+        None if lod0.morph_normals is None else np.ascontiguousarray(lod0.morph_normals),
     )
     origins = []  # each level's face origins (its faces' materials and pages)
     level = ctx.level0
@@ -146,7 +157,7 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
 
     lods: list[ir.Lod] = []
     error = 0.0
-    for (attributes, triangles, measured), origin in zip(chain.finish(), origins):
+    for (attributes, triangles, measured, morph_positions, morph_normals), origin in zip(chain.finish(), origins):
         error = max(error, stored(measured))
         if error > limit:
             break
@@ -156,6 +167,8 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
             materials=lod0.materials[origin].astype(np.uint32),
             lightmap_blocks=None if lod0.lightmap_blocks is None else lod0.lightmap_blocks[origin].astype(np.uint32),
             error=error,
+            morph_positions=morph_positions,
+            morph_normals=morph_normals,
         ))
     return lods
 

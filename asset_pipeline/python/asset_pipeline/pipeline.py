@@ -469,17 +469,11 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
         todo = []
         for i, m in enumerate(scene.meshes):
             base = m.base
-            if base.morph_positions is not None:
-                # Morph deltas are per vertex and simplification merges vertices; until the lod
-                # stage carries them, a morphing mesh keeps its full detail only.
-                chains[i] = []
-                rec.items -= 1  # no work, so neither built nor cached
-                bar.advance()
-                continue
             key = Hasher("lod").settings(doc)
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])
-            key = key.array(base.triangles).array(base.materials).array(base.lightmap_blocks).key()
+            key = key.array(base.triangles).array(base.materials).array(base.lightmap_blocks)
+            key = key.array(base.morph_positions).array(base.morph_normals).key()
             keys[i] = key
             hit = cache.load("lod", key)
             if hit is not None:
