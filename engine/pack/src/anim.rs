@@ -87,8 +87,9 @@ pub struct DeformMesh {
 pub struct DeformLod {
     /// u16 [vertex][4] joint indices and f32 [vertex][4] weights summing to 1 (cooker-normalised).
     pub skin: Option<SkinWeights>,
-    /// f32 [target][vertex][3] position deltas, and normal deltas when any target has them.
-    /// Only LOD 0 carries morph targets.
+    /// f32 [target][vertex][3] position deltas, and normal deltas when any target has them,
+    /// over this LOD's own vertices (the cooker carries LOD 0's deltas to each level). Every LOD
+    /// of a mesh has them or none does, and normal deltas likewise.
     pub morph: Option<MorphTargets>,
 }
 
@@ -147,9 +148,18 @@ impl Animation {
                 return bad(format!("mesh {} '{}': deformation data for {} LODs, the mesh has {}", d.mesh, mesh.name, d.lods.len(), mesh.lods.len()));
             }
             let targets = d.morph_weights.len() as u64;
+            // What a LOD's morph deltas hold: none, positions, or positions and normals.
+            let kind = |dl: &DeformLod| match dl.morph {
+                None => "none",
+                Some(MorphTargets { normals: None, .. }) => "positions",
+                Some(_) => "positions and normals",
+            };
             for (l, (dl, lod)) in d.lods.iter().zip(&mesh.lods).enumerate() {
                 let what = format!("mesh {} '{}' LOD {l}", d.mesh, mesh.name);
                 let n = lod.vertex_count as u64;
+                if kind(dl) != kind(&d.lods[0]) {
+                    return bad(format!("{what}: morph deltas of {}, LOD 0's of {} (every LOD morphs alike)", kind(dl), kind(&d.lods[0])));
+                }
                 if let Some(s) = dl.skin {
                     in_data(&format!("{what} joints"), s.joints, n * 8)?;
                     in_data(&format!("{what} weights"), s.weights, n * 16)?;

@@ -389,6 +389,58 @@ fn animation_section_round_trips_and_bad_references_are_rejected() {
     bad(&|p| p.manifest.animation.meshes[0].lods[0].skin.as_mut().unwrap().weights.len = 48, "mesh 0 'quad' LOD 0 weights");
 }
 
+/// `animated()` whose LOD 1 is a triangle of its own 3 vertices with its own skin and morph
+/// deltas (positions and normals), as the cooker's LOD stage writes a morphing mesh's levels;
+/// LOD 0 keeps 4 vertices with normal deltas too.
+fn animated_lods() -> Pack {
+    let mut p = animated();
+    let f32s = |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
+    let verts: Vec<Vertex> = (0..3).map(|i| Vertex { position: [i as f32, 0.5, 0.0], normal: [0.0, 0.0, 1.0], ..Default::default() }).collect();
+    let vertices = push(&mut p, Vertex::slice_as_bytes(&verts));
+    let indices = push(&mut p, &[0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
+    let lod1 = &mut p.manifest.meshes[0].lods[1];
+    (lod1.vertices, lod1.vertex_count, lod1.indices, lod1.index_count) = (vertices, 3, indices, 3);
+    let joints = push(&mut p, &[0u8; 3 * 8]);
+    let weights = push(&mut p, &f32s(&[1.0, 0.0, 0.0, 0.0].repeat(3)));
+    let positions = push(&mut p, &f32s(&[0.0, 0.1, 0.0, 0.0, 0.2, 0.0, 0.0, 0.3, 0.0]));
+    let normals = push(&mut p, &f32s(&[0.5; 9]));
+    p.manifest.animation.meshes[0].lods[1] = DeformLod { skin: Some(SkinWeights { joints, weights }), morph: Some(MorphTargets { positions, normals: Some(normals) }) };
+    let normals0 = push(&mut p, &f32s(&[0.25; 12]));
+    p.manifest.animation.meshes[0].lods[0].morph.as_mut().unwrap().normals = Some(normals0);
+    p
+}
+
+#[test]
+fn each_lod_carries_its_own_morph_deltas_checked_against_its_own_vertices() {
+    let p = animated_lods();
+    let q = Pack::from_bytes(&p.to_bytes().unwrap()).unwrap();
+    assert_eq!(p, q);
+    let d = q.manifest.animation.deform(0).unwrap();
+    let read = |r: BufferRange| -> Vec<f32> { q.bytes(r).chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect() };
+    let (m0, m1) = (d.lods[0].morph.unwrap(), d.lods[1].morph.unwrap());
+    assert_eq!(read(m1.positions), vec![0.0, 0.1, 0.0, 0.0, 0.2, 0.0, 0.0, 0.3, 0.0], "LOD 1's own deltas, one per its 3 vertices");
+    assert_eq!(read(m1.normals.unwrap()), vec![0.5; 9]);
+    assert_eq!((read(m0.positions).len(), read(m0.normals.unwrap()).len()), (12, 12), "LOD 0's: 4 vertices");
+
+    let bad = |edit: &dyn Fn(&mut Pack), want: &str| {
+        let mut p = animated_lods();
+        edit(&mut p);
+        let e = p.to_bytes().unwrap_err().to_string();
+        assert!(e.contains(want) && !e.contains('\n'), "expected one line with '{want}': {e}");
+    };
+    // LOD 1's arrays are measured against LOD 1's 3 vertices, not LOD 0's 4.
+    let lod1 = |p: &mut Pack| p.manifest.animation.meshes[0].lods[1].morph.unwrap();
+    let four = |p: &mut Pack| push(p, &[0u8; 48]);
+    bad(&|p| { let r = four(p); p.manifest.animation.meshes[0].lods[1].morph.as_mut().unwrap().positions = r; }, "mesh 0 'quad' LOD 1 morph positions: 48 bytes stored but 36 expected");
+    bad(&|p| { let r = four(p); p.manifest.animation.meshes[0].lods[1].morph.as_mut().unwrap().normals = Some(r); }, "mesh 0 'quad' LOD 1 morph normals: 48 bytes stored but 36 expected");
+    bad(&|p| { let r = lod1(p).positions; p.manifest.animation.meshes[0].lods[0].morph.as_mut().unwrap().positions = r; }, "mesh 0 'quad' LOD 0 morph positions: 36 bytes stored but 48 expected");
+    bad(&|p| p.manifest.animation.meshes[0].lods[1].skin.as_mut().unwrap().weights.len = 64, "mesh 0 'quad' LOD 1 weights: 64 bytes stored but 48 expected");
+    // Every LOD morphs alike: a level without the deltas (or without normal deltas) would drop
+    // the morph at a distance.
+    bad(&|p| p.manifest.animation.meshes[0].lods[1].morph = None, "mesh 0 'quad' LOD 1: morph deltas of none, LOD 0's of positions and normals (every LOD morphs alike)");
+    bad(&|p| p.manifest.animation.meshes[0].lods[1].morph.as_mut().unwrap().normals = None, "mesh 0 'quad' LOD 1: morph deltas of positions, LOD 0's of positions and normals");
+}
+
 #[test]
 fn texture_sizes_that_overflow_are_malformed_not_a_panic() {
     // Seen beside the fuzz targets: mip level 32 shifted the u32 width by 32 bits (a panic with
