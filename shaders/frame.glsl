@@ -10,7 +10,7 @@ layout(set = 0, binding = 0) uniform Frame {
     vec4 ambient;      // rgb linear ambient (stand-in lighting only)
     vec4 exposure;     // x: exposure (the tone-map pass's); y: 1 = physical lighting (lightmaps, probes, sun in lux), tone-mapped
     vec4 shadow;       // x: 1 when the shadow map holds this frame's casters; y: one map texel in metres; z: 1 / map size
-    vec4 features;     // x: 1 = specular (the material-maps switch picks pipelines: SLOTS, mesh_shading.glsl)
+    vec4 features;     // x: 1 = specular (the material-maps switch picks pipelines: SLOTS, mesh_shading.glsl); y: the material textures' mip bias (log2 of the render scale)
 } frame;
 
 // Counted fragments (the renderer's fragment counter; written only by pipelines made with the

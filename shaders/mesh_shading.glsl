@@ -95,6 +95,11 @@ layout(constant_id = 5) const bool BICUBIC = false;
 // specular environment is theirs, box-projected and blended, over the fallback.
 layout(constant_id = 6) const bool REFLECTIONS = false;
 
+// The material textures' mip bias: log2 of the render scale (0 at the output's size; -1 at half
+// of it), so a frame drawn small and upscaled keeps the texture detail of the output's size, as
+// upscalers ask (FSR 1: the bias makes the low-resolution frame sharper, EASU then resamples it).
+#define MIP_BIAS frame.features.y
+
 void count_fragment() {
     if (COUNT_FRAGMENTS) {
         atomicAdd(counters.fragments, 1u);
@@ -102,7 +107,7 @@ void count_fragment() {
 }
 
 vec4 albedo() {
-    vec4 t = HAS_BASE_COLOR && materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? texture(base_color_tex, in_base_color_uv) : vec4(1.0);
+    vec4 t = HAS_BASE_COLOR && materials[uint(draw.material.y)].base_color_uv[1].w > 0.5 ? texture(base_color_tex, in_base_color_uv, MIP_BIAS) : vec4(1.0);
     return t * draw.base_color * in_color;
 }
 
@@ -274,7 +279,7 @@ vec3 shading_normal(float scale) {
     vec3 t = in_tangent.xyz - n * dot(n, in_tangent.xyz);
     float tl = dot(t, t);
     if (HAS_NORMAL && scale != 0.0 && tl > 1e-12) {
-        vec3 ts = texture(normal_tex, in_normal_uv).xyz * 2.0 - 1.0;
+        vec3 ts = texture(normal_tex, in_normal_uv, MIP_BIAS).xyz * 2.0 - 1.0;
         ts.xy *= scale;
         t *= inversesqrt(tl);
         vec3 b = cross(n, t) * (in_tangent.w < 0.0 ? -1.0 : 1.0);
@@ -377,7 +382,7 @@ vec4 shade(vec4 a) {
         float ndotl = max(dot(n, frame.sun_dir.xyz), 0.0);
         return vec4(a.rgb * (frame.ambient.rgb + frame.sun_color.rgb * ndotl), 1.0);
     }
-    vec4 mr = HAS_METALLIC_ROUGHNESS && materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv) : vec4(1.0);
+    vec4 mr = HAS_METALLIC_ROUGHNESS && materials[m].metallic_roughness_uv[1].w > 0.5 ? texture(metallic_roughness_tex, in_metallic_roughness_uv, MIP_BIAS) : vec4(1.0);
     float metallic = clamp(pbr.x * mr.b, 0.0, 1.0);
     float rough = clamp(pbr.y * mr.g, MIN_ROUGHNESS, 1.0);
     float alpha = rough * rough;
@@ -386,7 +391,7 @@ vec4 shade(vec4 a) {
     float occlusion_flag = materials[m].occlusion_uv[1].w;
     float ao = 1.0;
     if (HAS_OCCLUSION && occlusion_flag > 0.5 && occlusion_flag < 1.5) {
-        ao = 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv).r - 1.0);
+        ao = 1.0 + pbr.w * (texture(occlusion_tex, in_occlusion_uv, MIP_BIAS).r - 1.0);
     } else if (HAS_METALLIC_ROUGHNESS && occlusion_flag > 1.5) {
         ao = 1.0 + pbr.w * (mr.r - 1.0);
     }
@@ -435,7 +440,7 @@ vec4 shade(vec4 a) {
     // (both in the tone-map pass).
     vec3 emission = materials[m].emission.rgb;
     if (HAS_EMISSIVE && materials[m].emissive_uv[1].w > 0.5) {
-        emission *= texture(emissive_tex, in_emissive_uv).rgb;
+        emission *= texture(emissive_tex, in_emissive_uv, MIP_BIAS).rgb;
     }
     l += emission;
     return vec4(min(l, HALF_MAX), 1.0);

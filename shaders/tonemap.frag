@@ -25,9 +25,21 @@ layout(push_constant) uniform ToneMap {
 
 layout(location = 0) out vec4 out_color;
 
-// The sky is behind what the frame drew: a pipeline of its own (tonemap.rs), since a uniform
-// branch runs masked on lavapipe and the sky's code cost frames without a sky 3 ms at 720p.
-layout(constant_id = 0) const bool SKY = true;
+// The pipeline's variant (tonemap.rs), a constant rather than a uniform branch, since a branch
+// runs masked on lavapipe. Bit 0, SKY: the sky is behind what the frame drew (its code cost
+// frames without a sky 3 ms at 720p). Bit 1, GAMMA2: the frame is drawn below the output's size
+// and the upscaler (shaders/upscale.frag) reads this pass's output: it is written to a UNORM
+// image as sqrt(colour), a perceptual encoding (gamma 2, as FSR 1 advises for its input) whose
+// decode is one multiply.
+layout(constant_id = 0) const int VARIANT = 1;
+const bool SKY = (VARIANT & 1) != 0;
+const bool GAMMA2 = (VARIANT & 2) != 0;
+
+// The colour as the target stores it: linear for an _SRGB target (the hardware encodes), or
+// gamma 2 for the upscaler's input.
+vec4 encoded(vec3 c) {
+    return vec4(GAMMA2 ? sqrt(c) : c, 1.0);
+}
 
 // The background's radiance along this pixel's view ray: the level's sky radiance in nits, as
 // the baker lit the level with it, and the sun's disc (its illuminance spread over its solid
@@ -48,7 +60,7 @@ void main() {
     }
     // Alpha 0 marks pixels no surface covered: the clear colour, display-referred, not radiance.
     if (tm.params.y < 0.5 || c.a == 0.0) {
-        out_color = vec4(c.rgb, 1.0);
+        out_color = encoded(c.rgb);
         return;
     }
     vec3 ls = max(c.rgb, 0.0) * tm.params.x;
@@ -58,5 +70,5 @@ void main() {
         return;
     }
     float ld = y / (1.0 + y);
-    out_color = vec4(clamp(pow(ls / y, vec3(tm.params.z)) * ld, 0.0, 1.0), 1.0);
+    out_color = encoded(clamp(pow(ls / y, vec3(tm.params.z)) * ld, 0.0, 1.0));
 }

@@ -42,6 +42,8 @@ pub struct WindowOptions {
     pub shadow_map_size: u32,
     /// Anti-aliasing from the first frame (the overlay switches it).
     pub aa: crate::render::renderer::AntiAliasing,
+    /// How the 3D passes' resolution is chosen (the overlay shows the scale).
+    pub render_scale: crate::render::scale::RenderScale,
     pub title: String,
     /// Show the debug overlay from the first frame (F1 toggles it either way).
     pub overlay: bool,
@@ -241,6 +243,7 @@ impl State {
         let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         renderer.aa = opts.aa;
+        renderer.render_scale = crate::render::scale::ScaleController::new(opts.render_scale);
         let loaded = renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| {
             let scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
             match crate::anim::animated::AnimatedScene::new(&gpu, pack, &scene, FRAMES_IN_FLIGHT) {

@@ -10,6 +10,7 @@ use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::ui::{self, FrameStats, Overlay};
 use engine::render::renderer::{Lighting, Renderer};
+use engine::render::scale::{RenderScale, ScaleController};
 use engine::scene::GpuScene;
 use engine::stats::{median, percentile};
 use engine::app::{self, WindowOptions};
@@ -26,6 +27,7 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
             [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
             [--overlay] [--device auto|cpu|gpu|NAME]
             [--validation] [--shadow-map-size N] [--aa off|msaa|fxaa]
+            [--render-scale S | --target-ms T]
        demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`);
@@ -51,6 +53,11 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
   --aa MODE            anti-aliasing: off (default); msaa (4 samples a pixel, alpha-to-coverage
                        for alpha-tested materials, resolved before the tone map); or fxaa (a
                        post-process pass after the tone map, cheaper)
+  --target-ms T        the frame budget in GPU milliseconds the render scale adapts to hold
+                       (default 16.7: 60 fps): the 3D passes draw at 0.5 to 1 of the output's
+                       size, and an edge-adaptive upscaler (FSR 1 EASU) brings the frame back
+  --render-scale S     draw the 3D passes at this fixed scale instead (0.5..1; 1 = off: every
+                       pass at the output's size)
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
                        world matrices, joint matrices, morph weights, skinned LOD 0 vertices
 
@@ -87,6 +94,7 @@ struct Args {
     validation: bool,
     shadow_map_size: u32,
     aa: engine::render::renderer::AntiAliasing,
+    render_scale: RenderScale,
     /// `--dump-pose PACK --clip NAME --time T`.
     dump_pose: Option<(PathBuf, Option<String>, Option<f32>)>,
 }
@@ -110,8 +118,10 @@ fn parse_args() -> Result<Args, String> {
         validation: GpuOptions::validation_from_env(),
         shadow_map_size: engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE,
         aa: Default::default(),
+        render_scale: RenderScale::default(),
         dump_pose: None,
     };
+    let (mut render_scale, mut target_ms) = (None, None);
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
         let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
@@ -150,6 +160,8 @@ fn parse_args() -> Result<Args, String> {
             "--device" => a.device = DevicePreference::parse(&value("--device")?),
             "--shadow-map-size" => a.shadow_map_size = number("--shadow-map-size", value("--shadow-map-size")?)?,
             "--aa" => a.aa = value("--aa")?.parse().map_err(|e| format!("--aa: {e}"))?,
+            "--render-scale" => render_scale = Some(value("--render-scale")?),
+            "--target-ms" => target_ms = Some(value("--target-ms")?),
             "--dump-pose" => a.dump_pose = Some((PathBuf::from(value("--dump-pose")?), None, None)),
             "--clip" => a.dump_pose.as_mut().ok_or("--clip goes with --dump-pose")?.1 = Some(value("--clip")?),
             "--time" => a.dump_pose.as_mut().ok_or("--time goes with --dump-pose")?.2 = Some(number("--time", value("--time")?)?),
@@ -158,6 +170,7 @@ fn parse_args() -> Result<Args, String> {
             s => a.more.push(PathBuf::from(s)),
         }
     }
+    a.render_scale = RenderScale::from_args(render_scale.as_deref(), target_ms.as_deref())?;
     if let Some((_, clip, time)) = &a.dump_pose {
         if clip.is_none() || !time.is_some_and(f32::is_finite) {
             return Err("--dump-pose needs --clip NAME and a finite --time T".into());
@@ -235,6 +248,7 @@ fn main() -> ExitCode {
             max_frames: args.frames,
             shadow_map_size: args.shadow_map_size,
             aa: args.aa,
+            render_scale: args.render_scale,
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
@@ -295,6 +309,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1)?;
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
     renderer.aa = args.aa;
+    renderer.render_scale = ScaleController::new(args.render_scale);
     // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
     let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;

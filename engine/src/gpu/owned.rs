@@ -85,6 +85,7 @@ destroy_by_method! {
     crate::render::sampled_input::SampledInput,
     crate::render::shadow::SunShadow,
     crate::render::tonemap::ToneMap,
+    crate::render::fullscreen::FullscreenFilter,
     crate::render::particles_draw::ParticlePass,
     crate::render::boids_draw::BoidsDraw,
     crate::scene::GpuScene,

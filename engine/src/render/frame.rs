@@ -36,6 +36,11 @@ pub const FRAGMENT_COUNTER: ResourceId = ResourceId("fragment counter");
 /// The tone-mapped frame before post-process anti-aliasing (transient, the output's size and
 /// format), when FXAA is on.
 pub const LDR: ResourceId = ResourceId("ldr");
+/// The tone-mapped frame at the render scale, gamma 2 in a UNORM image (`LOW_FORMAT`), which the
+/// upscaler resamples to the output: when the frame is drawn below the output's size.
+pub const LDR_LOW: ResourceId = ResourceId("ldr (render scale)");
+/// `LDR_LOW`'s format: 8 bits of sqrt(colour) (shaders/tonemap.frag GAMMA2).
+pub const LOW_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 
 /// The renderer's switches, as this frame uses them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,6 +63,9 @@ pub struct Settings {
     pub depth_view: bool,
     /// Post-process anti-aliasing after the tone map.
     pub fxaa: bool,
+    /// The 3D passes draw below the output's size (`FrameCx::render`) and the upscaler
+    /// resamples the tone-mapped frame to the output.
+    pub upscale: bool,
     /// Samples per pixel of the camera's targets (HDR and DEPTH): 1, or 4 with MSAA.
     pub samples: vk::SampleCountFlags,
 }
@@ -82,12 +90,12 @@ impl Settings {
 
     /// The camera's colour target as the passes drawing it describe it.
     pub fn hdr_desc(&self) -> ImageDesc {
-        ImageDesc::output(HDR_FORMAT).samples(self.samples)
+        ImageDesc::render(HDR_FORMAT).samples(self.samples)
     }
 
     /// The camera's depth buffer as the passes drawing it describe it.
     pub fn depth_desc(&self, gpu: &Gpu) -> ImageDesc {
-        ImageDesc::output(gpu.caps.depth_format).samples(self.samples)
+        ImageDesc::render(gpu.caps.depth_format).samples(self.samples)
     }
 
     /// The single-sampled HDR image the tone map reads: HDR, or its resolve.
@@ -133,6 +141,10 @@ pub struct FrameData {
     /// The background's radiance, which the tone map puts behind the frame (a baked level with
     /// a sky or a sun, `Renderer::sky` on).
     pub sky: Option<SkyParams>,
+    /// The render scale this frame draws at, and the region of the camera's targets it gives
+    /// (`scale::ScaleController::render_extent` of the output's size).
+    pub scale: f32,
+    pub render: vk::Extent2D,
 }
 
 /// The background: the tone map's sky push constants (mirrors shaders/tonemap.frag).
@@ -166,6 +178,9 @@ pub struct FrameCx<'a> {
     pub particles: &'a ParticlePass,
     pub boids: &'a BoidsDraw,
     pub tonemap: &'a mut ToneMap,
+    /// The region of the camera's targets this frame draws: the output's size times the render
+    /// scale (the output's size when `settings.upscale` is off).
+    pub render: vk::Extent2D,
     pub animation: Option<&'a mut AnimatedScene>,
     /// Draw calls the mesh passes made (passes add theirs).
     pub draw_calls: u32,

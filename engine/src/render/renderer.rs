@@ -15,6 +15,7 @@ use crate::render::frame::{FrameCx, FrameData, Settings, SkyParams, FRAGMENT_COU
 use crate::render::graph::{Access, FrameProfile, Graph, ImageRef, Pass, ResourceId};
 use crate::render::mesh_draw::{LitPhase, MeshKit};
 use crate::render::passes;
+use crate::render::scale::{RenderScale, ScaleController};
 use crate::scene::{GpuScene, SceneLayouts};
 use crate::render::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
 use crate::render::tonemap::ToneMap;
@@ -44,7 +45,8 @@ pub struct FrameUniforms {
     /// sun visibility); y: one map texel in metres; z: 1 / map size in texels.
     pub shadow: Vec4,
     /// The shading's switches: x: 1 for specular (`Renderer::specular`). (`material_maps`
-    /// picks the pipelines: `MeshKit::lit`.)
+    /// picks the pipelines: `MeshKit::lit`.) y: the material textures' mip bias, log2 of the
+    /// render scale (texture detail of the output's size in a frame drawn smaller).
     pub features: Vec4,
 }
 
@@ -166,6 +168,11 @@ pub struct Renderer {
     slot_counted: Vec<bool>,
     /// Culling and LOD state and settings; `visibility.counts` are the last frame's counters.
     pub visibility: Visibility,
+    /// The render scale (`scale::RenderScale`): `Fixed(1.0)` unless the owner asks (every frame
+    /// at the output's size, deterministic); the demo and the bench make it adaptive.
+    pub render_scale: ScaleController,
+    /// The scale each slot's last frame was drawn at (what its GPU time is evidence of).
+    slot_scale: Vec<f32>,
     /// Skinned and morphed instances (`animated`): advanced by `animate`, skinned in `record`
     /// and drawn from their skinned output. Set by the owner of the scene; destroyed here.
     pub animation: Option<AnimatedScene>,
@@ -251,6 +258,8 @@ impl Renderer {
             aa: AntiAliasing::Off,
             slot_counted: vec![false; frames_in_flight],
             visibility: Visibility::default(),
+            render_scale: ScaleController::new(RenderScale::Fixed(1.0)),
+            slot_scale: vec![1.0; frames_in_flight],
             animation: None,
         })
     }
@@ -274,6 +283,15 @@ impl Renderer {
     /// particles and boids, and write the uniforms. `record` follows.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(&mut self, gpu: &Gpu, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, extent: vk::Extent2D) -> Result<()> {
+        // The slot's last frame is finished: its GPU time at its scale sets this one's.
+        if let Some(p) = self.graph.profile(gpu, slot) {
+            self.render_scale.observe(self.slot_scale[slot], p.total_ms() as f32);
+        }
+        // The depth view shows the depth buffer as it is, at the output's size.
+        let scale = if self.depth_view { 1.0 } else { self.render_scale.scale() };
+        self.slot_scale[slot] = scale;
+        let render = ScaleController::render_extent(scale, extent);
+        (self.frame.scale, self.frame.render) = (scale, render);
         let aspect = extent.width as f32 / extent.height as f32;
         let view_proj = camera.view_proj(aspect);
         self.visibility.update(scene, view_proj, camera.position, camera.fov_y, extent.height as f32);
@@ -370,10 +388,11 @@ impl Renderer {
             ambient: ambient.extend(0.0),
             exposure,
             shadow: shadow_params,
-            features: Vec4::new(self.specular as u32 as f32, 0.0, 0.0, 0.0),
+            features: Vec4::new(self.specular as u32 as f32, scale.log2(), 0.0, 0.0),
         };
         (f.exposure, f.tone_map) = (exposure.x, scene.baked.is_some());
-        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj, extent));
+        // The tone map that draws the sky runs at the render scale.
+        f.sky = scene.baked.filter(|_| self.sky).and_then(|b| SkyParams::of(&b, view_proj, render));
         self.frame_ubos[slot].mapped()[..std::mem::size_of::<FrameUniforms>()].copy_from_slice(bytemuck::bytes_of(&uniforms));
         if f.draw_shadow {
             // The shadow passes run mesh.vert with the sun's transform as its view_proj.
@@ -389,6 +408,8 @@ impl Renderer {
     /// without finals the output stays a colour attachment.
     #[allow(clippy::too_many_arguments)]
     pub fn record_prepared(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, target: &FrameTarget, extra: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
+        let render = self.frame.render;
+        let upscale = render != target.extent;
         // With nothing to draw there is nothing to pre-pass (and lavapipe 22.3 crashes executing a
         // depth-only rendering that has no draws).
         let settings = Settings {
@@ -400,7 +421,9 @@ impl Renderer {
             reflection_probes: self.reflections && scene.reflection_probe_count > 0,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
-            fxaa: self.aa == AntiAliasing::Fxaa,
+            // Below the output's size the upscaler's edge-adaptive resampling stands in for FXAA.
+            fxaa: self.aa == AntiAliasing::Fxaa && !upscale,
+            upscale,
             samples: self.samples(gpu),
         };
         // A sample count's pipelines are made the first time a frame uses it.
@@ -426,13 +449,14 @@ impl Renderer {
             particles: &self.particles,
             boids: &self.boids,
             tonemap: &mut self.tonemap,
+            render,
             animation: self.animation.as_mut(),
             draw_calls: 0,
         };
         let output = ImageRef { image: target.color_image, view: target.color_view, format: self.color_format, extent: target.extent };
         let mut passes: Vec<&mut dyn Pass> = self.passes.iter_mut().map(|p| &mut **p as &mut dyn Pass).collect();
         passes.extend(extra.iter_mut().map(|p| &mut **p as &mut dyn Pass));
-        self.graph.run(gpu, cb, slot, output, &mut cx, &mut passes, &finals)?;
+        self.graph.run(gpu, cb, slot, output, render, &mut cx, &mut passes, &finals)?;
         self.draw_calls = cx.draw_calls;
         Ok(())
     }

@@ -11,6 +11,7 @@ pub const DEPTH_MASKED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/d
 pub const FULLSCREEN_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fullscreen.vert.spv"));
 pub const TONEMAP_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/tonemap.frag.spv"));
 pub const FXAA_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fxaa.frag.spv"));
+pub const UPSCALE_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/upscale.frag.spv"));
 pub const PARTICLE_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/particle.vert.spv"));
 pub const PARTICLE_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/particle.frag.spv"));
 pub const BOID_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/boid.vert.spv"));

@@ -5,7 +5,7 @@
 
 use crate::gpu::Gpu;
 use crate::render::fullscreen::FullscreenFilter;
-use crate::render::frame::SkyParams;
+use crate::render::frame::{SkyParams, LOW_FORMAT};
 use crate::render::graph::{ImageRef, Rec};
 use bytemuck::{Pod, Zeroable};
 use crate::render::shaders;
@@ -40,6 +40,8 @@ pub struct ToneMap {
     pub display_format: vk::Format,
     /// Reads the HDR target with texelFetch (the sampler only has to exist).
     filter: FullscreenFilter,
+    /// The same into the upscaler's input (`frame::LOW_FORMAT`, gamma 2), below the output's size.
+    low: FullscreenFilter,
 }
 
 impl ToneMap {
@@ -47,20 +49,25 @@ impl ToneMap {
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
         let push = std::mem::size_of::<ToneMapPush>() as u32;
         // Variants: SKY off (0) and on (1).
-        let filter = FullscreenFilter::new_variants(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])?;
-        Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, filter })
+        let filter = gpu.own(FullscreenFilter::new_variants(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])?);
+        // The same two with GAMMA2 (bit 1), for the upscaler's input.
+        let low = FullscreenFilter::new_variants(gpu, "tone-map (render scale)", shaders::TONEMAP_FRAG, push, LOW_FORMAT, frames_in_flight, vk::Filter::NEAREST, &[2, 3])?;
+        Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, filter: filter.keep(), low })
     }
 
     /// Record the pass: `hdr` is sampled, every pixel of `target` written. `tone_map` false
     /// passes the values through (display-referred input: the stand-in lighting). With `sky`,
     /// the background shows through where the frame's alpha leaves it uncovered.
+    /// Into a `LOW_FORMAT` target (the upscaler's input), `target` is written gamma 2 encoded.
     pub fn record(&mut self, rec: &Rec, hdr: ImageRef, target: ImageRef, exposure: f32, tone_map: bool, sky: Option<SkyParams>) {
         let params = Vec4::new(exposure, tone_map as u32 as f32, self.saturation, 0.0);
         let push = ToneMapPush { params, sky: sky.unwrap_or_else(SkyParams::zeroed) };
-        self.filter.draw_variant(rec, hdr.view, target, bytemuck::bytes_of(&push), sky.is_some() as usize);
+        let filter = if target.format == LOW_FORMAT && self.display_format != LOW_FORMAT { &mut self.low } else { &mut self.filter };
+        filter.draw_variant(rec, hdr.view, target, bytemuck::bytes_of(&push), sky.is_some() as usize);
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.filter.destroy(gpu);
+        self.low.destroy(gpu);
     }
 }

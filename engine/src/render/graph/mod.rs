@@ -46,6 +46,10 @@ pub struct ImageRef {
 pub enum Size {
     /// The output's size.
     Output,
+    /// The 3D passes' size (the output's times the render scale, `Graph::run`'s `render`). The
+    /// image is made at the output's size and passes see the region they draw (`ImageRef::extent`,
+    /// from the top-left corner): a new scale every few frames re-creates nothing.
+    Render,
     Fixed(vk::Extent2D),
 }
 
@@ -62,6 +66,11 @@ impl ImageDesc {
     /// A single-sampled image of the output's size.
     pub fn output(format: vk::Format) -> ImageDesc {
         ImageDesc { format, size: Size::Output, samples: vk::SampleCountFlags::TYPE_1 }
+    }
+
+    /// A single-sampled image the 3D passes draw at the render scale (`Size::Render`).
+    pub fn render(format: vk::Format) -> ImageDesc {
+        ImageDesc { format, size: Size::Render, samples: vk::SampleCountFlags::TYPE_1 }
     }
 
     pub fn samples(self, samples: vk::SampleCountFlags) -> ImageDesc {
@@ -192,8 +201,9 @@ impl Graph {
     /// resources in, such as the output's `Present` or a read-back buffer's `HostRead`). The
     /// output and the resources in `finals` are what the frame is for; a pass that contributes
     /// to none of them does not run. The caller has waited for `slot`'s previous frame.
+    /// `render`: the region of `Size::Render` images the frame draws (at most the output's).
     #[allow(clippy::too_many_arguments)]
-    pub fn run(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, output: ImageRef, cx: &mut FrameCx, passes: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
+    pub fn run(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, output: ImageRef, render: vk::Extent2D, cx: &mut FrameCx, passes: &mut [&mut dyn Pass], finals: &[(ResourceId, Access)]) -> Result<()> {
         self.frame += 1;
         self.collect_retired(gpu);
         let mut ios: Vec<Io> = Vec::with_capacity(passes.len());
@@ -215,7 +225,7 @@ impl Graph {
                 images.insert(id, image);
             }
         }
-        self.make_transients(gpu, &ios, output.extent, &mut images)?;
+        self.make_transients(gpu, &ios, output.extent, render, &mut images)?;
 
         // The declarations move into the plan's form (no copy); the images stay in `ios`.
         let uses: Vec<PassUses> = passes.iter().zip(&mut ios).map(|(p, io)| PassUses { name: p.name(), uses: std::mem::take(&mut io.uses), side_effects: io.side_effects }).collect();
@@ -272,7 +282,8 @@ impl Graph {
         }
     }
 
-    fn make_transients(&mut self, gpu: &Gpu, ios: &[Io], output: vk::Extent2D, images: &mut HashMap<ResourceId, ImageRef>) -> Result<()> {
+    fn make_transients(&mut self, gpu: &Gpu, ios: &[Io], output: vk::Extent2D, render: vk::Extent2D, images: &mut HashMap<ResourceId, ImageRef>) -> Result<()> {
+        let render = vk::Extent2D { width: render.width.clamp(1, output.width), height: render.height.clamp(1, output.height) };
         let mut wanted: Vec<(ResourceId, ImageDesc, vk::ImageUsageFlags)> = Vec::new();
         for io in ios {
             for &(id, desc) in &io.creates {
@@ -291,9 +302,11 @@ impl Graph {
             }
         }
         for (id, desc, usage) in wanted {
-            let extent = match desc.size {
-                Size::Output => output,
-                Size::Fixed(e) => e,
+            // Made at `extent`; passes see `used` of it.
+            let (extent, used) = match desc.size {
+                Size::Output => (output, output),
+                Size::Render => (output, render),
+                Size::Fixed(e) => (e, e),
             };
             let key = (id, desc);
             let keep = self.transients.get(&key).is_some_and(|t| t.image.extent == extent && t.usage.contains(usage));
@@ -310,7 +323,7 @@ impl Graph {
             let (image, view) = (t.image.image, t.image.view);
             // Another image under this name than last frame: its contents and layout are new.
             self.track_import(id, image);
-            images.insert(id, ImageRef { image, view, format: desc.format, extent });
+            images.insert(id, ImageRef { image, view, format: desc.format, extent: used });
         }
         // Images no frame has used for a while go once no frame in flight can use them.
         let (frame, retire_after) = (self.frame, self.frame + self.frames_in_flight as u64);

@@ -14,6 +14,7 @@ mod shadow_static;
 mod skinning;
 mod tonemap;
 mod transparent;
+mod upscale;
 
 pub use depth_view::DepthView;
 
@@ -38,6 +39,7 @@ pub fn register(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) ->
     passes.push(Box::new(resolve::Resolve));
     passes.push(Box::new(tonemap::ToneMapPass));
     passes.push(Box::new(fxaa::Fxaa::new(gpu, color_format, frames_in_flight)?));
+    passes.push(Box::new(upscale::Upscale::new(gpu, color_format, frames_in_flight)?));
     passes.push(Box::new(DepthView::new(gpu, color_format, frames_in_flight)?));
     Ok(passes.keep())
 }

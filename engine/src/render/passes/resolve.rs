@@ -18,7 +18,7 @@ impl Pass for Resolve {
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         if cx.settings.multisampled() {
-            io.create(HDR_RESOLVED, ImageDesc::output(HDR_FORMAT));
+            io.create(HDR_RESOLVED, ImageDesc::render(HDR_FORMAT));
             io.uses(HDR, Access::ResolveSrc).uses(HDR_RESOLVED, Access::ResolveDst);
         }
     }

@@ -1,6 +1,7 @@
-//! The tone map: the HDR target into the output (`tonemap`), or into the FXAA pass's input.
+//! The tone map: the HDR target into the output (`tonemap`), or into the FXAA pass's input, or,
+//! below the output's size, into the upscaler's input (gamma 2, the render scale's size).
 
-use crate::render::frame::{FrameCx, LDR};
+use crate::render::frame::{FrameCx, LDR, LDR_LOW, LOW_FORMAT};
 use crate::render::graph::{Access, ImageDesc, Io, Pass, Rec, ResourceId, OUTPUT};
 use anyhow::Result;
 
@@ -17,7 +18,9 @@ impl Pass for ToneMapPass {
     }
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
-        if cx.settings.fxaa {
+        if cx.settings.upscale {
+            io.create(LDR_LOW, ImageDesc::render(LOW_FORMAT));
+        } else if cx.settings.fxaa {
             io.create(LDR, ImageDesc::output(cx.tonemap.display_format));
         }
         io.uses(cx.settings.tone_map_input(), Access::SampledFragment).uses(target(cx), Access::ColorWrite);
@@ -31,9 +34,11 @@ impl Pass for ToneMapPass {
     }
 }
 
-/// Where the tone map writes: the output, or FXAA's input.
+/// Where the tone map writes: the output, FXAA's input or the upscaler's.
 fn target(cx: &FrameCx) -> ResourceId {
-    if cx.settings.fxaa {
+    if cx.settings.upscale {
+        LDR_LOW
+    } else if cx.settings.fxaa {
         LDR
     } else {
         OUTPUT

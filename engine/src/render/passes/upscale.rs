@@ -1,0 +1,62 @@
+//! The spatial upscaler: below the output's size (`Settings::upscale`), the tone-mapped frame
+//! (`LDR_LOW`, the render scale's region) resampled to the output by FSR 1's edge-adaptive
+//! upsampler (shaders/upscale.frag). One full-screen pass at the output's size: the only one of
+//! the frame when it is on (the tone map runs at the render scale, before it).
+
+use crate::gpu::Gpu;
+use crate::render::frame::{FrameCx, LDR_LOW};
+use crate::render::fullscreen::FullscreenFilter;
+use crate::render::graph::{Access, Io, Pass, Rec, OUTPUT};
+use crate::render::shaders;
+use anyhow::Result;
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec4;
+
+/// Mirrors the push-constant block of shaders/upscale.frag.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct UpscalePush {
+    /// xy: input texels per output pixel; zw: the input region's size in texels.
+    scale: Vec4,
+}
+
+pub struct Upscale {
+    filter: FullscreenFilter,
+}
+
+impl Upscale {
+    pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Upscale> {
+        let push = std::mem::size_of::<UpscalePush>() as u32;
+        Ok(Upscale { filter: FullscreenFilter::new(gpu, "upscale", shaders::UPSCALE_FRAG, push, color_format, frames_in_flight, vk::Filter::NEAREST)? })
+    }
+}
+
+impl Pass for Upscale {
+    fn name(&self) -> &'static str {
+        "upscale"
+    }
+
+    /// A non-indexed full-screen draw: see `Pass::counts_invocations`.
+    fn counts_invocations(&self) -> bool {
+        false
+    }
+
+    fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
+        if cx.settings.upscale {
+            io.uses(LDR_LOW, Access::SampledFragment).uses(OUTPUT, Access::ColorWrite);
+        }
+    }
+
+    fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
+        let (input, output) = (rec.image(LDR_LOW), rec.image(OUTPUT));
+        let (i, o) = (input.extent, output.extent);
+        let push = UpscalePush { scale: Vec4::new(i.width as f32 / o.width as f32, i.height as f32 / o.height as f32, i.width as f32, i.height as f32) };
+        self.filter.draw(rec, input.view, output, bytemuck::bytes_of(&push));
+        Ok(())
+    }
+
+    fn destroy(&mut self, gpu: &Gpu) {
+        self.filter.destroy(gpu);
+    }
+}
