@@ -12,6 +12,7 @@ use engine::scene::camera::Camera;
 use engine::gpu::Gpu;
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::render::renderer::{Lighting, Renderer, CLEAR_COLOR};
+use engine::render::visibility::LOD_BUCKETS;
 use engine::scene::{world_transforms, GpuScene};
 use glam::{Mat4, Vec3};
 use pack::{Pack, Vertex};
@@ -66,6 +67,8 @@ struct Frame {
     pixels: Vec<u8>,
     /// Pixels not showing the clear colour.
     covered: usize,
+    /// Instances drawn per LOD (the renderer's histogram).
+    lods: [u32; LOD_BUCKETS],
 }
 
 fn clear_bytes() -> [u8; 3] {
@@ -79,7 +82,7 @@ fn clear_bytes() -> [u8; 3] {
 fn frame(pixels: Vec<u8>) -> Frame {
     let clear = clear_bytes();
     let covered = pixels.chunks_exact(4).filter(|p| (0..3).any(|c| (p[c] as i32 - clear[c] as i32).abs() > 1)).count();
-    Frame { pixels, covered }
+    Frame { pixels, covered, lods: [0; LOD_BUCKETS] }
 }
 
 /// Render `pack` once; with `time`, its animated instances play clip 0 from that time (advanced
@@ -103,10 +106,11 @@ fn render(gpu: &Gpu, pack: &Pack, camera: &Camera, time: Option<f32>, prepass: b
         assert!(a.dispatches > 0, "no skinning dispatch was recorded");
     }
     let px = target.pixels().to_vec();
+    let lods = renderer.visibility.counts.lod_histogram;
     scene.destroy(gpu);
     renderer.destroy(gpu);
     target.destroy(gpu);
-    frame(px)
+    Frame { lods, ..frame(px) }
 }
 
 /// A camera framing the baked pose's bounds.
@@ -236,6 +240,101 @@ fn the_culling_sphere_of_an_animated_instance_holds_every_skinned_vertex() {
         scene.destroy(&gpu);
         r.destroy(&gpu);
     }
+    assert_clean(&gpu);
+}
+
+/// A 2 x 2 m double-sided sheet in the XY plane with two LODs of their own vertices (a 9 x 9 and
+/// a 5 x 5 grid: different vertex counts, as the cooker's LOD stage makes them) and one morph
+/// target, each LOD's deltas a smooth field sampled at its own vertices (the sheet's sides bend
+/// down and it shears and bows out of its plane), held at weight 1 by a constant clip. Both
+/// LODs' errors are 0, so LOD selection always draws the coarser one, LOD 1.
+fn morph_lods_pack() -> Pack {
+    use pack::{Channel, ChannelPath, Clip, DeformLod, DeformMesh, Interpolation, Material, Mesh, MeshLod, MorphTargets, Node, PackBuilder, Submesh};
+    let field = |p: [f32; 3]| [0.2 * p[0] * p[1], 0.35 * (1.0 - p[0] * p[0]), 0.3 * p[0] * p[1]];
+    let bytes = |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
+    let mut b = PackBuilder::new("generated", "test");
+    let (mut lods, mut deform) = (Vec::new(), Vec::new());
+    for n in [8u32, 4] {
+        let verts: Vec<Vertex> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let (x, y) = (2.0 * i as f32 / n as f32 - 1.0, 2.0 * j as f32 / n as f32 - 1.0);
+                Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], color: [255; 4], ..Default::default() }
+            })
+            .collect();
+        let mut idx: Vec<u32> = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * (n + 1) + i;
+                idx.extend([a, a + 1, a + n + 2, a, a + n + 2, a + n + 1]);
+            }
+        }
+        let deltas: Vec<f32> = verts.iter().flat_map(|v| field(v.position)).collect();
+        let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+        lods.push(MeshLod {
+            vertices: b.push_bytes(Vertex::slice_as_bytes(&verts)),
+            vertex_count: verts.len() as u32,
+            indices: b.push_bytes(&index_bytes),
+            index_count: idx.len() as u32,
+            submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0, lightmap_block: None }],
+            error: 0.0,
+        });
+        deform.push(DeformLod { skin: None, morph: Some(MorphTargets { positions: b.push_bytes(&bytes(&deltas)), normals: None }) });
+    }
+    b.manifest.materials.push(Material { double_sided: true, ..Default::default() });
+    b.manifest.meshes.push(Mesh { name: "sheet".into(), lods, bounds_min: [-1.0, -1.0, 0.0], bounds_max: [1.0, 1.0, 0.0] });
+    b.manifest.nodes.push(Node { name: "sheet".into(), mesh: Some(0), local: Mat4::IDENTITY.to_cols_array(), ..Default::default() });
+    let (times, values) = (b.push_bytes(&bytes(&[0.0, 1.0])), b.push_bytes(&bytes(&[1.0, 1.0])));
+    b.manifest.animation.meshes.push(DeformMesh { mesh: 0, morph_weights: vec![0.0], lods: deform });
+    let channel = Channel { node: 0, path: ChannelPath::Weights, interpolation: Interpolation::Linear, key_count: 2, components: 1, times, values };
+    b.manifest.animation.clips.push(Clip { name: "hold".into(), duration: 1.0, channels: vec![channel] });
+    b.finish()
+}
+
+#[test]
+fn a_morphed_lod_1_deforms_with_its_own_deltas() {
+    // The sheet drawn at LOD 1 with the target at weight 1 must look like LOD 1's own vertices
+    // plus LOD 1's own deltas (the CPU reference, baked into a static copy); LOD 0's deltas are
+    // for other vertices (81, not 25), so any mix-up shows. The culling sphere holds every LOD's
+    // morphed vertices.
+    let gpu = gpu();
+    let pack = morph_lods_pack();
+    let reference_pack = baked(&pack, 0.5);
+    let camera = camera_for(&gpu, &reference_pack);
+    let reference = render(&gpu, &reference_pack, &camera, None, true);
+    let animated = render(&gpu, &pack, &camera, Some(0.5), true);
+    assert_eq!(animated.lods[..2], [0, 1], "the animated sheet is not drawn at LOD 1: {:?}", animated.lods);
+    assert_eq!(reference.lods[..2], [0, 1], "the baked sheet is not drawn at LOD 1: {:?}", reference.lods);
+    assert!(reference.covered > (W * H / 10) as usize, "the morphed sheet covers only {} pixels", reference.covered);
+    let (worst, at) = max_channel_difference(&reference.pixels, &animated.pixels);
+    println!("morphed LOD 1: {} pixels covered (baked {}), largest channel difference {worst} at pixel {at}", animated.covered, reference.covered);
+    assert_eq!(animated.covered, reference.covered, "the silhouettes differ");
+    assert!(worst <= 1, "pixel {at} differs by {worst} steps from LOD 1 morphed by its own deltas on the CPU");
+    // The morph shows: the flat sheet (no animation) looks different.
+    let flat = render(&gpu, &pack, &camera, None, true);
+    assert_eq!(flat.lods[..2], [0, 1]);
+    let changed = flat.pixels.chunks_exact(4).zip(reference.pixels.chunks_exact(4)).filter(|(x, y)| x != y).count();
+    assert!(changed > reference.covered / 5, "the morph changed only {changed} of {} pixels", reference.covered);
+
+    let renderer = Renderer::new(&gpu, OFFSCREEN_FORMAT, 1).unwrap();
+    let mut scene = GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
+    let mut anim = AnimatedScene::new(&gpu, &pack, &scene, 1).unwrap().unwrap();
+    anim.play(0, 0, 0.5, 1.0);
+    anim.advance(&mut scene, 0.0);
+    let s = scene.instances.spheres();
+    let i = anim.instances[0].instance as usize;
+    let (c, r) = (Vec3::new(s.x[i], s.y[i], s.z[i]), s.r[i]);
+    for lod in 0..2 {
+        let data = DeformData::for_node(&pack, 0, lod).unwrap();
+        let mut v = data.vertices.clone();
+        skin_cpu(&data, &[1.0], &[Mat4::IDENTITY], &mut v);
+        let outside = v.iter().map(|p| (Vec3::from(p.position) - c).length() - r).fold(f32::NEG_INFINITY, f32::max);
+        assert!(outside <= 1e-4 * r, "LOD {lod}: a morphed vertex lies {outside} outside the culling sphere (radius {r})");
+    }
+    let mut r = renderer;
+    anim.destroy(&gpu);
+    scene.destroy(&gpu);
+    r.destroy(&gpu);
     assert_clean(&gpu);
 }
 

@@ -4,8 +4,9 @@
 //! world space, so the mesh passes draw those instances from it with an identity model matrix.
 //!
 //! Culling bounds of an animated instance come from its joints: the sphere around the joints'
-//! world positions, grown by the farthest any vertex sits from a joint that moves it (measured
-//! once in the bind pose) plus the current morph displacement. Linear blend skinning puts a
+//! world positions, grown by the farthest any vertex of any LOD sits from a joint that moves it
+//! (measured once in the bind pose) plus the current morph displacement (each LOD is skinned and
+//! morphed from its own vertices, weights and deltas). Linear blend skinning puts a
 //! vertex in the convex hull of its joints' rigid images, each that far from its joint, so the
 //! sphere holds every skinned vertex while the joints stay rigid (scale is accounted for by
 //! the largest joint scale).
@@ -40,9 +41,10 @@ pub struct AnimatedInstance {
     /// The skin the node is bound to (None: morph only, placed by the node's own matrix).
     skin: Option<usize>,
     joints: Vec<Mat4>,
-    /// Bind-pose distance from any vertex to the farthest joint that moves it (0 unskinned).
+    /// Bind-pose distance from any vertex of any LOD to the farthest joint that moves it (0
+    /// unskinned).
     margin: f32,
-    /// Per morph target, the longest position delta.
+    /// Per morph target, the longest position delta of any LOD.
     morph_reach: Vec<f32>,
     /// Bind bounds of the mesh as a sphere (unskinned, morph-only instances).
     bind_sphere: (Vec3, f32),
@@ -167,39 +169,38 @@ impl AnimatedScene {
         let mesh = &scene.meshes[scene.instances[index].mesh as usize];
         let joints = vec![Mat4::IDENTITY; joint_count(pack, node)];
         let mut lods = gpu.own(Vec::with_capacity(mesh.lods.len()));
-        let mut first: Option<DeformData> = None;
+        // Every LOD's own data (vertices, skin, morph deltas): each is skinned and morphed from
+        // its own, and the culling margins below hold whichever LOD is drawn.
+        let mut all: Vec<DeformData> = Vec::with_capacity(mesh.lods.len());
         for lod in 0..mesh.lods.len() {
             let data = DeformData::for_node(pack, node, lod).context("an animated node without a mesh")?;
             lods.push(SkinnedMesh::with_slots(gpu, &self.pipe, &data, joints.len(), slots)?);
-            first.get_or_insert(data);
+            all.push(data);
         }
-        let data = first.context("a mesh without LODs")?;
+        if all.is_empty() {
+            anyhow::bail!("a mesh without LODs");
+        }
         let skin = pack.manifest.animation.binding(node as u32).and_then(|b| b.skin);
-        let margin = match (skin, &data.joints, &data.weights) {
-            (Some(s), Some(js), Some(ws)) => {
-                let bind_pos: Vec<Vec3> = self.rig.skins[s as usize].inverse_bind.iter().map(|ibm| ibm.inverse().w_axis.truncate()).collect();
-                let mut m = 0.0f32;
+        let bind_pos: Vec<Vec3> = skin.map_or(vec![], |s| self.rig.skins[s as usize].inverse_bind.iter().map(|ibm| ibm.inverse().w_axis.truncate()).collect());
+        let mut margin = 0.0f32;
+        let mut morph_reach = vec![0.0f32; all.iter().map(|d| d.targets).max().unwrap_or(0)];
+        for data in &all {
+            if let (false, Some(js), Some(ws)) = (bind_pos.is_empty(), &data.joints, &data.weights) {
                 for ((v, j), w) in data.vertices.iter().zip(js).zip(ws) {
                     for k in 0..4 {
                         if w[k] != 0.0 {
                             let p = bind_pos[(j[k] as usize).min(bind_pos.len() - 1)];
-                            m = m.max((Vec3::from(v.position) - p).length());
+                            margin = margin.max((Vec3::from(v.position) - p).length());
                         }
                     }
                 }
-                m
             }
-            _ => 0.0,
-        };
-        let n = data.vertices.len();
-        let morph_reach = (0..data.targets)
-            .map(|t| {
-                data.morph_positions[t * n * 3..(t + 1) * n * 3]
-                    .chunks_exact(3)
-                    .map(|d| Vec3::new(d[0], d[1], d[2]).length())
-                    .fold(0.0, f32::max)
-            })
-            .collect();
+            let n = data.vertices.len();
+            for (t, reach) in morph_reach.iter_mut().enumerate().take(data.targets) {
+                let longest = data.morph_positions[t * n * 3..(t + 1) * n * 3].chunks_exact(3).map(|d| Vec3::new(d[0], d[1], d[2]).length()).fold(0.0, f32::max);
+                *reach = reach.max(longest);
+            }
+        }
         // Pose only this character's skeleton (and the node itself), not the whole level.
         let mut needed = skin.map_or(vec![], |s| self.rig.skins[s as usize].joints.clone());
         needed.push(node as u32);
