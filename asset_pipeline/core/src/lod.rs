@@ -527,11 +527,6 @@ pub struct Morphs {
 }
 
 impl Morphs {
-    /// Row counts of every target's deltas.
-    pub fn lens(&self) -> impl Iterator<Item = usize> + '_ {
-        self.positions.iter().chain(&self.normals).map(Vec::len)
-    }
-
     /// These deltas at the points `src` names, per target: position deltas blended
     /// (barycentric, like UVs: a carried vertex moves by LOD 0's displacement at the point its
     /// attributes come from), normal deltas blended and scaled with the normal (see
