@@ -14,6 +14,7 @@ from pathlib import Path
 
 from asset_pipeline import CookError
 from asset_pipeline.bake import LIGHTMAP_MODES, PRESETS, BakeSettings
+from asset_pipeline.chunks import ChunkSettings
 from asset_pipeline.cook import cook_detailed
 from asset_pipeline.executor import EXECUTORS
 from asset_pipeline.pipeline import CookSettings
@@ -74,6 +75,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
+    parser.add_argument("--no-chunks", action="store_true", help="do not cut large static meshes into level chunks")
+    parser.add_argument("--chunk-size", type=_positive_number, metavar="METRES",
+                        help=f"level chunks: cut static meshes of {ChunkSettings.min_mesh_triangles} triangles or more into pieces "
+                             f"about this size (default {ChunkSettings.size:g})")
+    parser.add_argument("--chunk-triangles", type=_positive, metavar="N",
+                        help=f"level chunks: cut pieces further until each has at most N triangles (default {ChunkSettings.max_triangles})")
     parser.add_argument("--texels-per-metre", type=_positive_number, metavar="N",
                         help="lightmap density of static surfaces (default: the level's; for a glTF scene 16, lowered to fit a 2048x2048 page)")
     parser.add_argument("--no-report", action="store_true", help="do not write OUT.report.md")
@@ -110,6 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.ray_address is not None and args.executor != "ray":
         parser.error("--ray-address needs --executor ray")
+    if args.no_chunks and (args.chunk_size is not None or args.chunk_triangles is not None):
+        parser.error("--chunk-size and --chunk-triangles need level chunks (drop --no-chunks)")
+    chunk_options = {k: v for k, v in (("size", args.chunk_size), ("max_triangles", args.chunk_triangles)) if v is not None}
+    chunk = ChunkSettings(**chunk_options) if chunk_options else None
     bake_settings = BakeSettings(preset=args.quality, lightmap_mode=args.lightmap_mode, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
                                  reflection_face=args.reflection_face, reflection_samples=args.reflection_samples, seed=args.seed, threads=args.threads, tile_texels=args.tile_texels)
     executor = args.executor
@@ -117,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         # A process that exits on Ctrl-C leaves its tasks to the cluster (see RayExecutor).
         from asset_pipeline.executor import RayExecutor
         executor = RayExecutor(args.ray_address, cancel_on_interrupt=False)
-    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, bake=bake_settings, baking=not args.no_bake,
+    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, chunks=not args.no_chunks, chunk=chunk,
+                            bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
                             mips=not args.no_mips, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
                             allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)

@@ -1,13 +1,17 @@
-"""The cook: source -> scene IR -> lightmap UVs -> LOD chains -> bake -> pack + report.
+"""The cook: source -> scene IR -> lightmap UVs -> bake -> level chunks -> LOD chains -> pack + report.
 
 Each stage is a pure function of its inputs and settings, cached by a hash of both and the
 cooker's code (cache.py). The whole cook also has a key: when the output already exists and was
 made from the same key, nothing runs and no file is touched.
 
 Stage order: lightmap UVs come before LODs, so every LOD carries LOD 0's lightmap UVs as an
-attribute and one baked lightmap serves the whole chain. The bake writes its pages into the pack
-(half-float textures) and beside it as OpenEXR files, `<pack>.lightmap<N>.exr`. The textures
-stage then gives every material texture its mip chain (lightmap pages keep one level).
+attribute and one baked lightmap serves the whole chain. The bake reads only LOD 0 and writes its
+pages into the pack (half-float textures) and beside it as OpenEXR files,
+`<pack>.lightmap<N>.exr`. The chunk stage (chunks.py) then cuts large static meshes into level
+chunks that share their mesh's baked lightmap region, so the pages are baked from whole meshes
+and a border between chunks reads the same texels from both; the LOD stage comes after it, so
+every chunk gets its own chain (borders locked). The textures stage then gives every material
+texture its mip chain (lightmap pages keep one level).
 """
 
 from __future__ import annotations
@@ -34,9 +38,11 @@ from asset_pipeline.report import write_report
 @dataclass
 class CookSettings:
     lod: "object | None" = None  # asset_pipeline.lod.LodSettings; None = defaults
+    chunk: "object | None" = None  # asset_pipeline.chunks.ChunkSettings; None = defaults
     uv2: "object | None" = None  # asset_pipeline.uv2.Uv2Settings; None = defaults (density from the level)
     bake: "object | None" = None  # asset_pipeline.bake.BakeSettings; None = defaults
     lods: bool = True
+    chunks: bool = True  # cut large static meshes into level chunks (chunks.py)
     lightmap_uvs: bool = True
     # Lightmap density of static surfaces, texels per metre: overrides the level's; a glTF scene
     # without it gets Uv2Settings' default, lowered to fit AUTO_LIGHTMAP_TEXELS.
@@ -80,6 +86,7 @@ class CookResult:
     uv2: dict = field(default_factory=dict)  # the uv2 stage's measurements (instances, pages, utilisation)
     bake: dict = field(default_factory=dict)  # the bake's (texels, rays, seconds per page and instance)
     scene: "ir.Scene | None" = None  # the scene as written (None when up to date)
+    chunks: dict = field(default_factory=dict)  # the chunk stage's (chunks.split_chunks' stats)
 
 
 def _settings_doc(obj) -> object:
@@ -153,6 +160,10 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         raise CookError(f"{source}: no such file")
     if not out.parent.is_dir():
         raise CookError(f"{out}: output directory '{out.parent}' does not exist")
+    if settings.chunks:
+        from asset_pipeline.chunks import ChunkSettings
+
+        (settings.chunk or ChunkSettings()).check()  # a bad setting fails before any work
     cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
     stages: list[StageRecord] = []
 
@@ -220,12 +231,17 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     if settings.lightmap_uvs and scene.static_nodes():
         scene, uv2_stats, rec = _uv2_stage(scene, settings, cache, progress)
         stages.append(rec)
-    if settings.lods:
-        scene, rec = _lod_stage(scene, settings, cache, progress, executor)
-        stages.append(rec)
     bake_stats: dict = {}
     if settings.baking and scene.lightmap is not None and scene.lightmap.pages:
         scene, bake_stats, rec = _bake_stage(scene, settings, cache, progress, executor)
+        stages.append(rec)
+    atlas_scene = scene  # the static instances as the atlas was laid out and baked (the report's previews)
+    chunk_stats: dict = {}
+    if settings.chunks and scene.static_nodes():
+        scene, chunk_stats, rec = _chunks_stage(scene, settings, cache, progress)
+        stages.append(rec)
+    if settings.lods:
+        scene, rec = _lod_stage(scene, settings, cache, progress, executor, locked=frozenset(chunk_stats.get("chunk_meshes", ())))
         stages.append(rec)
 
     if settings.mips and scene.textures:
@@ -246,13 +262,14 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
 
     report = None
     if settings.report:
-        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs)
+        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene)
     outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
     record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
     write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
-                      tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene)
+                      tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene,
+                      chunks=chunk_stats)
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
@@ -451,15 +468,35 @@ def _uv2_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
     return dataclasses.replace(scene, warnings=[*scene.warnings, *new]), stats, rec
 
 
+# ---- level chunks -------------------------------------------------------------------------------
+
+
+def _chunks_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    """Large static meshes cut into chunks (chunks.split_chunks); each mesh's partition is cached
+    by its positions, triangles, size in its units and the settings."""
+    from asset_pipeline.chunks import ChunkSettings, candidates, split_chunks
+
+    chunk_settings = settings.chunk or ChunkSettings()
+    t0 = time.perf_counter()
+    with progress.stage("chunks", len(candidates(scene, chunk_settings))) as bar:
+        scene, stats = split_chunks(scene, chunk_settings, cache=cache, advance=bar.advance)
+    rec = StageRecord("chunks", seconds=time.perf_counter() - t0, items=stats["items"], cached=stats["cached"])
+    return scene, stats, rec
+
+
 # ---- LOD chains ---------------------------------------------------------------------------------
 
 
-def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None):
+def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None, locked=frozenset()):
+    """`locked`: meshes simplified with their open borders kept (level chunks, chunks.py)."""
     from asset_pipeline.executor import lod_chain
     from asset_pipeline.lod import LodSettings, build_lods
 
     lod_settings = settings.lod or LodSettings()
     doc = {"settings": _settings_doc(lod_settings), "fast-simplification": library_version("fast-simplification")}
+    # Level chunks keep every border vertex at every level, so neighbours' borders meet at any LODs.
+    chunk_settings = dataclasses.replace(lod_settings, lock_borders=True)
+    chunk_doc = {**doc, "settings": _settings_doc(chunk_settings)}
     rec = StageRecord("lod", items=len(scene.meshes))
     t0 = time.perf_counter()
     # Per mesh: its LODs below LOD 0, and its cache key.
@@ -469,7 +506,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
         todo = []
         for i, m in enumerate(scene.meshes):
             base = m.base
-            key = Hasher("lod").settings(doc)
+            key = Hasher("lod").settings(chunk_doc if i in locked else doc)
             for name in sorted(base.attributes):
                 key.text(name).array(base.attributes[name])
             key = key.array(base.triangles).array(base.materials).array(base.lightmap_blocks)
@@ -481,7 +518,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
                 rec.cached += 1
                 bar.advance()
             elif executor is None:
-                chains[i] = build_lods(base, lod_settings)
+                chains[i] = build_lods(base, chunk_settings if i in locked else lod_settings)
                 docs, arrays = ir.lods_to_wire(chains[i])
                 cache.store("lod", key, {"lods": docs}, arrays)
                 bar.advance()
@@ -496,7 +533,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             bar.advance()
 
         if todo:  # the meshes not in the cache, one Ray task each
-            executor.run([(lod_chain, (scene.meshes[i].base, lod_settings)) for i in todo], on_done=done)
+            executor.run([(lod_chain, (scene.meshes[i].base, chunk_settings if i in locked else lod_settings)) for i in todo], on_done=done)
     meshes = [dataclasses.replace(m, lods=[m.base, *chain]) for m, chain in zip(scene.meshes, chains)]
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), rec

@@ -14,7 +14,10 @@ def _row(*cells) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
 
-def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict, bake_stats: dict | None = None, exrs=()) -> Path:
+def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict, bake_stats: dict | None = None, exrs=(),
+                 chunk_stats: dict | None = None, atlas_scene: ir.Scene | None = None) -> Path:
+    """`atlas_scene`: the scene as its lightmap atlas was laid out (before the chunk stage: a
+    chart a chunk border cuts is drawn as one chart), for the atlas previews; default `scene`."""
     path = out.with_suffix(".report.md")
     lines = [f"# Cook report: {out.name}", "", f"Source: `{scene.source}`", ""]
     lines += [
@@ -34,6 +37,10 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
     for k, m in enumerate(scene.meshes):
         for i, lod in enumerate(m.lods):
             lines.append(_row(m.name if i == 0 else "", "yes" if k in static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
+    if chunk_stats:
+        from asset_pipeline.chunks import describe
+
+        lines += ["", "## Level chunks", "", *describe(chunk_stats)]
     if scene.skins or scene.clips:
         lines += ["", "## Animation", "", f"{len(scene.skins)} skin(s): " + ", ".join(f"{s.name} ({len(s.joints)} joints)" for s in scene.skins), ""]
         lines += [_row("clip", "channels", "seconds"), _row("---", "---:", "---:")]
@@ -52,7 +59,7 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
                       _row("instance", "mesh", "page", "texels baked", "texels/m"), _row("---", "---", "---:", "---:", "---:")]
             lines += [_row(i["name"], i["mesh"], ", ".join(map(str, i["pages"])), i.get("texels", ""), f"{i['measured_texels_per_metre']:.3g}")
                       for i in instances]
-        previews = _previews(out, scene)
+        previews = _previews(out, atlas_scene or scene)
         for i, (w, h) in enumerate(lm.pages):
             lines += ["", f"Page {i}: {w} x {h}"]
             if i < len(previews):
