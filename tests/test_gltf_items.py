@@ -568,7 +568,7 @@ def test_a_double_sided_roof_reflects_the_floors_light_back_a_single_sided_one_d
 def render(pack: Path, png: Path, size: int = 64) -> np.ndarray:
     """The demo's first frame of `pack` from where the pack says the view starts (headless,
     validation on): the screenshot as (h, w, 3) uint8. Requires exit 0 and no validation error."""
-    r = run_demo([pack, "--headless", "--flight", "0", "--frames", "1", "--width", size, "--height", size, "--screenshot", png, "--validation"])
+    r = run_demo([pack, "--headless", "--flight", "0", "--frames", "1", "--width", size, "--height", size, "--render-scale", "1", "--screenshot", png, "--validation"])
     assert r.returncode == 0, f"demo failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
     assert "validation errors: 0" in r.stdout, r.stdout
     assert "[vulkan validation error]" not in r.stderr, r.stderr

@@ -25,9 +25,10 @@ OUTLIER_FRACTION = 0.002
 
 
 def render_headless(pack: Path, out: Path, width: int, height: int, frames: int = 1) -> subprocess.CompletedProcess:
-    # A still camera at the player's view (`--flight 0`): these tests are about the rendering.
+    # A still camera at the player's view (`--flight 0`): these tests are about the rendering,
+    # every pass at the image's size (the adaptive render scale follows the machine's speed).
     result = run_demo([str(pack), "--headless", "--validation", "--flight", "0", "--frames", str(frames), "--width", str(width), "--height", str(height),
-                       "--screenshot", str(out)])
+                       "--render-scale", "1", "--screenshot", str(out)])
     assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
     assert "validation errors: 0" in result.stdout, result.stdout
     assert "[vulkan validation error]" not in result.stderr, result.stderr
@@ -70,6 +71,25 @@ def test_box_textured_matches_reference_and_renders_identically_twice(box_textur
         reference.parent.mkdir(exist_ok=True)
         reference.write_bytes(first.read_bytes())
     compare_to_reference(first, reference)
+
+
+def test_scale_one_renders_bit_for_bit_what_the_renderer_drew_before_render_scales(box_textured_pack, tmp_path):
+    # At render scale 1 every pass runs at the output's size as before adaptive resolution
+    # (issue 23): no upscale pass, and the same bytes as the reference the renderer of issue 22
+    # made (BoxTextured_320x240.png, regenerated with that renderer and unchanged since), exactly,
+    # not within the tolerance. (The flight's screens at 1280x720 were compared the same way
+    # when the scale landed: byte-identical PNGs.)
+    out = tmp_path / "scale1.png"
+    result = render_headless(box_textured_pack, out, 320, 240)
+    assert "upscale" not in result.stdout and "render scale fixed 1" in result.stdout, result.stdout
+    got, want = load_rgb(out), load_rgb(REFERENCE_DIR / "BoxTextured_320x240.png")
+    assert got.shape == want.shape and np.array_equal(got, want), f"largest difference {np.abs(got - want).max()}"
+    # Drawn at half size and upscaled, it is a different image (the scale is really applied).
+    half = tmp_path / "half.png"
+    r = run_demo([str(box_textured_pack), "--headless", "--validation", "--flight", "0", "--frames", "1", "--width", "320", "--height", "240",
+                  "--render-scale", "0.5", "--screenshot", str(half)])
+    assert r.returncode == 0 and "validation errors: 0" in r.stdout and "upscale" in r.stdout, r.stdout + r.stderr
+    assert not np.array_equal(load_rgb(half), want)
 
 
 def test_box_textured_shows_the_texture(box_textured_pack, tmp_path):
@@ -125,7 +145,7 @@ def test_headless_demo_flies_over_the_level_and_its_screens_match_references(tmp
     pack = REPO / "build" / "temple.pack"
     assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
     times = ("0", "3", "6")
-    result = run_demo([str(pack), "--headless", "--validation", "--width", "160", "--height", "90", "--shadow-map-size", "512",
+    result = run_demo([str(pack), "--headless", "--validation", "--width", "160", "--height", "90", "--shadow-map-size", "512", "--render-scale", "1",
                        "--screens", ",".join(times), "--screens-dir", str(tmp_path / "screens"), "--screenshot", str(tmp_path / "last.png")])
     assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
     assert "validation errors: 0" in result.stdout and "frame_ms: median" in result.stdout, result.stdout
@@ -138,6 +158,54 @@ def test_headless_demo_flies_over_the_level_and_its_screens_match_references(tmp
         if os.environ.get("UPDATE_REFERENCE") == "1":
             reference.write_bytes((tmp_path / "screens" / f"t{t}s.png").read_bytes())
         compare_to_reference(tmp_path / "screens" / f"t{t}s.png", reference)
+
+
+def flight_screens(pack: Path, out: Path, times, *scale_args: str) -> dict:
+    """The headless flight's screens at `times` at 1280x720, as RGB arrays, with the render scale
+    each was drawn at (from demo's output)."""
+    result = run_demo([str(pack), "--headless", "--validation", "--width", "1280", "--height", "720", *scale_args,
+                       "--screens", ",".join(times), "--screens-dir", str(out), "--screenshot", str(out / "last.png")], timeout=600)
+    assert result.returncode == 0, f"demo failed ({result.returncode}):\n{result.stdout}\n{result.stderr}"
+    assert "validation errors: 0" in result.stdout, result.stdout
+    scales = {}
+    for line in result.stdout.splitlines():
+        for t in times:
+            if line.startswith("wrote ") and f"t{t}s.png (render scale " in line:
+                scales[t] = float(line.rsplit("render scale ", 1)[1].rstrip(")"))
+    assert set(scales) == set(times), result.stdout
+    return {t: (np.asarray(Image.open(out / f"t{t}s.png").convert("RGB")), scales[t]) for t in times}
+
+
+def test_upscaled_flight_screens_keep_the_full_resolution_image(tmp_path):
+    # Adaptive resolution's quality bar (issue 23): the flight's three screens drawn at half the
+    # output's size in each direction (the lowest scale the controller goes to) and brought back
+    # by the upscaler, against the same moments drawn at full size: SSIM >= 0.90 each (scikit-
+    # image's, on luma, Wang et al.'s Gaussian window). Then the default, adaptive run: each
+    # screen at the scale the controller chose is held to the same bar.
+    from skimage.metrics import structural_similarity
+
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
+    times = ("0", "3", "6")
+    full = flight_screens(pack, tmp_path / "full", times, "--render-scale", "1")
+    half = flight_screens(pack, tmp_path / "half", times, "--render-scale", "0.5")
+    adaptive = flight_screens(pack, tmp_path / "adaptive", times)
+
+    def luma(rgb):
+        return rgb.astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+
+    def ssim(a, b):
+        return structural_similarity(luma(a), luma(b), data_range=255.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
+
+    for t in times:
+        assert full[t][1] == 1.0 and half[t][1] == 0.5
+        s_half = ssim(half[t][0], full[t][0])
+        s_adaptive = ssim(adaptive[t][0], full[t][0])
+        print(f"t{t}s: SSIM {s_half:.4f} at scale 0.50; adaptive run at scale {adaptive[t][1]:.2f}: SSIM {s_adaptive:.4f}")
+        assert s_half >= 0.90, f"t{t}s at scale 0.5: SSIM {s_half:.4f} against the full-resolution frame"
+        assert s_adaptive >= 0.90, f"t{t}s at scale {adaptive[t][1]}: SSIM {s_adaptive:.4f} against the full-resolution frame"
+        # Not the same image by accident: the upscaled one really was drawn smaller.
+        assert not np.array_equal(half[t][0], full[t][0])
 
 
 def test_project_demo_content_renders(tmp_path):

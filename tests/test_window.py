@@ -98,7 +98,7 @@ def window_screenshot(xvfb, tmp_path, *extra_args):
     env = {**os.environ, "DISPLAY": xvfb, "ENGINE_VALIDATION": "1"}
     env.pop("WAYLAND_DISPLAY", None)
     demo = subprocess.Popen(
-        [str(DEMO), str(pack), "--width", str(WIDTH), "--height", str(HEIGHT), *extra_args],
+        [str(DEMO), str(pack), "--width", str(WIDTH), "--height", str(HEIGHT), "--render-scale", "1", *extra_args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -123,7 +123,7 @@ def headless_render(tmp_path):
     pack = REPO / "build" / "temple.pack"
     headless = tmp_path / "headless.png"
     result = subprocess.run(
-        [str(DEMO), str(pack), "--headless", "--frames", "1", "--width", str(WIDTH), "--height", str(HEIGHT), "--screenshot", str(headless)],
+        [str(DEMO), str(pack), "--headless", "--frames", "1", "--width", str(WIDTH), "--height", str(HEIGHT), "--render-scale", "1", "--screenshot", str(headless)],
         capture_output=True,
         text=True,
         timeout=300,

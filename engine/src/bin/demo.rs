@@ -343,6 +343,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     let pass_names: Vec<&'static str> = renderer.pass_names().collect();
     let mut pass_ms: Vec<Vec<f64>> = pass_names.iter().map(|_| record()).collect();
     let mut skin_ms = record();
+    // Frames drawn at each render scale (in hundredths).
+    let mut scales: std::collections::BTreeMap<u32, u64> = Default::default();
     for f in 0..frames {
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
         renderer.animate(&mut scene, 1.0 / 60.0);
@@ -369,6 +371,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         }
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
+        *scales.entry((renderer.frame_scale() * 100.0).round() as u32).or_default() += 1;
         if let Some(p) = renderer.profile(&gpu, 0) {
             for (v, name) in pass_ms.iter_mut().zip(&pass_names) {
                 v.push(p.ms(name));
@@ -385,7 +388,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         if let Some(secs) = screen {
             let path = args.screens_dir.join(format!("t{secs}s.png"));
             target.save_png(&path)?;
-            println!("wrote {}", path.display());
+            println!("wrote {} (render scale {:.2})", path.display(), renderer.frame_scale());
         }
     }
     target.save_png(&args.screenshot)?;
@@ -415,6 +418,8 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     if let Some(m) = median(&gpu_ms) {
         println!("gpu_ms: median {m:.3}");
     }
+    let at: Vec<String> = scales.iter().map(|(s, n)| format!("{:.2}: {n}", *s as f32 / 100.0)).collect();
+    println!("render scale {}: frames at each {{{}}}", renderer.render_scale.mode.describe(), at.join(", "));
     // The passes that ran in some frame, as the overlay lists them.
     let ran: Vec<String> = pass_names
         .iter()

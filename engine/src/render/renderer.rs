@@ -173,6 +173,9 @@ pub struct Renderer {
     pub render_scale: ScaleController,
     /// The scale each slot's last frame was drawn at (what its GPU time is evidence of).
     slot_scale: Vec<f32>,
+    /// `prepare` feeds the GPU time of the slot's finished frame to `render_scale` (on by
+    /// default); off, the owner does (the bench keeps a controller per variant it interleaves).
+    pub scale_feedback: bool,
     /// Skinned and morphed instances (`animated`): advanced by `animate`, skinned in `record`
     /// and drawn from their skinned output. Set by the owner of the scene; destroyed here.
     pub animation: Option<AnimatedScene>,
@@ -260,6 +263,7 @@ impl Renderer {
             visibility: Visibility::default(),
             render_scale: ScaleController::new(RenderScale::Fixed(1.0)),
             slot_scale: vec![1.0; frames_in_flight],
+            scale_feedback: true,
             animation: None,
         })
     }
@@ -284,8 +288,10 @@ impl Renderer {
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(&mut self, gpu: &Gpu, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, extent: vk::Extent2D) -> Result<()> {
         // The slot's last frame is finished: its GPU time at its scale sets this one's.
-        if let Some(p) = self.graph.profile(gpu, slot) {
-            self.render_scale.observe(self.slot_scale[slot], p.total_ms() as f32);
+        if self.scale_feedback && matches!(self.render_scale.mode, RenderScale::Adaptive { .. }) {
+            if let Some(p) = self.graph.profile(gpu, slot) {
+                self.render_scale.observe(self.slot_scale[slot], p.total_ms() as f32);
+            }
         }
         // The depth view shows the depth buffer as it is, at the output's size.
         let scale = if self.depth_view { 1.0 } else { self.render_scale.scale() };
@@ -493,6 +499,17 @@ impl Renderer {
     pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, scene: &GpuScene, camera: &Camera, lighting: &Lighting, target: &FrameTarget) -> Result<()> {
         self.prepare(gpu, slot, scene, camera, lighting, target.extent)?;
         self.record_prepared(gpu, cb, slot, scene, target, &mut [], &[])
+    }
+
+    /// The render scale of the frame last prepared.
+    pub fn frame_scale(&self) -> f32 {
+        self.frame.scale
+    }
+
+    /// The region of the camera's targets the frame last prepared draws (the output's size at
+    /// scale 1).
+    pub fn render_extent(&self) -> vk::Extent2D {
+        self.frame.render
     }
 
     /// GPU milliseconds and shader invocations of every pass of the frame last recorded in

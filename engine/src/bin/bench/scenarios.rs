@@ -21,6 +21,7 @@ use engine::gpu::{barrier, full_range, DevicePreference, Gpu, GpuOptions, Image,
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::render::graph::FrameProfile;
 use engine::render::renderer::{AntiAliasing, Lighting, Renderer};
+use engine::render::scale::{RenderScale, ScaleController};
 use engine::scene::GpuScene;
 use engine::sim::boids::{Aabb, BoidParams, Flock, FlockState};
 use engine::sim::clock::{ClockParams, FixedClock};
@@ -49,6 +50,7 @@ pub const NAMES: [&str; 6] = ["demo-flythrough", "culling-100k", "boids-10k", "p
 
 pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frames N] [--warmup N] [--width W] [--height H]
              [--json-dir DIR] [--level PACK] [--character PACK] [--device auto|cpu|gpu|NAME] [--quiet]
+             [--render-scale S | --target-ms T]
        bench --list
 
   --scenario LIST   comma-separated scenario names (see --list)
@@ -64,6 +66,9 @@ pub const USAGE: &str = "usage: bench --scenario NAME[,NAME..] | --all  [--frame
   --quiet           only the one-line summary per scenario
   --no-variants     measure each scenario's default only (no variant frames in between): for
                     comparing with a build that has fewer or no variants
+  --target-ms T     the GPU frame time the render scale adapts to hold (default 16.7); each
+                    series (the default, each variant) adapts on its own frames
+  --render-scale S  a fixed render scale instead (0.5..1; 1: every pass at the image's size)
 
 Scenarios:
   demo-flythrough   the demo level on a scripted camera orbit, its characters, boids and particles
@@ -76,6 +81,8 @@ Scenarios:
   boids-10k         a flock of 10 000 boids stepped and drawn
   particles-100k    a fountain holding about 100 000 live particles, stepped, sorted and drawn
   skinned-64        64 skinned characters (the --character pack) all in view, skinned every frame
+                    at the LODs their size on screen picks; frames alternate with LOD selection
+                    off, every one at full detail (its `variants.lod_off`)
   prepass-overdraw  16 overlapping opaque layers drawn back to front; frames alternate with the
                     depth pre-pass on (the scenario's times) and off (its `variants.prepass_off`)
 
@@ -98,6 +105,8 @@ pub struct Options {
     pub quiet: bool,
     /// Skip the scenarios' variants.
     pub no_variants: bool,
+    /// How the 3D passes' resolution is chosen (adaptive at 16.7 ms unless told).
+    pub render_scale: RenderScale,
 }
 
 /// Whether the command line asks for named scenarios (the other forms are the older benches).
@@ -118,7 +127,9 @@ pub fn parse(args: Vec<String>) -> Result<Options, String> {
         device: DevicePreference::from_env(),
         quiet: false,
         no_variants: false,
+        render_scale: RenderScale::default(),
     };
+    let (mut render_scale, mut target_ms) = (None, None);
     let mut it = args.into_iter();
     while let Some(flag) = it.next() {
         let mut value = |name: &str| it.next().ok_or_else(|| format!("{name} needs a value"));
@@ -140,10 +151,13 @@ pub fn parse(args: Vec<String>) -> Result<Options, String> {
             "--device" => o.device = DevicePreference::parse(&value("--device")?),
             "--quiet" => o.quiet = true,
             "--no-variants" => o.no_variants = true,
+            "--render-scale" => render_scale = Some(value("--render-scale")?),
+            "--target-ms" => target_ms = Some(value("--target-ms")?),
             "-h" | "--help" => return Err(USAGE.into()),
             other => return Err(format!("unknown argument '{other}' (try --help)")),
         }
     }
+    o.render_scale = RenderScale::from_args(render_scale.as_deref(), target_ms.as_deref())?;
     if o.frames == 0 {
         return Err("--frames must be at least 1".into());
     }
@@ -203,6 +217,7 @@ enum Switch {
     TransparencyOff,
     BicubicLightmaps,
     ReflectionsOff,
+    LodOff,
 }
 
 impl Switch {
@@ -219,6 +234,7 @@ impl Switch {
             Switch::TransparencyOff => "transparency_off",
             Switch::BicubicLightmaps => "lightmaps_bicubic",
             Switch::ReflectionsOff => "reflections_off",
+            Switch::LodOff => "lod_off",
         }
     }
 
@@ -234,6 +250,7 @@ impl Switch {
             Switch::TransparencyOff => "transparency off",
             Switch::BicubicLightmaps => "bicubic lightmaps",
             Switch::ReflectionsOff => "reflection probes off",
+            Switch::LodOff => "LOD selection off",
         }
     }
 
@@ -250,6 +267,7 @@ impl Switch {
             Switch::TransparencyOff => r.transparency = !on,
             Switch::BicubicLightmaps => r.bicubic_lightmaps = on,
             Switch::ReflectionsOff => r.reflections = !on,
+            Switch::LodOff => r.visibility.lod_selection = !on,
         }
     }
 }
@@ -274,6 +292,8 @@ struct Series {
     record_ms: Vec<f64>,
     wait_ms: Vec<f64>,
     gpu_ms: Vec<f64>,
+    /// The render scale each frame was drawn at.
+    scales: Vec<f64>,
     passes: Vec<FrameProfile>,
     counters: Map<String, Value>,
 }
@@ -345,6 +365,8 @@ fn floor_ms(gpu: &Gpu, o: &Options) -> anyhow::Result<Vec<f64>> {
 
 fn run_one(gpu: &Gpu, o: &Options, name: &str, floor: &Value) -> anyhow::Result<PathBuf> {
     let mut renderer = Renderer::new(gpu, OFFSCREEN_FORMAT, 1)?;
+    // `measure` feeds each series' controller its own frames.
+    renderer.scale_feedback = false;
     let mut target = Offscreen::new(gpu, o.width, o.height)?;
     let result = setup(gpu, o, name, &mut renderer).and_then(|mut s| {
         if o.no_variants {
@@ -401,13 +423,30 @@ fn series_json(s: &Series, floor: &Value, pass_names: &[&'static str]) -> Map<St
         "floor_ratio": ratios(&s.cpu_ms, floor),
         "gpu_frame_ms": summary(&s.gpu_ms),
         "pass_gpu_ms": pass_summary(&s.passes, pass_names),
+        "render_scale": scale_summary(&s.scales),
         "counters": s.counters,
-        "samples": { "cpu_frame_ms": s.cpu_ms, "gpu_frame_ms": s.gpu_ms },
+        "samples": { "cpu_frame_ms": s.cpu_ms, "gpu_frame_ms": s.gpu_ms, "render_scale": s.scales },
     });
     match doc {
         Value::Object(m) => m,
         _ => unreachable!("json! of an object"),
     }
+}
+
+/// The render scales of a series: median, range and how many frames ran at each.
+fn scale_summary(scales: &[f64]) -> Value {
+    let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+    for s in scales {
+        *counts.entry(format!("{s:.2}")).or_default() += 1;
+    }
+    let mut sorted = scales.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    json!({
+        "p50": sorted.get(sorted.len() / 2),
+        "min": sorted.first(),
+        "max": sorted.last(),
+        "frames_at": counts,
+    })
 }
 
 fn print_summary(o: &Options, name: &str, doc: &Value, variants: &[Switch]) {
@@ -430,6 +469,7 @@ fn print_summary(o: &Options, name: &str, doc: &Value, variants: &[Switch]) {
         f(&doc["cpu_record_ms"]["p50"]),
         f(&doc["fence_wait_ms"]["p50"])
     );
+    println!("{:<17} render scale {} (frames at each: {})", "", o.render_scale.describe(), doc["render_scale"]["frames_at"]);
     for switch in variants {
         let c = &doc["variants"][switch.key()]["cpu_frame_ms"];
         let ratio = f(&c["p50"]) / f(&cpu["p50"]);
@@ -452,10 +492,13 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscreen, s: &mut Setup) -> anyhow::Result<Vec<Series>> {
     let mut series: Vec<Series> = (0..1 + s.variants.len()).map(|_| Series::default()).collect();
     let per_frame = series.len();
+    // Each series adapts its render scale to its own frames (a variant's cost is its own).
+    let mut scalers = vec![ScaleController::new(o.render_scale); per_frame];
     for k in 0..(o.warmup + o.frames) * per_frame {
         // A frame's variants share its simulation step, so all see the same content.
         let (frame, variant) = (k / per_frame, k % per_frame);
         select(renderer, &s.variants, variant);
+        std::mem::swap(&mut renderer.render_scale, &mut scalers[variant]);
         let t = Instant::now();
         if variant == 0 {
             renderer.animate(&mut s.scene, FRAME_S as f32);
@@ -466,6 +509,10 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         let update_ms = t.elapsed().as_secs_f64() * 1e3;
         let timing = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false)?;
         let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
+        // The frame's GPU time moves its series' scale for that series' next frame.
+        let scale = renderer.frame_scale();
+        renderer.render_scale.observe(scale, timing.gpu_ms.unwrap_or(cpu_ms) as f32);
+        std::mem::swap(&mut renderer.render_scale, &mut scalers[variant]);
         if frame < o.warmup {
             continue;
         }
@@ -475,6 +522,7 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         out.record_ms.push(timing.record_ms);
         out.wait_ms.push(timing.wait_ms);
         out.gpu_ms.extend(timing.gpu_ms);
+        out.scales.push(scale as f64);
         out.passes.extend(renderer.profile(gpu, 0));
         out.counters = counters(gpu, renderer, &s.scene, &s.world);
     }
@@ -514,6 +562,10 @@ fn counters(gpu: &Gpu, r: &Renderer, scene: &GpuScene, world: &World) -> Map<Str
     put("cull_tested", json!(c.cull.tested));
     put("culled", json!(c.cull.culled));
     put("drawn", json!(c.cull.visible));
+    // Of the culled, those occlusion culling hid (`drawn` is after both).
+    put("occlusion_tested", json!(c.cull.occlusion_tested));
+    put("occlusion_culled", json!(c.cull.occlusion_culled));
+    put("occluders", json!(r.visibility.occlusion_culler.stats.occluders));
     put("triangles", json!(c.triangles));
     put("draw_calls", json!(r.draw_calls));
     put("lod_histogram", json!(c.lod_histogram));

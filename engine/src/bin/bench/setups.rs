@@ -162,7 +162,9 @@ fn particles(gpu: &Gpu, renderer: &mut Renderer, n: usize) -> anyhow::Result<Set
 }
 
 /// `n` copies of the character pack on a grid, each playing its first clip at its own phase,
-/// every one at full detail and in view, so the skinning pass skins them all every frame.
+/// every one in view, so the skinning pass skins them all every frame: at the LOD their size on
+/// screen picks (morphing meshes have LOD chains too), and in the variant `lod_off` all at full
+/// detail (the skinning pass's worst case).
 fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow::Result<Setup> {
     let single = read_pack(&o.character)?;
     if single.manifest.animation.skins.is_empty() || single.manifest.animation.clips.is_empty() {
@@ -178,7 +180,6 @@ fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow:
         anim.play(i, clip, phase, 1.0);
     }
     renderer.animation = Some(anim);
-    renderer.visibility.lod_selection = false;
     // Framed on the characters' placements (their meshes' boxes), before a pose moves the
     // bounds: the same view whatever the clips do.
     let (lo, hi) = scene.bounds();
@@ -192,7 +193,7 @@ fn skinned(gpu: &Gpu, o: &Options, renderer: &mut Renderer, n: usize) -> anyhow:
         world: empty_world(),
         camera: Box::new(move |_| camera),
         lighting: Lighting::default(),
-        variants: Vec::new(),
+        variants: vec![Switch::LodOff],
         content,
     })
 }
