@@ -36,9 +36,14 @@ const bool SKY = (VARIANT & 1) != 0;
 const bool GAMMA2 = (VARIANT & 2) != 0;
 
 // The colour as the target stores it: linear for an _SRGB target (the hardware encodes), or
-// gamma 2 for the upscaler's input.
+// gamma 2 for the upscaler's input, with the luma it finds edges by in alpha (computed once per
+// texel here rather than for each of the 12 output pixels that read it).
 vec4 encoded(vec3 c) {
-    return vec4(GAMMA2 ? sqrt(c) : c, 1.0);
+    if (GAMMA2) {
+        vec3 g = sqrt(c);
+        return vec4(g, dot(g, vec3(0.25, 0.5, 0.25)));
+    }
+    return vec4(c, 1.0);
 }
 
 // The background's radiance along this pixel's view ray: the level's sky radiance in nits, as
@@ -66,7 +71,7 @@ void main() {
     vec3 ls = max(c.rgb, 0.0) * tm.params.x;
     float y = dot(ls, vec3(0.2126, 0.7152, 0.0722));
     if (y <= 0.0) {
-        out_color = vec4(0.0, 0.0, 0.0, 1.0);
+        out_color = encoded(vec3(0.0));
         return;
     }
     float ld = y / (1.0 + y);

@@ -5,11 +5,11 @@
 // texels around it (the 4 nearest and their 8 edge neighbours) weighted by a Lanczos-2-like
 // kernel stretched along the local edge and shortened across it, so an edge is resampled along
 // its own direction (no stair steps, no blur across it), then clamped to the 4 nearest texels'
-// range (no ringing). Optionally followed by its contrast-adaptive sharpening (RCAS, `sharpen.frag`).
+// range (no ringing).
 //
 // Input: `low`, a UNORM image of the output's size whose top-left `in_size` texels hold the
-// frame as sqrt(colour) (gamma 2, shaders/tonemap.frag GAMMA2): the kernel works on perceptual
-// values, as FSR 1 asks, and the decode is one multiply. Output: linear colour for the _SRGB
+// frame as sqrt(colour) (gamma 2, shaders/tonemap.frag GAMMA2) and its luma in alpha: the kernel
+// works on perceptual values, as FSR 1 asks, and the decode is one multiply. Output: linear colour for the _SRGB
 // target (the hardware encodes).
 
 layout(set = 0, binding = 0) uniform sampler2D low;
@@ -22,15 +22,10 @@ layout(push_constant) uniform Upscale {
 layout(location = 0) out vec4 out_color;
 
 // The texel at integer `p`, clamped into the drawn region (the image is larger: texels past it
-// hold nothing of this frame).
-vec3 tap(ivec2 p) {
+// hold nothing of this frame): gamma-2 colour, and its luma in alpha (the tone map's).
+vec4 tap(ivec2 p) {
     ivec2 hi = ivec2(up.scale.zw) - 1;
-    return texelFetch(low, clamp(p, ivec2(0), hi), 0).rgb;
-}
-
-// A cheap luma for edge finding (2x the usual weights' green, as EASU does: only ratios matter).
-float luma(vec3 c) {
-    return c.b * 0.5 + (c.r * 0.5 + c.g);
+    return texelFetch(low, clamp(p, ivec2(0), hi), 0);
 }
 
 // One of the four nearest texels' votes for the edge direction and its length (how much it looks
@@ -83,12 +78,12 @@ void main() {
     //  e f g h
     //  i j k l
     //    n o
-    vec3 b = tap(p + ivec2(0, -1)), c = tap(p + ivec2(1, -1));
-    vec3 e = tap(p + ivec2(-1, 0)), f = tap(p), g = tap(p + ivec2(1, 0)), h = tap(p + ivec2(2, 0));
-    vec3 i = tap(p + ivec2(-1, 1)), j = tap(p + ivec2(0, 1)), k = tap(p + ivec2(1, 1)), l = tap(p + ivec2(2, 1));
-    vec3 n = tap(p + ivec2(0, 2)), o = tap(p + ivec2(1, 2));
-    float lb = luma(b), lc = luma(c), le = luma(e), lf = luma(f), lg = luma(g), lh = luma(h);
-    float li = luma(i), lj = luma(j), lk = luma(k), ll = luma(l), ln = luma(n), lo = luma(o);
+    vec4 b = tap(p + ivec2(0, -1)), c = tap(p + ivec2(1, -1));
+    vec4 e = tap(p + ivec2(-1, 0)), f = tap(p), g = tap(p + ivec2(1, 0)), h = tap(p + ivec2(2, 0));
+    vec4 i = tap(p + ivec2(-1, 1)), j = tap(p + ivec2(0, 1)), k = tap(p + ivec2(1, 1)), l = tap(p + ivec2(2, 1));
+    vec4 n = tap(p + ivec2(0, 2)), o = tap(p + ivec2(1, 2));
+    float lb = b.a, lc = c.a, le = e.a, lf = f.a, lg = g.a, lh = h.a;
+    float li = i.a, lj = j.a, lk = k.a, ll = l.a, ln = n.a, lo = o.a;
 
     // The edge direction and length: the four nearest texels' votes, bilinearly weighted.
     vec2 dir = vec2(0.0);
@@ -111,21 +106,21 @@ void main() {
 
     vec3 acc = vec3(0.0);
     float wsum = 0.0;
-    accumulate(acc, wsum, vec2(0.0, -1.0) - pp, dir, len2, lob, clip, b);
-    accumulate(acc, wsum, vec2(1.0, -1.0) - pp, dir, len2, lob, clip, c);
-    accumulate(acc, wsum, vec2(-1.0, 1.0) - pp, dir, len2, lob, clip, i);
-    accumulate(acc, wsum, vec2(0.0, 1.0) - pp, dir, len2, lob, clip, j);
-    accumulate(acc, wsum, vec2(0.0, 0.0) - pp, dir, len2, lob, clip, f);
-    accumulate(acc, wsum, vec2(-1.0, 0.0) - pp, dir, len2, lob, clip, e);
-    accumulate(acc, wsum, vec2(1.0, 1.0) - pp, dir, len2, lob, clip, k);
-    accumulate(acc, wsum, vec2(2.0, 1.0) - pp, dir, len2, lob, clip, l);
-    accumulate(acc, wsum, vec2(2.0, 0.0) - pp, dir, len2, lob, clip, h);
-    accumulate(acc, wsum, vec2(1.0, 0.0) - pp, dir, len2, lob, clip, g);
-    accumulate(acc, wsum, vec2(1.0, 2.0) - pp, dir, len2, lob, clip, o);
-    accumulate(acc, wsum, vec2(0.0, 2.0) - pp, dir, len2, lob, clip, n);
+    accumulate(acc, wsum, vec2(0.0, -1.0) - pp, dir, len2, lob, clip, b.rgb);
+    accumulate(acc, wsum, vec2(1.0, -1.0) - pp, dir, len2, lob, clip, c.rgb);
+    accumulate(acc, wsum, vec2(-1.0, 1.0) - pp, dir, len2, lob, clip, i.rgb);
+    accumulate(acc, wsum, vec2(0.0, 1.0) - pp, dir, len2, lob, clip, j.rgb);
+    accumulate(acc, wsum, vec2(0.0, 0.0) - pp, dir, len2, lob, clip, f.rgb);
+    accumulate(acc, wsum, vec2(-1.0, 0.0) - pp, dir, len2, lob, clip, e.rgb);
+    accumulate(acc, wsum, vec2(1.0, 1.0) - pp, dir, len2, lob, clip, k.rgb);
+    accumulate(acc, wsum, vec2(2.0, 1.0) - pp, dir, len2, lob, clip, l.rgb);
+    accumulate(acc, wsum, vec2(2.0, 0.0) - pp, dir, len2, lob, clip, h.rgb);
+    accumulate(acc, wsum, vec2(1.0, 0.0) - pp, dir, len2, lob, clip, g.rgb);
+    accumulate(acc, wsum, vec2(1.0, 2.0) - pp, dir, len2, lob, clip, o.rgb);
+    accumulate(acc, wsum, vec2(0.0, 2.0) - pp, dir, len2, lob, clip, n.rgb);
     // No ringing: within the four nearest texels' range.
-    vec3 lo4 = min(min(f, g), min(j, k));
-    vec3 hi4 = max(max(f, g), max(j, k));
+    vec3 lo4 = min(min(f.rgb, g.rgb), min(j.rgb, k.rgb));
+    vec3 hi4 = max(max(f.rgb, g.rgb), max(j.rgb, k.rgb));
     vec3 c2 = clamp(acc / wsum, lo4, hi4);
     out_color = vec4(c2 * c2, 1.0);
 }
