@@ -1,15 +1,18 @@
 //! Loading a cooked pack onto the device: every mesh's vertices and indices into one vertex and
 //! one index buffer, textures (with the sampler state each material slot asks for), material
 //! descriptor sets, the baked lightmap pages as one array texture, the probe grid, and the
-//! instances from the node hierarchy. What it makes is a `scene::GpuScene`.
+//! instances from the node hierarchy, and each small LOD's triangles kept on the CPU for
+//! occlusion culling. What it makes is a `scene::GpuScene`.
 
 use crate::gpu::{Buffer, Gpu, Image};
+use crate::render::occlusion::{OccluderMesh, MAX_OCCLUDER_TRIANGLES};
 use crate::render::samplers::SamplerCache;
-use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, SceneLayouts, TextureSlots};
+use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, LocalBounds, SceneLayouts, TextureSlots};
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::Vec3;
 use pack::{Pack, TextureFormat, TextureTransform};
+use std::sync::Arc;
 
 /// What the mesh shaders read per material (set 2 binding 2, std430; `MaterialConstants` in
 /// shaders/mesh_draw.glsl): the emission and the UV transforms of the slots they sample.
@@ -96,12 +99,15 @@ impl GpuScene {
         for mesh in &m.meshes {
             let mut lods = Vec::with_capacity(mesh.lods.len());
             for lod in &mesh.lods {
+                let (bounds, occluder) = lod_geometry(pack, lod, mesh);
                 lods.push(GpuLod {
                     base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
                     first_index: (index_bytes.len() / 4) as u32,
                     submeshes: lod.submeshes.clone(),
                     error: lod.error,
                     triangles: lod.index_count / 3,
+                    bounds,
+                    occluder,
                 });
                 vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
                 index_bytes.extend_from_slice(pack.bytes(lod.indices));
@@ -306,6 +312,26 @@ impl GpuScene {
             flock_meshes: flock_meshes.keep(),
         })
     }
+}
+
+/// A LOD's box in the mesh's space (the mesh's own where it has no vertices) and, for a LOD of
+/// up to `occlusion::MAX_OCCLUDER_TRIANGLES` triangles, its triangles for occlusion culling.
+fn lod_geometry(pack: &Pack, lod: &pack::MeshLod, mesh: &pack::Mesh) -> (LocalBounds, Option<Arc<OccluderMesh>>) {
+    let positions: Vec<Vec3> = pack
+        .bytes(lod.vertices)
+        .chunks_exact(pack::VERTEX_STRIDE)
+        .map(|v| Vec3::from(bytemuck::pod_read_unaligned::<[f32; 3]>(&v[..12])))
+        .collect();
+    let bounds = match positions.iter().copied().reduce(Vec3::min).zip(positions.iter().copied().reduce(Vec3::max)) {
+        Some((min, max)) => LocalBounds { min, max },
+        None => LocalBounds { min: Vec3::from(mesh.bounds_min), max: Vec3::from(mesh.bounds_max) },
+    };
+    let occluder = (lod.index_count as usize / 3 <= MAX_OCCLUDER_TRIANGLES && lod.index_count >= 3).then(|| {
+        let indices: Vec<u32> = pack.bytes(lod.indices).chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+        let submeshes: Vec<(u32, u32)> = lod.submeshes.iter().map(|s| (s.first_index, s.index_count)).collect();
+        Arc::new(OccluderMesh::new(&positions, &indices, &submeshes))
+    });
+    (bounds, occluder)
 }
 
 /// The probe grid as the shaders read it (std430): origin, spacing (vec4s), counts (uvec4),

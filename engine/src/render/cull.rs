@@ -110,7 +110,9 @@ impl Spheres {
     }
 }
 
-/// What one culling pass did (exact counts: tests and the overlay pin them).
+/// What one culling pass did (exact counts: tests and the overlay pin them). With occlusion
+/// culling (`render::occlusion`, run by `Visibility` on the frustum's survivors) `culled` counts
+/// both kinds and `visible` what is left, the instances drawn.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CullCounts {
     pub tested: u32,
@@ -118,6 +120,10 @@ pub struct CullCounts {
     pub visible: u32,
     /// Visible and entirely inside the frustum.
     pub inside: u32,
+    /// Frustum-visible instances tested against the occluders (the occluders themselves are not).
+    pub occlusion_tested: u32,
+    /// Of them, those hidden (also counted in `culled`).
+    pub occlusion_culled: u32,
 }
 
 /// Instances per parallel work item.
@@ -164,7 +170,7 @@ pub fn cull_spheres(frustum: &Frustum, s: &Spheres, visible: &mut Vec<u32>) -> C
         inside
     };
     let shown = (visible.len() - before) as u32;
-    CullCounts { tested: n as u32, culled: n as u32 - shown, visible: shown, inside }
+    CullCounts { tested: n as u32, culled: n as u32 - shown, visible: shown, inside, ..Default::default() }
 }
 
 /// A local bounding sphere placed by an affine `model` matrix: centre transformed, radius scaled
@@ -210,7 +216,7 @@ mod tests {
             let s = grid(0.5);
             let mut vis = Vec::new();
             let c = cull_spheres(&f, &s, &mut vis);
-            assert_eq!(c, CullCounts { tested: 441, culled: 320, visible: 121, inside: 100 });
+            assert_eq!(c, CullCounts { tested: 441, culled: 320, visible: 121, inside: 100, ..Default::default() });
             for &i in &vis {
                 let (x, z) = (s.x[i as usize], s.z[i as usize]);
                 assert!(z <= 0.0 && x.abs() <= -z, "({x}, {z})");

@@ -24,6 +24,12 @@ pub struct GpuLod {
     /// Geometric error to LOD 0, metres in object space (0 for LOD 0).
     pub error: f32,
     pub triangles: u32,
+    /// This LOD's box in the mesh's space (a coarse LOD's vertices can lie outside LOD 0's,
+    /// which `GpuMesh::bounds_min/max` are).
+    pub bounds: LocalBounds,
+    /// Its triangles on the CPU, for occlusion culling (`render::occlusion`): LODs of up to
+    /// `occlusion::MAX_OCCLUDER_TRIANGLES` triangles.
+    pub occluder: Option<std::sync::Arc<crate::render::occlusion::OccluderMesh>>,
 }
 
 #[derive(Debug, Clone)]

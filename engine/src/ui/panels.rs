@@ -55,6 +55,7 @@ impl RendererPanel<'_> {
         };
         control("depth pre-pass", ui.checkbox(&mut r.prepass, "depth pre-pass"));
         control("frustum culling", ui.checkbox(&mut r.visibility.culling, "frustum culling"));
+        control("occlusion culling", ui.checkbox(&mut r.visibility.occlusion, "occlusion culling (CPU depth buffer of the largest static occluders)"));
         control("LOD selection", ui.checkbox(&mut r.visibility.lod_selection, "LOD selection (off: LOD 0 everywhere)"));
         control("freeze LOD", ui.checkbox(&mut r.visibility.freeze_lod, "freeze LODs (keep the last choice per instance)"));
         control("count shaded fragments", ui.checkbox(&mut r.count_fragments, "count shaded fragments (an atomic per fragment)"));
@@ -140,6 +141,9 @@ fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
         };
         row("instances tested", c.cull.tested.to_string());
         row("instances culled", c.cull.culled.to_string());
+        let o = &renderer.visibility.occlusion_culler.stats;
+        row("occlusion tested / culled", format!("{} / {}", c.cull.occlusion_tested, c.cull.occlusion_culled));
+        row("occluders / triangles", format!("{} / {}", o.occluders, o.occluder_triangles));
         row("instances drawn", c.cull.visible.to_string());
         row("triangles / draw calls", format!("{} / {}", c.triangles, renderer.draw_calls));
         let buckets: Vec<String> = c
