@@ -39,6 +39,8 @@ pub const LDR: ResourceId = ResourceId("ldr");
 /// The tone-mapped frame at the render scale, gamma 2 in a UNORM image (`LOW_FORMAT`), which the
 /// upscaler resamples to the output: when the frame is drawn below the output's size.
 pub const LDR_LOW: ResourceId = ResourceId("ldr (render scale)");
+/// `LDR_LOW` after FXAA, when it is on below the output's size (the upscaler's input then).
+pub const LDR_LOW_AA: ResourceId = ResourceId("ldr (render scale, fxaa)");
 /// `LDR_LOW`'s format: 8 bits of sqrt(colour) (shaders/tonemap.frag GAMMA2).
 pub const LOW_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 
@@ -181,6 +183,8 @@ pub struct FrameCx<'a> {
     /// The region of the camera's targets this frame draws: the output's size times the render
     /// scale (the output's size when `settings.upscale` is off).
     pub render: vk::Extent2D,
+    /// The output's size.
+    pub output: vk::Extent2D,
     pub animation: Option<&'a mut AnimatedScene>,
     /// Draw calls the mesh passes made (passes add theirs).
     pub draw_calls: u32,

@@ -427,8 +427,7 @@ impl Renderer {
             reflection_probes: self.reflections && scene.reflection_probe_count > 0,
             depth_test: self.depth_test,
             depth_view: self.depth_view,
-            // Below the output's size the upscaler's edge-adaptive resampling stands in for FXAA.
-            fxaa: self.aa == AntiAliasing::Fxaa && !upscale,
+            fxaa: self.aa == AntiAliasing::Fxaa,
             upscale,
             samples: self.samples(gpu),
         };
@@ -456,6 +455,7 @@ impl Renderer {
             boids: &self.boids,
             tonemap: &mut self.tonemap,
             render,
+            output: target.extent,
             animation: self.animation.as_mut(),
             draw_calls: 0,
         };

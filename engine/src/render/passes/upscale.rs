@@ -4,7 +4,7 @@
 //! the frame when it is on (the tone map runs at the render scale, before it).
 
 use crate::gpu::Gpu;
-use crate::render::frame::{FrameCx, LDR_LOW};
+use crate::render::frame::{FrameCx, LDR_LOW, LDR_LOW_AA};
 use crate::render::fullscreen::FullscreenFilter;
 use crate::render::graph::{Access, Io, Pass, Rec, OUTPUT};
 use crate::render::shaders;
@@ -44,12 +44,12 @@ impl Pass for Upscale {
 
     fn declare(&mut self, cx: &FrameCx, io: &mut Io) {
         if cx.settings.upscale {
-            io.uses(LDR_LOW, Access::SampledFragment).uses(OUTPUT, Access::ColorWrite);
+            io.uses(input(cx), Access::SampledFragment).uses(OUTPUT, Access::ColorWrite);
         }
     }
 
-    fn record(&mut self, _cx: &mut FrameCx, rec: &Rec) -> Result<()> {
-        let (input, output) = (rec.image(LDR_LOW), rec.image(OUTPUT));
+    fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
+        let (input, output) = (rec.image(input(cx)), rec.image(OUTPUT));
         let (i, o) = (input.extent, output.extent);
         let push = UpscalePush { scale: Vec4::new(i.width as f32 / o.width as f32, i.height as f32 / o.height as f32, i.width as f32, i.height as f32) };
         self.filter.draw(rec, input.view, output, bytemuck::bytes_of(&push));
@@ -58,5 +58,14 @@ impl Pass for Upscale {
 
     fn destroy(&mut self, gpu: &Gpu) {
         self.filter.destroy(gpu);
+    }
+}
+
+/// The tone-mapped frame at the render scale, after FXAA when it is on.
+fn input(cx: &FrameCx) -> crate::render::graph::ResourceId {
+    if cx.settings.fxaa {
+        LDR_LOW_AA
+    } else {
+        LDR_LOW
     }
 }
