@@ -81,6 +81,8 @@ pub struct ScaleController {
     /// GPU times of the frames drawn at `scale` since it was set, newest last (at most
     /// `UP_FRAMES`).
     recent: Vec<f32>,
+    /// The adaptive target it was made with, kept when switched to a fixed scale.
+    last_target: Option<f32>,
 }
 
 impl Default for ScaleController {
@@ -91,7 +93,19 @@ impl Default for ScaleController {
 
 impl ScaleController {
     pub fn new(mode: RenderScale) -> ScaleController {
-        ScaleController { mode, scale: 1.0, recent: Vec::with_capacity(UP_FRAMES) }
+        let last_target = match mode {
+            RenderScale::Adaptive { target_ms } => Some(target_ms),
+            RenderScale::Fixed(_) => None,
+        };
+        ScaleController { mode, scale: 1.0, recent: Vec::with_capacity(UP_FRAMES), last_target }
+    }
+
+    /// The frame time the adaptive mode holds (its target, or the last one it had, or 60 fps).
+    pub fn target_ms(&self) -> f32 {
+        match self.mode {
+            RenderScale::Adaptive { target_ms } => target_ms,
+            RenderScale::Fixed(_) => self.last_target.unwrap_or(DEFAULT_TARGET_MS),
+        }
     }
 
     /// The scale the next frame draws at.

@@ -4,6 +4,7 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
+use crate::render::scale::RenderScale;
 use crate::render::renderer::{AntiAliasing, Renderer};
 use crate::render::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
@@ -66,6 +67,14 @@ impl RendererPanel<'_> {
         control("transparency", ui.checkbox(&mut r.transparency, "transparency (BLEND materials; off: not drawn)"));
         control("bicubic lightmaps", ui.checkbox(&mut r.bicubic_lightmaps, "bicubic lightmaps (a cubic B-spline; off: bilinear)"));
         control("reflection probes", ui.checkbox(&mut r.reflections, "reflection probes (off: the lightmap's light as the environment)"));
+        // Adaptive render scale on and off (off: every pass at the output's size); the target
+        // is kept from the command line, or 60 fps.
+        let mut adaptive = matches!(r.render_scale.mode, RenderScale::Adaptive { .. });
+        let was = adaptive;
+        control("adaptive resolution", ui.checkbox(&mut adaptive, "adaptive render scale (off: every pass at the output's size)"));
+        if adaptive != was {
+            r.render_scale.mode = if adaptive { RenderScale::Adaptive { target_ms: r.render_scale.target_ms() } } else { RenderScale::Fixed(1.0) };
+        }
         // Each mode's cost shows in the pass list above: MSAA's in every camera pass and the
         // resolve pass, FXAA's as the fxaa pass.
         ui.horizontal(|ui| {
@@ -153,6 +162,9 @@ fn counters(ui: &mut egui::Ui, renderer: &Renderer, last: &FrameStats) {
             .map(|(i, n)| if i + 1 == LOD_BUCKETS { format!("{i}+:{n}") } else { format!("{i}:{n}") })
             .collect();
         row("LOD histogram", buckets.join(" "));
+        // The overlay itself is drawn after the upscaler, at the output's size.
+        let e = renderer.render_extent();
+        row("render scale", format!("{:.2} ({}x{}, {})", renderer.frame_scale(), e.width, e.height, renderer.render_scale.mode.describe()));
         row("fragments shaded (counter)", last.fragments_shaded.map_or_else(|| "off".to_string(), |n| n.to_string()));
     });
 }
