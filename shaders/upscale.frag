@@ -7,6 +7,11 @@
 // its own direction (no stair steps, no blur across it), then clamped to the 4 nearest texels'
 // range (no ringing).
 //
+// On CPU devices (lavapipe) the same 12 texels are weighted by the separable Catmull-Rom cubic
+// instead (CUBIC, passes/upscale.rs): a sharp cubic (its negative lobes restore contrast the
+// resampling takes), not edge-adaptive; measured there at 0.62x EASU's cost for the same SSIM
+// against the full-size frame to within 0.003 (README, "Frame budget").
+//
 // Input: `low`, a UNORM image of the output's size whose top-left `in_size` texels hold the
 // frame as sqrt(colour) (gamma 2, shaders/tonemap.frag GAMMA2) and its luma in alpha: the kernel
 // works on perceptual values, as FSR 1 asks, and the decode is one multiply. Output: linear colour for the _SRGB
@@ -20,6 +25,8 @@ layout(push_constant) uniform Upscale {
 } up;
 
 layout(location = 0) out vec4 out_color;
+
+layout(constant_id = 0) const bool CUBIC = false;
 
 // The texel at integer `p`, clamped into the drawn region (the image is larger: texels past it
 // hold nothing of this frame): gamma-2 colour, and its luma in alpha (the tone map's).
@@ -85,6 +92,25 @@ void main() {
     float lb = b.a, lc = c.a, le = e.a, lf = f.a, lg = g.a, lh = h.a;
     float li = i.a, lj = j.a, lk = k.a, ll = l.a, ln = n.a, lo = o.a;
 
+    if (CUBIC) {
+        // Catmull-Rom weights per axis at the fraction pp; the 4x4's corners (a few percent of
+        // the weight) left out, as EASU leaves them, and the rest renormalised.
+        vec2 w0 = pp * (-0.5 + pp * (1.0 - 0.5 * pp));
+        vec2 w1 = 1.0 + pp * pp * (-2.5 + 1.5 * pp);
+        vec2 w2 = pp * (0.5 + pp * (2.0 - 1.5 * pp));
+        vec2 w3 = pp * pp * (-0.5 + 0.5 * pp);
+        vec3 acc = b.rgb * (w1.x * w0.y) + c.rgb * (w2.x * w0.y)
+            + e.rgb * (w0.x * w1.y) + f.rgb * (w1.x * w1.y) + g.rgb * (w2.x * w1.y) + h.rgb * (w3.x * w1.y)
+            + i.rgb * (w0.x * w2.y) + j.rgb * (w1.x * w2.y) + k.rgb * (w2.x * w2.y) + l.rgb * (w3.x * w2.y)
+            + n.rgb * (w1.x * w3.y) + o.rgb * (w2.x * w3.y);
+        float wsum = (w1.x + w2.x) * (w0.y + w3.y) + (w0.x + w1.x + w2.x + w3.x) * (w1.y + w2.y);
+        // The cubic's overshoot clamped to the 4 nearest texels' range, as EASU's.
+        vec3 lo4 = min(min(f.rgb, g.rgb), min(j.rgb, k.rgb));
+        vec3 hi4 = max(max(f.rgb, g.rgb), max(j.rgb, k.rgb));
+        vec3 cc = clamp(acc / wsum, lo4, hi4);
+        out_color = vec4(cc * cc, 1.0);
+        return;
+    }
     // The edge direction and length: the four nearest texels' votes, bilinearly weighted.
     vec2 dir = vec2(0.0);
     float len = 0.0;

@@ -188,7 +188,9 @@ def test_upscaled_flight_screens_keep_the_full_resolution_image(tmp_path):
     assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
     times = ("0", "3", "6")
     full = flight_screens(pack, tmp_path / "full", times, "--render-scale", "1")
+    # This device's default upscaler (the cubic on lavapipe), and EASU, the GPUs'.
     half = flight_screens(pack, tmp_path / "half", times, "--render-scale", "0.5")
+    easu = flight_screens(pack, tmp_path / "easu", times, "--render-scale", "0.5", "--upscaler", "easu")
     adaptive = flight_screens(pack, tmp_path / "adaptive", times)
 
     def luma(rgb):
@@ -200,12 +202,14 @@ def test_upscaled_flight_screens_keep_the_full_resolution_image(tmp_path):
     for t in times:
         assert full[t][1] == 1.0 and half[t][1] == 0.5
         s_half = ssim(half[t][0], full[t][0])
+        s_easu = ssim(easu[t][0], full[t][0])
         s_adaptive = ssim(adaptive[t][0], full[t][0])
-        print(f"t{t}s: SSIM {s_half:.4f} at scale 0.50; adaptive run at scale {adaptive[t][1]:.2f}: SSIM {s_adaptive:.4f}")
+        print(f"t{t}s: SSIM {s_half:.4f} at scale 0.50 (default upscaler), {s_easu:.4f} with EASU; adaptive run at scale {adaptive[t][1]:.2f}: SSIM {s_adaptive:.4f}")
         assert s_half >= 0.90, f"t{t}s at scale 0.5: SSIM {s_half:.4f} against the full-resolution frame"
+        assert s_easu >= 0.90, f"t{t}s at scale 0.5 with EASU: SSIM {s_easu:.4f} against the full-resolution frame"
         assert s_adaptive >= 0.90, f"t{t}s at scale {adaptive[t][1]}: SSIM {s_adaptive:.4f} against the full-resolution frame"
         # Not the same image by accident: the upscaled one really was drawn smaller.
-        assert not np.array_equal(half[t][0], full[t][0])
+        assert not np.array_equal(half[t][0], full[t][0]) and not np.array_equal(easu[t][0], half[t][0])
 
 
 def test_project_demo_content_renders(tmp_path):
@@ -246,6 +250,12 @@ def test_demo_rejects_bad_arguments():
         assert result.returncode == 2, f"{args}: exit {result.returncode}"
         assert "demo: error:" in result.stderr and "usage:" in result.stderr
         assert "panicked" not in result.stderr
+    for args, says in ((["--render-scale", "0.3"], "--render-scale: '0.3' is not a scale from 0.5 to 1"),
+                       (["--target-ms", "fast"], "--target-ms: 'fast' is not a frame time in milliseconds"),
+                       (["--render-scale", "1", "--target-ms", "16"], "give one of them"),
+                       (["--upscaler", "dlss"], "--upscaler: 'dlss' is not an upscaler (easu, cubic)")):
+        result = run_demo(args)
+        assert result.returncode == 2 and says in result.stderr and "panicked" not in result.stderr, (args, result.stderr)
     assert DEMO.exists()
 
 

@@ -44,6 +44,8 @@ pub struct WindowOptions {
     pub aa: crate::render::renderer::AntiAliasing,
     /// How the 3D passes' resolution is chosen (the overlay shows the scale).
     pub render_scale: crate::render::scale::RenderScale,
+    /// The upscaler's filter (None: the device kind's default).
+    pub upscaler: Option<crate::render::scale::Upscaler>,
     pub title: String,
     /// Show the debug overlay from the first frame (F1 toggles it either way).
     pub overlay: bool,
@@ -244,6 +246,9 @@ impl State {
         let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         renderer.aa = opts.aa;
         renderer.render_scale = crate::render::scale::ScaleController::new(opts.render_scale);
+        if let Some(u) = opts.upscaler {
+            renderer.upscaler = u;
+        }
         let loaded = renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| {
             let scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
             match crate::anim::animated::AnimatedScene::new(&gpu, pack, &scene, FRAMES_IN_FLIGHT) {

@@ -10,7 +10,7 @@ use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
 use engine::ui::{self, FrameStats, Overlay};
 use engine::render::renderer::{Lighting, Renderer};
-use engine::render::scale::{RenderScale, ScaleController};
+use engine::render::scale::{RenderScale, ScaleController, Upscaler};
 use engine::scene::GpuScene;
 use engine::stats::{median, percentile};
 use engine::app::{self, WindowOptions};
@@ -27,7 +27,7 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
             [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
             [--overlay] [--device auto|cpu|gpu|NAME]
             [--validation] [--shadow-map-size N] [--aa off|msaa|fxaa]
-            [--render-scale S | --target-ms T]
+            [--render-scale S | --target-ms T] [--upscaler easu|cubic]
        demo --dump-pose PACK --clip NAME --time T
 
   PACK                 cooked pack to show (default: build/temple.pack, made by `make cook`);
@@ -58,6 +58,8 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
                        size, and an edge-adaptive upscaler (FSR 1 EASU) brings the frame back
   --render-scale S     draw the 3D passes at this fixed scale instead (0.5..1; 1 = off: every
                        pass at the output's size)
+  --upscaler U         below the output's size: easu (FSR 1's edge-adaptive upsampler, the
+                       default on GPUs) or cubic (Catmull-Rom, the default on CPU devices)
   --dump-pose PACK     print clip NAME's pose at T seconds (clamped to the clip) as JSON: node
                        world matrices, joint matrices, morph weights, skinned LOD 0 vertices
 
@@ -95,6 +97,7 @@ struct Args {
     shadow_map_size: u32,
     aa: engine::render::renderer::AntiAliasing,
     render_scale: RenderScale,
+    upscaler: Option<Upscaler>,
     /// `--dump-pose PACK --clip NAME --time T`.
     dump_pose: Option<(PathBuf, Option<String>, Option<f32>)>,
 }
@@ -119,6 +122,7 @@ fn parse_args() -> Result<Args, String> {
         shadow_map_size: engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE,
         aa: Default::default(),
         render_scale: RenderScale::default(),
+        upscaler: None,
         dump_pose: None,
     };
     let (mut render_scale, mut target_ms) = (None, None);
@@ -162,6 +166,7 @@ fn parse_args() -> Result<Args, String> {
             "--aa" => a.aa = value("--aa")?.parse().map_err(|e| format!("--aa: {e}"))?,
             "--render-scale" => render_scale = Some(value("--render-scale")?),
             "--target-ms" => target_ms = Some(value("--target-ms")?),
+            "--upscaler" => a.upscaler = Some(value("--upscaler")?.parse().map_err(|e| format!("--upscaler: {e}"))?),
             "--dump-pose" => a.dump_pose = Some((PathBuf::from(value("--dump-pose")?), None, None)),
             "--clip" => a.dump_pose.as_mut().ok_or("--clip goes with --dump-pose")?.1 = Some(value("--clip")?),
             "--time" => a.dump_pose.as_mut().ok_or("--time goes with --dump-pose")?.2 = Some(number("--time", value("--time")?)?),
@@ -249,6 +254,7 @@ fn main() -> ExitCode {
             shadow_map_size: args.shadow_map_size,
             aa: args.aa,
             render_scale: args.render_scale,
+            upscaler: args.upscaler,
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
@@ -310,6 +316,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
     renderer.aa = args.aa;
     renderer.render_scale = ScaleController::new(args.render_scale);
+    if let Some(u) = args.upscaler {
+        renderer.upscaler = u;
+    }
     // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
     let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;

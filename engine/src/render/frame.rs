@@ -68,6 +68,8 @@ pub struct Settings {
     /// The 3D passes draw below the output's size (`FrameCx::render`) and the upscaler
     /// resamples the tone-mapped frame to the output.
     pub upscale: bool,
+    /// Its filter.
+    pub upscaler: crate::render::scale::Upscaler,
     /// Samples per pixel of the camera's targets (HDR and DEPTH): 1, or 4 with MSAA.
     pub samples: vk::SampleCountFlags,
 }

@@ -15,7 +15,7 @@ use crate::render::frame::{FrameCx, FrameData, Settings, SkyParams, FRAGMENT_COU
 use crate::render::graph::{Access, FrameProfile, Graph, ImageRef, Pass, ResourceId};
 use crate::render::mesh_draw::{LitPhase, MeshKit};
 use crate::render::passes;
-use crate::render::scale::{RenderScale, ScaleController};
+use crate::render::scale::{RenderScale, ScaleController, Upscaler};
 use crate::scene::{GpuScene, SceneLayouts};
 use crate::render::shadow::{SunShadow, DEFAULT_SHADOW_MAP_SIZE};
 use crate::render::tonemap::ToneMap;
@@ -171,6 +171,9 @@ pub struct Renderer {
     /// The render scale (`scale::RenderScale`): `Fixed(1.0)` unless the owner asks (every frame
     /// at the output's size, deterministic); the demo and the bench make it adaptive.
     pub render_scale: ScaleController,
+    /// The upscaler's filter: EASU on GPUs; on CPU devices the Catmull-Rom cubic, which costs
+    /// 0.62x of EASU's pass there for the same SSIM to within 0.003 (README, "Frame budget").
+    pub upscaler: Upscaler,
     /// The scale each slot's last frame was drawn at (what its GPU time is evidence of).
     slot_scale: Vec<f32>,
     /// `prepare` feeds the GPU time of the slot's finished frame to `render_scale` (on by
@@ -264,6 +267,7 @@ impl Renderer {
             render_scale: ScaleController::new(RenderScale::Fixed(1.0)),
             slot_scale: vec![1.0; frames_in_flight],
             scale_feedback: true,
+            upscaler: if gpu.caps.device_type == vk::PhysicalDeviceType::CPU { Upscaler::Cubic } else { Upscaler::Easu },
             animation: None,
         })
     }
@@ -429,6 +433,7 @@ impl Renderer {
             depth_view: self.depth_view,
             fxaa: self.aa == AntiAliasing::Fxaa,
             upscale,
+            upscaler: self.upscaler,
             samples: self.samples(gpu),
         };
         // A sample count's pipelines are made the first time a frame uses it.

@@ -15,6 +15,35 @@
 //!   triggers above the target, up below 85 % of it predicted: the two never chase each other
 //!   around one scale (the test `a_steady_load_settles_without_oscillating`).
 
+/// The filter that brings a frame drawn below the output's size back to it (shaders/upscale.frag).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Upscaler {
+    /// FSR 1's edge-adaptive upsampler (EASU): the default on GPUs.
+    #[default]
+    Easu,
+    /// The separable Catmull-Rom cubic over the same 12 texels: the default on CPU devices,
+    /// where EASU's edge analysis costs more than the cubic's whole pass.
+    Cubic,
+}
+
+impl Upscaler {
+    pub const ALL: [Upscaler; 2] = [Upscaler::Easu, Upscaler::Cubic];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Upscaler::Easu => "easu",
+            Upscaler::Cubic => "cubic",
+        }
+    }
+}
+
+impl std::str::FromStr for Upscaler {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Upscaler::ALL.into_iter().find(|u| u.name() == s).ok_or_else(|| format!("'{s}' is not an upscaler (easu, cubic)"))
+    }
+}
+
 /// How the render scale is chosen.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RenderScale {

@@ -4,7 +4,7 @@
 
 use super::history::{FrameHistory, Ring};
 use super::FrameStats;
-use crate::render::scale::RenderScale;
+use crate::render::scale::{RenderScale, Upscaler};
 use crate::render::renderer::{AntiAliasing, Renderer};
 use crate::render::visibility::LOD_BUCKETS;
 use egui::{Color32, Pos2, Rect, Sense, Shape, Stroke, Vec2};
@@ -75,6 +75,16 @@ impl RendererPanel<'_> {
         if adaptive != was {
             r.render_scale.mode = if adaptive { RenderScale::Adaptive { target_ms: r.render_scale.target_ms() } } else { RenderScale::Fixed(1.0) };
         }
+        ui.horizontal(|ui| {
+            ui.label("upscaler:");
+            for u in Upscaler::ALL {
+                let label = match u {
+                    Upscaler::Easu => "FSR 1 EASU",
+                    Upscaler::Cubic => "Catmull-Rom",
+                };
+                control(u.name(), ui.radio_value(&mut r.upscaler, u, label));
+            }
+        });
         // Each mode's cost shows in the pass list above: MSAA's in every camera pass and the
         // resolve pass, FXAA's as the fxaa pass.
         ui.horizontal(|ui| {
