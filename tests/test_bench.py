@@ -54,9 +54,9 @@ def results(tmp_path_factory) -> tuple[Path, dict[str, dict], str]:
 def test_times_are_reported_not_gated(results, capsys):
     """Print the short run's frame times into the CI log (past pytest's capture)."""
     lines = [line for line in results[2].splitlines() if "cpu_frame_ms" in line or line.startswith(("bench:", "floor"))]
-    # Header, floor, a line per scenario, and one per variant: pre-pass off, instancing off and
-    # demo-flythrough's six.
-    assert len(lines) == 2 + len(SCENARIOS) + 2 + len(DEMO_VARIANTS)
+    # Header, floor, a line per scenario, and one per variant: pre-pass off, instancing off, LOD
+    # selection off (skinned-64) and demo-flythrough's.
+    assert len(lines) == 2 + len(SCENARIOS) + 3 + len(DEMO_VARIANTS)
     with capsys.disabled():
         print("\nbench short run (times are not checked):\n" + "\n".join(lines))
 
@@ -120,10 +120,25 @@ def test_particles_100k_holds_the_same_particles(results):
 
 
 def test_skinned_64_skins_every_character(results):
-    c = counters(results, "skinned-64")
-    assert c["animated_instances"] == 64
-    assert c["skinned_vertices"] == SKINNED_VERTICES
-    assert c["skinned_vertices"] % 64 == 0
+    # At the LODs their size on screen picks (the golem's morph target has LODs too), and in the
+    # variant every one at full detail.
+    doc = results[1]["skinned-64"]
+    c, full = doc["counters"], doc["variants"]["lod_off"]["counters"]
+    assert c["animated_instances"] == full["animated_instances"] == 64
+    assert (c["skinned_vertices"], c["lod_histogram"]) == SKINNED_LOD
+    assert full["skinned_vertices"] == SKINNED_VERTICES and full["lod_histogram"][0] == 64
+    assert full["skinned_vertices"] % 64 == 0
+
+
+def test_every_series_reports_its_render_scale(results):
+    # Adaptive by default: each series (the default, each variant) on its own controller; every
+    # measured frame at a scale in 0.5..1.
+    for name, doc in results[1].items():
+        for series in [doc, *doc.get("variants", {}).values()]:
+            rs = series["render_scale"]
+            assert sum(rs["frames_at"].values()) == FRAMES, name
+            assert 0.5 <= rs["min"] <= rs["p50"] <= rs["max"] <= 1.0, (name, rs)
+            assert len(series["samples"]["render_scale"]) == FRAMES
 
 
 def test_prepass_removes_the_overdraw(results):
@@ -253,23 +268,29 @@ CULLING_CULLED = 74_446
 BOIDS_DRAWN = 10_000
 PARTICLES_LIVE = 100_174
 SKINNED_VERTICES = 813_440  # 64 golems of 12 710 vertices (a seam vertex per capsule ring for the texture, MikkTSpace splits)
+# The same 64 at the LODs the framed grid picks at 640x360: 63 at LOD 5 (530 vertices), one at LOD 6.
+SKINNED_LOD = (34_340, [0, 0, 0, 0, 0, 63, 1, 0])
 # (pre-pass on, off): about half of the 640x360 view, then the sum over the 16 layers.
 OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # build/temple.pack from the camera flight's last measured frame (2/3 of the loop: above the
-# roofs, the whole level in view): 8 level instances plus 32 doves, the priest's and the
-# pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
+# roofs, the whole level in view): the level's chunks and whole meshes, 32 doves, the priest's
+# and the pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
 DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off", "transparency_off", "lightmaps_bicubic", "reflections_off"]
 DEMO_COUNTERS = {
-    "instances": 16,  # the level's 6 meshes, 2 golems and 2 lanterns of 4 parts
-    "drawn": 48,
-    "culled": 0,
-    "triangles": 50_156,
-    # One per submesh and pass (the level's meshes are one instance each); the lanterns' three
+    "instances": 39,  # the level's 4 whole meshes and 25 chunks (temple 15, courtyard 10), 2 golems, 2 lanterns of 4 parts
+    "drawn": 70,  # with the 32 doves
+    "culled": 1,
+    # Occlusion: the 29 largest static instances in view rasterised on the CPU; the rest tested.
+    "occluders": 29,
+    "occlusion_tested": 10,
+    "occlusion_culled": 1,
+    "triangles": 4_702,
+    # One per submesh and pass (each chunk is an instance of its own mesh); the lanterns' three
     # opaque parts in the pre-pass, shading and shadow passes, their glass in the transparent one.
-    "draw_calls": 54,
-    "lod_histogram": [13, 1, 2, 0, 0, 0, 0, 0],
+    "draw_calls": 170,
+    "lod_histogram": [27, 7, 2, 0, 0, 0, 2, 0],  # the golems at LOD 6 from above the roofs
     "particles": 301,
     "boids_drawn": 32,
-    "skinned_vertices": 25_420,
+    "skinned_vertices": 1_720,
     "fragments_shaded": 128_660,
 }
