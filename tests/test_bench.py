@@ -130,6 +130,17 @@ def test_skinned_64_skins_every_character(results):
     assert full["skinned_vertices"] % 64 == 0
 
 
+def test_culling_along_the_whole_flythrough(tmp_path):
+    # What frustum and occlusion culling remove along the demo's camera loop: 60 frames spread
+    # over the whole flight (ground level, up, around above the roofs, down), summed per frame.
+    # Culling depends on the camera alone, not on the machine or the render scale: exact.
+    r = run_bench("--scenario", "demo-flythrough", "--frames", 60, "--warmup", 0, "--width", WIDTH, "--height", HEIGHT,
+                  "--no-variants", "--json-dir", tmp_path, "--level", LEVEL, "--character", CHARACTER)
+    assert r.returncode == 0, f"bench failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
+    totals = json.loads((tmp_path / "demo-flythrough.json").read_text())["counter_totals"]
+    assert totals == FLYTHROUGH_TOTALS
+
+
 def test_every_series_reports_its_render_scale(results):
     # Adaptive by default: each series (the default, each variant) on its own controller; every
     # measured frame at a scale in 0.5..1.
@@ -275,6 +286,9 @@ OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # build/temple.pack from the camera flight's last measured frame (2/3 of the loop: above the
 # roofs, the whole level in view): the level's chunks and whole meshes, 32 doves, the priest's
 # and the pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
+# Summed over the 60 frames of the loop: instance-frames the frustum culled, occlusion tested and
+# culled (hidden behind the level's chunks and meshes), drawn, and the triangles drawn.
+FLYTHROUGH_TOTALS = {"frustum_culled": 425, "occlusion_tested": 609, "occlusion_culled": 38, "drawn": 3797, "triangles": 332_688}
 DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off", "transparency_off", "lightmaps_bicubic", "reflections_off"]
 DEMO_COUNTERS = {
     "instances": 39,  # the level's 4 whole meshes and 25 chunks (temple 15, courtyard 10), 2 golems, 2 lanterns of 4 parts

@@ -294,6 +294,9 @@ struct Series {
     gpu_ms: Vec<f64>,
     /// The render scale each frame was drawn at.
     scales: Vec<f64>,
+    /// Culling's counts summed over the measured frames (instances culled by the frustum, tested
+    /// and culled by occlusion, drawn; triangles): what culling did along the whole camera path.
+    totals: [u64; 5],
     passes: Vec<FrameProfile>,
     counters: Map<String, Value>,
 }
@@ -424,6 +427,13 @@ fn series_json(s: &Series, floor: &Value, pass_names: &[&'static str]) -> Map<St
         "gpu_frame_ms": summary(&s.gpu_ms),
         "pass_gpu_ms": pass_summary(&s.passes, pass_names),
         "render_scale": scale_summary(&s.scales),
+        "counter_totals": {
+            "frustum_culled": s.totals[0],
+            "occlusion_tested": s.totals[1],
+            "occlusion_culled": s.totals[2],
+            "drawn": s.totals[3],
+            "triangles": s.totals[4],
+        },
         "counters": s.counters,
         "samples": { "cpu_frame_ms": s.cpu_ms, "gpu_frame_ms": s.gpu_ms, "render_scale": s.scales },
     });
@@ -525,6 +535,11 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         out.scales.push(scale as f64);
         out.passes.extend(renderer.profile(gpu, 0));
         out.counters = counters(gpu, renderer, &s.scene, &s.world);
+        let c = renderer.visibility.counts;
+        let frame_counts = [(c.cull.culled - c.cull.occlusion_culled) as u64, c.cull.occlusion_tested as u64, c.cull.occlusion_culled as u64, c.cull.visible as u64, c.triangles];
+        for (t, n) in out.totals.iter_mut().zip(frame_counts) {
+            *t += n;
+        }
     }
     for (variant, out) in series.iter_mut().enumerate() {
         let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant)?;
