@@ -65,7 +65,7 @@ pub const DEFAULT_SIZE: (usize, usize) = (192, 108);
 /// default triangle budget, so any LOD that fits in it can occlude.
 pub const MAX_OCCLUDER_TRIANGLES: usize = 4096;
 /// How far (texels) a texel is grown each side for coverage and depth: rounding, and the GPU's
-/// snapping of vertices to 1/256 pixel (a texel is ~5 pixels at 1280x720).
+/// snapping of vertices to 1/256 pixel (1/32 texel is 0.2 pixels at 1280x720).
 const EPS: f32 = 1.0 / 32.0;
 /// The guard band: triangles are clipped to twice the screen in x and y.
 const GUARD: f32 = 2.0;
