@@ -182,10 +182,8 @@ pub struct FrameCx<'a> {
     pub particles: &'a ParticlePass,
     pub boids: &'a BoidsDraw,
     pub tonemap: &'a mut ToneMap,
-    /// The region of the camera's targets this frame draws: the output's size times the render
-    /// scale (the output's size when `settings.upscale` is off).
-    pub render: vk::Extent2D,
-    /// The output's size.
+    /// The output's size (the images of `Size::Render` are made at it; `frame.render` is the
+    /// region of them this frame draws).
     pub output: vk::Extent2D,
     pub animation: Option<&'a mut AnimatedScene>,
     /// Draw calls the mesh passes made (passes add theirs).

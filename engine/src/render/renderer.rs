@@ -459,7 +459,6 @@ impl Renderer {
             particles: &self.particles,
             boids: &self.boids,
             tonemap: &mut self.tonemap,
-            render,
             output: target.extent,
             animation: self.animation.as_mut(),
             draw_calls: 0,
