@@ -79,7 +79,11 @@ def xvfb():
     for tool in ("Xvfb", "import"):
         assert shutil.which(tool), f"{tool} is installed by `make setup` (xvfb, imagemagick)"
     n = free_display()
-    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", f"{WIDTH}x{HEIGHT}x24", "-nolisten", "tcp"], stderr=subprocess.DEVNULL)
+    # -r: no key auto-repeat. A loaded machine can hold xdotool between a key's press and release
+    # past the 660 ms repeat delay; the server then sent a second press, and F5 turned the
+    # lightmaps off and at once on again (a fresh-clone CI run saw "lightmaps off", "lightmaps
+    # on" from one key). The tests press keys; they never mean to hold them.
+    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", f"{WIDTH}x{HEIGHT}x24", "-nolisten", "tcp", "-r"], stderr=subprocess.DEVNULL)
     deadline = time.time() + 20
     while not Path(f"/tmp/.X11-unix/X{n}").exists():
         assert proc.poll() is None, "Xvfb exited at start-up"
