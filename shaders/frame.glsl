@@ -14,7 +14,7 @@ layout(set = 0, binding = 0) uniform Frame {
 } frame;
 
 // Counted fragments (the renderer's fragment counter; written only by pipelines made with the
-// COUNT_FRAGMENTS specialisation constant set). Mirrors `Renderer::fragment_count`.
+// COUNT_FRAGMENTS variants of mesh.frag and mesh_equal.frag). Mirrors `Renderer::fragment_count`.
 layout(set = 0, binding = 1) buffer Counters {
     uint fragments;
 } counters;

@@ -1,4 +1,5 @@
 #version 450
+//! variant counted COUNT_FRAGMENTS
 // The shading pass without a depth pre-pass: depth is tested and written here, so alpha-tested
 // (MASK) materials discard here (or, multisampled, cover the samples their alpha says).
 #include "mesh_shading.glsl"

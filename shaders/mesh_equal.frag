@@ -1,4 +1,5 @@
 #version 450
+//! variant counted COUNT_FRAGMENTS
 // The shading pass after the depth pre-pass (compare EQUAL, no depth writes): only the visible
 // fragment of each pixel passes, so it is tested before shading (early_fragment_tests: every
 // invocation is one shaded pixel, as the pre-pass promises). Alpha testing already happened in

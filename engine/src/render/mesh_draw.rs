@@ -18,7 +18,7 @@ use glam::Vec4;
 /// vertices and fragments (the transforms and lightmap regions are per instance, in the
 /// instance stream).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 struct DrawPush {
     /// x: alpha-test cutoff (or -1); y: material index (its constants); z: the submesh's
     /// lightmap block (added to the instance's page).
@@ -229,8 +229,15 @@ impl MeshKit {
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 2, &[scene.scene_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, setup.instances], &[0, 0]);
             d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
+            // Each state is recorded only when it changes: lavapipe re-validates a stage's
+            // whole state (its textures and samplers, the rasteriser, the constants) after any
+            // command that sets some of it, even to the value it had (`draws_state_changes`).
             let mut bound = vk::Pipeline::null();
             let mut bound_vertices = scene.vertex_buffer.buffer;
+            let mut bound_front = None;
+            let mut bound_cull = None;
+            let mut bound_push = None;
+            let mut bound_material = vk::DescriptorSet::null();
             for batch in setup.batches {
                 let mesh = &scene.meshes[scene.instances[batch.instance as usize].mesh as usize];
                 let lod = &mesh.lods[batch.lod as usize];
@@ -241,7 +248,10 @@ impl MeshKit {
                     d.cmd_bind_vertex_buffers(cb, 0, &[batch.vertices], &[0]);
                     bound_vertices = batch.vertices;
                 }
-                d.cmd_set_front_face(cb, batch.front);
+                if bound_front != Some(batch.front) {
+                    d.cmd_set_front_face(cb, batch.front);
+                    bound_front = Some(batch.front);
+                }
                 for sm in &lod.submeshes {
                     let material = batch.material.unwrap_or(sm.material);
                     let mat = &scene.materials[material as usize];
@@ -257,10 +267,19 @@ impl MeshKit {
                         material: Vec4::new(mat.alpha_cutoff, material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
                         base_color: Vec4::from(mat.base_color),
                     };
-                    d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, bytemuck::bytes_of(&push));
+                    if bound_push != Some(push) {
+                        d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, bytemuck::bytes_of(&push));
+                        bound_push = Some(push);
+                    }
                     let cull = if setup.cull && !mat.double_sided { vk::CullModeFlags::BACK } else { vk::CullModeFlags::NONE };
-                    d.cmd_set_cull_mode(cb, cull);
-                    d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
+                    if bound_cull != Some(cull) {
+                        d.cmd_set_cull_mode(cb, cull);
+                        bound_cull = Some(cull);
+                    }
+                    if bound_material != mat.descriptor_set {
+                        d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 1, &[mat.descriptor_set], &[]);
+                        bound_material = mat.descriptor_set;
+                    }
                     d.cmd_draw_indexed(cb, sm.index_count, batch.count, lod.first_index + sm.first_index, batch.base_vertex, batch.first_instance);
                     calls += 1;
                 }
@@ -330,9 +349,13 @@ fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
-            create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_FRAG), true, NEARER, variant, None, samples)
+            let frag = if key.counting { shaders::MESH_COUNTED_FRAG } else { shaders::MESH_FRAG };
+            create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(frag), true, NEARER, variant, None, samples)
         }
-        LitPhase::Equal => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(shaders::MESH_EQUAL_FRAG), false, vk::CompareOp::EQUAL, variant, None, samples),
+        LitPhase::Equal => {
+            let frag = if key.counting { shaders::MESH_EQUAL_COUNTED_FRAG } else { shaders::MESH_EQUAL_FRAG };
+            create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(frag), false, vk::CompareOp::EQUAL, variant, None, samples)
+        }
         LitPhase::Blend => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples),
     }
 }
@@ -354,11 +377,10 @@ fn create_mesh_pipeline(
     depth_bias: Option<(f32, f32)>,
     samples: vk::SampleCountFlags,
 ) -> Result<vk::Pipeline> {
-    // Specialisation constants 0 to 6: COUNT_FRAGMENTS, LIGHTMAPPED, SAMPLES, SLOTS,
-    // DIRECTIONAL, BICUBIC and REFLECTIONS (mesh_shading.glsl).
+    // Specialisation constants 1 to 6: LIGHTMAPPED, SAMPLES, SLOTS, DIRECTIONAL, BICUBIC and
+    // REFLECTIONS (mesh_shading.glsl). Counting is a module of its own (`lit_pipeline`).
     let k = &variant.key;
     let values = [
-        vk::Bool32::from(k.counting),
         vk::Bool32::from(k.lightmapped),
         variant.samples.max(1),
         k.slots.0,
@@ -368,7 +390,7 @@ fn create_mesh_pipeline(
     ]
     .map(u32::to_le_bytes);
     let bytes = values.concat();
-    let entries: [vk::SpecializationMapEntry; 7] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 });
+    let entries: [vk::SpecializationMapEntry; 6] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32 + 1, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes this shader reads are declared.

@@ -6,6 +6,9 @@ use ash::vk;
 pub const MESH_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.vert.spv"));
 pub const MESH_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.frag.spv"));
 pub const MESH_EQUAL_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_equal.frag.spv"));
+/// The two above with each shaded fragment counted (`COUNT_FRAGMENTS`, mesh_shading.glsl).
+pub const MESH_COUNTED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_counted.frag.spv"));
+pub const MESH_EQUAL_COUNTED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_equal_counted.frag.spv"));
 pub const MESH_BLEND_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_blend.frag.spv"));
 pub const DEPTH_MASKED_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/depth_masked.frag.spv"));
 pub const FULLSCREEN_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fullscreen.vert.spv"));
