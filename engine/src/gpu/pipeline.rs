@@ -214,6 +214,11 @@ impl<T> PerSamples<T> {
         self.sets.iter().find(|s| s.0 == samples).map(|s| &s.1).unwrap_or_else(|| panic!("no pipelines were made for {samples:?} samples"))
     }
 
+    /// Every set made so far.
+    pub fn iter(&self) -> impl Iterator<Item = &T> + '_ {
+        self.sets.iter().map(|s| &s.1)
+    }
+
     /// Every set made, emptied out (to destroy them).
     pub fn drain(&mut self) -> impl Iterator<Item = T> + '_ {
         self.sets.drain(..).map(|s| s.1)

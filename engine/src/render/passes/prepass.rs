@@ -28,7 +28,7 @@ impl Pass for Prepass {
         // Reversed-Z: the far plane is depth 0.
         let rendering = Rendering::depth_only(depth, Some(0.0), vk::AttachmentStoreOp::STORE);
         let f = cx.frame;
-        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: true, cull: true };
+        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: true, cull: true, by_state: true };
         cx.draw_calls += cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, Some(cx.settings.samples)));
         Ok(())
     }

@@ -57,7 +57,7 @@ impl Pass for Shading {
         }
         let phase = if prepass { LitPhase::Equal } else { LitPhase::Plain };
         let (mesh, settings) = (cx.mesh, &cx.settings);
-        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || settings.depth_test, cull: true };
+        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.view_batches, instances: f.instances, depth_test: prepass || settings.depth_test, cull: true, by_state: true };
         cx.draw_calls += mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| (!mat.blend).then(|| mesh.lit(settings.samples, settings.lit_key(phase, mat, lightmapped))));
         Ok(())
     }

@@ -34,6 +34,6 @@ impl Pass for ShadowStatic {
 /// top of what it holds; returns the draw calls. Shared by the three shadow passes' drawing two.
 pub(super) fn draw_casters(cx: &FrameCx, rec: &Rec, target: crate::render::graph::ResourceId, clear: Option<f32>, batches: &[crate::render::batches::Batch]) -> u32 {
     let rendering = Rendering::depth_only(rec.image(target), clear, vk::AttachmentStoreOp::STORE);
-    let setup = DrawSetup { frame_set: cx.shadow.sets[cx.slot], batches, instances: cx.frame.instances, depth_test: true, cull: false };
+    let setup = DrawSetup { frame_set: cx.shadow.sets[cx.slot], batches, instances: cx.frame.instances, depth_test: true, cull: false, by_state: true };
     cx.mesh.draw(rec, cx.scene, &rendering, &setup, |mat, _| cx.mesh.depth_for(mat, None))
 }

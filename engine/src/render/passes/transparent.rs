@@ -31,7 +31,7 @@ impl Pass for Transparent {
     fn record(&mut self, cx: &mut FrameCx, rec: &Rec) -> Result<()> {
         let f = cx.frame;
         let rendering = Rendering::color(rec.image(HDR), None).depth(rec.image(DEPTH), None, vk::AttachmentStoreOp::NONE);
-        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.transparent_batches, instances: f.instances, depth_test: true, cull: true };
+        let setup = DrawSetup { frame_set: f.frame_set, batches: &f.transparent_batches, instances: f.instances, depth_test: true, cull: true, by_state: false };
         let (mesh, settings) = (cx.mesh, &cx.settings);
         cx.draw_calls += mesh.draw(rec, cx.scene, &rendering, &setup, |mat, lightmapped| mat.blend.then(|| mesh.lit(settings.samples, settings.lit_key(LitPhase::Blend, mat, lightmapped))));
         Ok(())
