@@ -30,6 +30,10 @@ WARMUP, FRAMES = 2, 3
 # Half of `make bench`'s 1280x720 in each direction, for time: the fill-bound scenarios run four
 # times faster on lavapipe, and only the LOD choices and fragment counts depend on the size.
 WIDTH, HEIGHT = 640, 360
+# The pinned runs draw at a fixed render scale: LODs are picked in render pixels, so an adaptive
+# scale (set by the machine's speed) would make the triangle counts the machine's. Half, what
+# the adaptive scale settles at on lavapipe.
+SCALE = 0.5
 
 
 def run_bench(*args, timeout=900) -> subprocess.CompletedProcess:
@@ -45,7 +49,7 @@ def results(tmp_path_factory) -> tuple[Path, dict[str, dict], str]:
         assert pack.exists(), f"{pack} is made by `make cook` (a prerequisite of `make test`)"
     out = tmp_path_factory.mktemp("bench")
     r = run_bench("--all", "--frames", FRAMES, "--warmup", WARMUP, "--width", WIDTH, "--height", HEIGHT, "--json-dir", out,
-                  "--level", LEVEL, "--character", CHARACTER)
+                  "--level", LEVEL, "--character", CHARACTER, "--render-scale", SCALE)
     assert r.returncode == 0, f"bench failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
     assert "[vulkan validation error]" not in r.stderr, r.stderr
     return out, {name: json.loads((out / f"{name}.json").read_text()) for name in SCENARIOS}, r.stdout
@@ -133,23 +137,32 @@ def test_skinned_64_skins_every_character(results):
 def test_culling_along_the_whole_flythrough(tmp_path):
     # What frustum and occlusion culling remove along the demo's camera loop: 60 frames spread
     # over the whole flight (ground level, up, around above the roofs, down), summed per frame.
-    # Culling depends on the camera alone, not on the machine or the render scale: exact.
+    # Culling depends on the camera alone, not on the machine: exact (the triangles, at the LODs
+    # picked in render pixels, at the fixed SCALE).
     r = run_bench("--scenario", "demo-flythrough", "--frames", 60, "--warmup", 0, "--width", WIDTH, "--height", HEIGHT,
-                  "--no-variants", "--json-dir", tmp_path, "--level", LEVEL, "--character", CHARACTER)
+                  "--no-variants", "--json-dir", tmp_path, "--level", LEVEL, "--character", CHARACTER, "--render-scale", SCALE)
     assert r.returncode == 0, f"bench failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
     totals = json.loads((tmp_path / "demo-flythrough.json").read_text())["counter_totals"]
     assert totals == FLYTHROUGH_TOTALS
 
 
-def test_every_series_reports_its_render_scale(results):
-    # Adaptive by default: each series (the default, each variant) on its own controller; every
-    # measured frame at a scale in 0.5..1.
+def test_every_series_reports_its_render_scale(results, tmp_path):
+    # The pinned run: every series of every scenario at the fixed scale it was given.
     for name, doc in results[1].items():
         for series in [doc, *doc.get("variants", {}).values()]:
             rs = series["render_scale"]
-            assert sum(rs["frames_at"].values()) == FRAMES, name
-            assert 0.5 <= rs["min"] <= rs["p50"] <= rs["max"] <= 1.0, (name, rs)
+            assert rs["frames_at"] == {f"{SCALE:.2f}": FRAMES} and rs["min"] == rs["max"] == SCALE, (name, rs)
             assert len(series["samples"]["render_scale"]) == FRAMES
+    # Adaptive by default: each series (the default, each variant) on its own controller; every
+    # measured frame at a scale in 0.5..1.
+    r = run_bench("--scenario", "skinned-64", "--frames", FRAMES, "--warmup", WARMUP, "--width", WIDTH, "--height", HEIGHT,
+                  "--json-dir", tmp_path, "--character", CHARACTER)
+    assert r.returncode == 0, f"bench failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
+    doc = json.loads((tmp_path / "skinned-64.json").read_text())
+    for series in [doc, *doc["variants"].values()]:
+        rs = series["render_scale"]
+        assert sum(rs["frames_at"].values()) == FRAMES
+        assert 0.5 <= rs["min"] <= rs["p50"] <= rs["max"] <= 1.0, rs
 
 
 def test_prepass_removes_the_overdraw(results):
@@ -273,14 +286,15 @@ def test_compare_prints_ratios_and_rejects_bad_input(results, tmp_path):
     assert r.returncode == 1 and "broken.json: not a readable JSON file" in r.stderr, r.stderr
 
 
-# ---- the pinned counters of the short run (frame WARMUP + FRAMES - 1, 1280x720) ------------------
+# ---- the pinned counters of the short run (frame WARMUP + FRAMES - 1, 640x360 at SCALE) ------------------
 
 CULLING_CULLED = 74_446
 BOIDS_DRAWN = 10_000
 PARTICLES_LIVE = 100_174
 SKINNED_VERTICES = 813_440  # 64 golems of 12 710 vertices (a seam vertex per capsule ring for the texture, MikkTSpace splits)
-# The same 64 at the LODs the framed grid picks at 640x360: 63 at LOD 5 (530 vertices), one at LOD 6.
-SKINNED_LOD = (34_340, [0, 0, 0, 0, 0, 63, 1, 0])
+# The same 64 at the LODs the framed grid picks at 640x360 drawn at SCALE (LODs in render pixels):
+# all 64 at LOD 6, the coarsest (320 vertices).
+SKINNED_LOD = (20_480, [0, 0, 0, 0, 0, 0, 64, 0])
 # (pre-pass on, off): about half of the 640x360 view, then the sum over the 16 layers.
 OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # build/temple.pack from the camera flight's last measured frame (2/3 of the loop: above the
@@ -288,7 +302,7 @@ OVERDRAW_FRAGMENTS_SHADED = (109_500, 1_276_088)
 # and the pilgrim's golems skinned, the fountain's and the brazier's particles after 2 s of warm-up.
 # Summed over the 60 frames of the loop: instance-frames the frustum culled, occlusion tested and
 # culled (hidden behind the level's chunks and meshes), drawn, and the triangles drawn.
-FLYTHROUGH_TOTALS = {"frustum_culled": 425, "occlusion_tested": 1813, "occlusion_culled": 37, "drawn": 3798, "triangles": 332_700}
+FLYTHROUGH_TOTALS = {"frustum_culled": 425, "occlusion_tested": 1813, "occlusion_culled": 37, "drawn": 3798, "triangles": 270_704}
 DEMO_VARIANTS = ["aa_msaa", "aa_fxaa", "sky_off", "material_maps_off", "specular_off", "transparency_off", "lightmaps_bicubic", "reflections_off"]
 DEMO_COUNTERS = {
     "instances": 39,  # the level's 4 whole meshes and 25 chunks (temple 15, courtyard 10), 2 golems, 2 lanterns of 4 parts
@@ -298,11 +312,11 @@ DEMO_COUNTERS = {
     "occluders": 8,
     "occlusion_tested": 31,
     "occlusion_culled": 2,
-    "triangles": 4_690,
+    "triangles": 4_310,
     # One per submesh and pass (each chunk is an instance of its own mesh); the lanterns' three
     # opaque parts in the pre-pass, shading and shadow passes, their glass in the transparent one.
     "draw_calls": 168,
-    "lod_histogram": [26, 7, 2, 0, 0, 0, 2, 0],  # the golems at LOD 6 from above the roofs
+    "lod_histogram": [26, 6, 1, 2, 0, 0, 2, 0],  # the golems at LOD 6 from above the roofs
     "particles": 301,
     "boids_drawn": 32,
     "skinned_vertices": 1_720,
