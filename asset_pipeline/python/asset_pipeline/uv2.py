@@ -62,6 +62,7 @@ import hashlib
 import math
 import multiprocessing
 import os
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -277,11 +278,7 @@ def chart_meshes(jobs: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]
     results: dict[int, tuple] = {}
     if workers > 1 and len(todo) > 1 and big:
         order = sorted(todo, key=lambda i: -len(jobs[i][1]))  # longest first
-        # fork: children need nothing re-imported (and scripts without a __main__ guard work);
-        # they run only xatlas and numpy, so threads the parent has (rayon) do not matter.
-        methods = multiprocessing.get_all_start_methods()
-        ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
-        with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx) as pool:
+        with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=_pool_context()) as pool:
             futures = {i: pool.submit(_chart_job, (*jobs[i], options)) for i in order}
             results = {i: f.result() for i, f in futures.items()}
     else:
@@ -291,6 +288,20 @@ def chart_meshes(jobs: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]
         if cache is not None:
             cache.store("uv2-charts", keys[i], {"count": r[5]}, list(r[:5]))
     return out  # type: ignore[return-value]
+
+
+def _pool_context() -> multiprocessing.context.BaseContext:
+    """The charting workers' start method. fork when this process has no other thread: the
+    children need nothing re-imported (and scripts without a __main__ guard work). With other
+    threads, a fork copies whatever locks they held at that moment: after Ray's client had started
+    (its gRPC threads) in the same process, a forked worker hung on one, and the cook with it (a
+    test-suite run). forkserver then forks from a clean single-threaded server."""
+    methods = multiprocessing.get_all_start_methods()
+    tasks = Path("/proc/self/task")
+    threads = len(list(tasks.iterdir())) if tasks.is_dir() else threading.active_count()
+    if "fork" in methods and threads == 1:
+        return multiprocessing.get_context("fork")
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else None)
 
 
 # ---- 2. packing --------------------------------------------------------------------------------
