@@ -1,4 +1,5 @@
 #version 450
+//! variant depth DEPTH_ONLY
 #include "frame.glsl"
 #include "mesh_draw.glsl"
 
@@ -20,13 +21,23 @@ layout(location = 11) in vec3 in_normal1;
 layout(location = 12) in vec3 in_normal2;
 layout(location = 14) in vec4 in_lightmap;
 
-layout(location = 0) out vec3 out_normal;
-// The depth pre-pass and the shading pass run this same shader, and the shading pass's EQUAL
-// test must pass exactly the pre-pass's winners: `precise` forbids the compiler to fuse or
-// reorder the position's arithmetic differently in the two pipelines. (`invariant gl_Position`
-// says the same but glslang puts it on a member of the gl_PerVertex block, which the validation
-// layer's SPIR-V checker flags with a warning on every pipeline.)
+// The depth pre-pass and the shading pass compute the position with this same code, and the
+// shading pass's EQUAL test must pass exactly the pre-pass's winners: `precise` forbids the
+// compiler to fuse or reorder the position's arithmetic differently in the two pipelines.
+// (`invariant gl_Position` says the same but glslang puts it on a member of the gl_PerVertex
+// block, which the validation layer's SPIR-V checker flags with a warning on every pipeline.)
 precise gl_Position;
+
+#ifdef DEPTH_ONLY
+// The depth-only pipelines' module (mesh_depth.vert, `//! variant depth`): the position alone.
+// Lavapipe runs vertex shaders on one thread and a pipeline without a fragment shader still
+// computed every output below (the material's five UV transforms read from a storage buffer).
+void main() {
+    vec4 world = in_model * vec4(in_position, 1.0);
+    gl_Position = frame.view_proj * world;
+}
+#else
+layout(location = 0) out vec3 out_normal;
 layout(location = 1) out vec2 out_base_color_uv;
 layout(location = 2) out vec4 out_color;
 layout(location = 3) out vec3 out_world;
@@ -66,3 +77,4 @@ void main() {
     out_lightmap_layer = in_normal0.w + draw.material.z;
     gl_Position = frame.view_proj * world;
 }
+#endif

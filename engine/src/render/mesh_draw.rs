@@ -422,9 +422,15 @@ fn create_mesh_pipeline(
     let bytes = values.concat();
     let entries: [vk::SpecializationMapEntry; 6] = std::array::from_fn(|i| vk::SpecializationMapEntry { constant_id: i as u32 + 1, offset: 4 * i as u32, size: 4 });
     let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&bytes);
+    // Without a fragment shader only the position is needed: lavapipe would otherwise compute
+    // every output of the vertex shader for nothing (mesh.vert's DEPTH_ONLY module).
+    let depth_only = frag.is_none();
+    let vert = if depth_only { shaders::MESH_DEPTH_VERT } else { shaders::MESH_VERT };
     // The vertex layout comes from the pack crate: one definition of the format. Only the
-    // attributes this shader reads are declared.
+    // attributes the shader reads are declared: the position and the model matrix (instance
+    // locations 6 to 9) for the depth-only module.
     const MESH_SHADER_INPUTS: [u32; 7] = [0, 1, 2, 3, 4, 5, 13];
+    let reads = |location: u32| if depth_only { location == 0 || (6..=9).contains(&location) } else { true };
     // Binding 1: the instance stream (batches.rs).
     let bindings = [
         vk::VertexInputBindingDescription { binding: 0, stride: pack::VERTEX_STRIDE as u32, input_rate: vk::VertexInputRate::VERTEX },
@@ -435,12 +441,13 @@ fn create_mesh_pipeline(
         .filter(|a| MESH_SHADER_INPUTS.contains(&a.0))
         .map(|&(location, offset, f)| vk::VertexInputAttributeDescription { location, binding: 0, format: attribute_format(f), offset })
         .chain(instance_attributes())
+        .filter(|a| reads(a.location))
         .collect();
     // Cull mode, front face and depth testing are dynamic (core 1.3): double-sided materials,
     // mirrored instances and the raw fragment count (`depth_test` off) change them per draw or
     // pass without a second pipeline.
     let dynamic = [vk::DynamicState::CULL_MODE, vk::DynamicState::FRONT_FACE, vk::DynamicState::DEPTH_TEST_ENABLE];
-    let mut pipeline = GraphicsPipeline::new("mesh", shaders::MESH_VERT)
+    let mut pipeline = GraphicsPipeline::new("mesh", vert)
         .vertex_input(&bindings, &attributes)
         .cull_back()
         .depth_bias(depth_bias)

@@ -4,6 +4,8 @@ use anyhow::Result;
 use ash::vk;
 
 pub const MESH_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.vert.spv"));
+/// mesh.vert for the depth-only pipelines: the position alone (`DEPTH_ONLY`).
+pub const MESH_DEPTH_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_depth.vert.spv"));
 pub const MESH_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh.frag.spv"));
 pub const MESH_EQUAL_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/mesh_equal.frag.spv"));
 /// The two above with each shaded fragment counted (`COUNT_FRAGMENTS`, mesh_shading.glsl).
