@@ -139,11 +139,21 @@ impl ApplicationHandler for App<'_> {
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::Resized(_) => s.needs_resize = true,
-            WindowEvent::KeyboardInput { event, .. } => {
+            WindowEvent::KeyboardInput { event, is_synthetic, .. } => {
                 let PhysicalKey::Code(code) = event.physical_key else { return };
                 if event.state != ElementState::Pressed {
                     // Releases always count, so no key sticks down.
                     s.input.keys.remove(&code);
+                    return;
+                }
+                // winit makes up a press for every key held down when the window gains the
+                // focus: the key is down (movement keys keep working), but nobody pressed it
+                // here, so it switches nothing. Two fresh-clone test runs saw one F5 from
+                // xdotool switch the lightmaps off and at once on again.
+                if is_synthetic {
+                    if !consumed {
+                        s.input.keys.insert(code);
+                    }
                     return;
                 }
                 if code == KeyCode::Escape {
