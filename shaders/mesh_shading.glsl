@@ -60,8 +60,8 @@ layout(location = 10) in vec2 in_occlusion_uv;
 // each shaded fragment adds one to counters.fragments (helper invocations' atomics have no
 // effect, so only real fragments count). A module of its own, not a specialisation constant:
 // lavapipe takes any atomic in the SPIR-V, even under a constant that is false, for a write to
-// the buffer, and then finishes all rendering before every draw that binds it (measured: 33 us a
-// draw, two thirds of the flythrough's shading pass).
+// the buffer, and then finishes all rendering before every draw that binds it (measured: about 60 us
+// a draw, a third of the flythrough's shading pass).
 // Set by the renderer for instances with a lightmap region (submeshes with a lightmap block):
 // lit by the lightmap alone. A constant, not a push-constant branch, so each variant carries
 // only its own lighting code (no branch, fewer registers): on lavapipe the demo flythrough's
