@@ -239,8 +239,24 @@ impl MeshKit {
             material: u32,
             batch: u32,
             submesh: u32,
+            /// The group's rank: its pipeline's and then its material's first appearance in
+            /// the list (not the handles' values, which change from run to run: coplanar
+            /// surfaces drawn in another order would give another image).
+            rank: (u32, u32),
         }
         let mut items = Vec::new();
+        let mut pipelines: Vec<vk::Pipeline> = Vec::new();
+        let mut materials: Vec<u32> = Vec::new();
+        fn first_seen<T: PartialEq + Copy>(seen: &mut Vec<T>, x: T) -> u32 {
+            let i = seen.iter().position(|&s| s == x).unwrap_or_else(|| {
+                seen.push(x);
+                seen.len() - 1
+            });
+            i as u32
+        }
+        let mut rank = |pipeline: vk::Pipeline, material: u32| {
+            (first_seen(&mut pipelines, pipeline), if self.reads_material(pipeline) { first_seen(&mut materials, material) } else { 0 })
+        };
         for (b, batch) in setup.batches.iter().enumerate() {
             let mesh = &scene.meshes[scene.instances[batch.instance as usize].mesh as usize];
             for (i, sm) in mesh.lods[batch.lod as usize].submeshes.iter().enumerate() {
@@ -249,14 +265,13 @@ impl MeshKit {
                 // rest the probes and the sun. None: the submesh is not this pass's (a BLEND
                 // material in an opaque pass).
                 if let Some(pipeline) = pipeline_for(&scene.materials[material as usize], batch.lightmapped && sm.lightmap_block.is_some()) {
-                    items.push(Item { pipeline, material, batch: b as u32, submesh: i as u32 });
+                    let rank = if setup.by_state { rank(pipeline, material) } else { (0, 0) };
+                    items.push(Item { pipeline, material, batch: b as u32, submesh: i as u32, rank });
                 }
             }
         }
-        if setup.by_state {
-            let reads = |p: vk::Pipeline| self.reads_material(p);
-            items.sort_by_key(|it| (vk::Handle::as_raw(it.pipeline), if reads(it.pipeline) { it.material } else { 0 }));
-        }
+        // Stable: list order within a group.
+        items.sort_by_key(|it| it.rank);
         let (d, cb) = (&rec.gpu.device, rec.cb);
         rec.begin_rendering(rendering);
         unsafe {
