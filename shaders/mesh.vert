@@ -28,13 +28,19 @@ layout(location = 14) in vec4 in_lightmap;
 // block, which the validation layer's SPIR-V checker flags with a warning on every pipeline.)
 precise gl_Position;
 
+// The world position, and gl_Position from it: the one place both modules compute them.
+vec4 place_vertex() {
+    vec4 world = in_model * vec4(in_position, 1.0);
+    gl_Position = frame.view_proj * world;
+    return world;
+}
+
 #ifdef DEPTH_ONLY
 // The depth-only pipelines' module (mesh_depth.vert, `//! variant depth`): the position alone.
 // Lavapipe runs vertex shaders on one thread and a pipeline without a fragment shader still
 // computed every output below (the material's five UV transforms read from a storage buffer).
 void main() {
-    vec4 world = in_model * vec4(in_position, 1.0);
-    gl_Position = frame.view_proj * world;
+    place_vertex();
 }
 #else
 layout(location = 0) out vec3 out_normal;
@@ -59,7 +65,7 @@ vec2 slot_uv(vec4 row0, vec4 row1) {
 }
 
 void main() {
-    vec4 world = in_model * vec4(in_position, 1.0);
+    vec4 world = place_vertex();
     out_normal = mat3(in_normal0.xyz, in_normal1, in_normal2) * in_normal;
     uint m = uint(draw.material.y);
     out_base_color_uv = slot_uv(materials[m].base_color_uv[0], materials[m].base_color_uv[1]);
@@ -75,6 +81,5 @@ void main() {
     out_world = world.xyz;
     out_lightmap_uv = in_uv1 * in_lightmap.xy + in_lightmap.zw;
     out_lightmap_layer = in_normal0.w + draw.material.z;
-    gl_Position = frame.view_proj * world;
 }
 #endif

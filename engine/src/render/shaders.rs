@@ -54,6 +54,20 @@ mod tests {
     }
 
     #[test]
+    fn a_variant_line_compiles_one_more_module_with_its_define() {
+        let dir = std::env::temp_dir().join(format!("shader-variant-{}", std::process::id()));
+        let out = dir.join("out");
+        std::fs::create_dir_all(&out).unwrap();
+        // The two modules differ only by the define.
+        let src = "#version 450\n//! variant loud LOUD\nlayout(location=0) out vec4 c;\n#ifdef LOUD\nvoid main() { c = vec4(1.0); }\n#else\nvoid main() { c = vec4(0.0); }\n#endif\n";
+        std::fs::write(dir.join("v.frag"), src).unwrap();
+        compile_all("glslc", &dir, &out).unwrap();
+        let (plain, loud) = (std::fs::read(out.join("v.frag.spv")).unwrap(), std::fs::read(out.join("v_loud.frag.spv")).unwrap());
+        assert_ne!(plain, loud, "the variant must be compiled with its define");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn the_project_shaders_compile() {
         let shaders = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shaders");
         let out = std::env::temp_dir().join(format!("shader-ok-{}", std::process::id()));
