@@ -542,23 +542,27 @@ fn measure(gpu: &Gpu, o: &Options, renderer: &mut Renderer, target: &mut Offscre
         }
     }
     for (variant, out) in series.iter_mut().enumerate() {
-        let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant)?;
+        let scale = out.scales.last().copied().unwrap_or(1.0) as f32;
+        let shaded = fragments_shaded(gpu, renderer, target, s, o.warmup + o.frames - 1, variant, scale)?;
         out.counters.insert("fragments_shaded".into(), json!(shaded));
     }
     Ok(series)
 }
 
-/// Fragments the shading pass shades in the last frame (same camera, no simulation step), from
-/// one more frame, not timed, with the shader's fragment counter on: the counter costs an atomic
-/// per fragment, and lavapipe's pipeline statistics count fragments the depth test then rejects,
-/// so they cannot show what the pre-pass saves.
-fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, variant: usize) -> anyhow::Result<Option<u32>> {
+/// Fragments the shading pass shades in the last frame (same camera and render scale `scale`, no
+/// simulation step), from one more frame, not timed, with the shader's fragment counter on: the
+/// counter costs an atomic per fragment, and lavapipe's pipeline statistics count fragments the
+/// depth test then rejects, so they cannot show what the pre-pass saves.
+fn fragments_shaded(gpu: &Gpu, renderer: &mut Renderer, target: &mut Offscreen, s: &Setup, last: usize, variant: usize, scale: f32) -> anyhow::Result<Option<u32>> {
     let camera = (s.camera)(last);
     select(renderer, &s.variants, variant);
     renderer.count_fragments = true;
+    // The series' scale, not the renderer's own controller (the measured frames swapped theirs in).
+    let own = std::mem::replace(&mut renderer.render_scale, ScaleController::new(RenderScale::Fixed(scale)));
     level::prepare_frame(&s.world, renderer, &s.scene, &camera);
     let frame = target.render(gpu, renderer, &s.scene, &camera, &s.lighting, false);
     let shaded = renderer.fragment_count(0);
+    renderer.render_scale = own;
     renderer.count_fragments = false;
     select(renderer, &s.variants, 0);
     frame?;
