@@ -13,61 +13,83 @@ layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer BindVertices { uvec4 bind[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Joints { uvec2 joints[]; };  // 4 x u16 per vertex
 layout(std430, set = 0, binding = 2) readonly buffer Weights { vec4 weights[]; };
-layout(std430, set = 0, binding = 3) readonly buffer MorphPositions { float morph_positions[]; };  // [target][vertex][3]
+layout(std430, set = 0, binding = 3) readonly buffer MorphPositions { float morph_positions[]; };  // per job [target][vertex][3]
 layout(std430, set = 0, binding = 4) readonly buffer MorphNormals { float morph_normals[]; };
 layout(std430, set = 0, binding = 5) readonly buffer MorphWeights { float morph_weights[]; };
 layout(std430, set = 0, binding = 6) readonly buffer JointMatrices { mat4 joint_matrices[]; };
 layout(std430, set = 0, binding = 7) writeonly buffer Skinned { uvec4 skinned[]; };
 
-layout(push_constant) uniform Params {
+// One dispatch skins every (instance, LOD) the frame draws (anim::skin_gpu::SkinBatch): lavapipe
+// wakes its compute threads and waits for them at every dispatch, which cost more than the
+// skinning itself at one dispatch per character. Each workgroup belongs to one job; a job's
+// inputs, parameters and output are ranges of the shared buffers.
+struct Job {
     uint vertex_count;
+    uint bind_base;          // first vertex in bind, joints, weights
+    uint morph_base;         // first float of the job's deltas in morph_positions
     uint target_count;
-    uint skinned;        // 0: every vertex follows joint matrix 0
-    uint morph_normals;  // 1: morph_normals holds normal deltas
-    uint joint_count;    // joint indices are clamped below it, so bad data cannot read past the buffer
+    uint morph_normal_base;  // in morph_normals, or ~0u: no normal deltas
+    uint weight_base;        // first of the owner's morph weights
+    uint joint_base;         // first of the owner's joint matrices
+    uint joint_count;        // joint indices are clamped below it, so bad data cannot read another's
+    uint skinned;            // 0: every vertex follows joint matrix joint_base
+    uint out_base;           // first vertex of the job's output
+    uint first_group;        // the job's first workgroup (with group_offset)
+    uint pad;
+};
+layout(std430, set = 0, binding = 8) readonly buffer Jobs { Job jobs[]; };
+layout(std430, set = 0, binding = 9) readonly buffer GroupJobs { uint group_job[]; };
+
+layout(push_constant) uniform Params {
+    // Added to gl_WorkGroupID.x: a batch of more groups than a dispatch may have is several.
+    uint group_offset;
 } params;
 
-uint joint(uvec2 words, uint k) {
+uint joint(Job job, uvec2 words, uint k) {
     uint word = words[k / 2];
-    return min((k % 2 == 0) ? (word & 0xffffu) : (word >> 16), params.joint_count - 1);
+    return job.joint_base + min((k % 2 == 0) ? (word & 0xffffu) : (word >> 16), job.joint_count - 1);
 }
 
 void main() {
-    uint v = gl_GlobalInvocationID.x;
-    if (v >= params.vertex_count) {
+    uint group = gl_WorkGroupID.x + params.group_offset;
+    Job job = jobs[group_job[group]];
+    uint v = (group - job.first_group) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+    if (v >= job.vertex_count) {
         return;
     }
     // The five words of a pack::Vertex: [position, normal.x] [normal.yz, tangent.xy]
     // [tangent.zw, uv0] [uv1, texcoord1] [colour, padding].
-    uint base = v * 5u;
+    uint iv = job.bind_base + v;
+    uint base = iv * 5u;
     vec4 w0 = uintBitsToFloat(bind[base]);
     vec4 w1 = uintBitsToFloat(bind[base + 1]);
     vec4 w2 = uintBitsToFloat(bind[base + 2]);
     vec3 p = w0.xyz;
     vec3 n = vec3(w0.w, w1.xy);
     vec4 t = vec4(w1.zw, w2.xy);
-    for (uint k = 0; k < params.target_count; k++) {
-        float w = morph_weights[k];
+    for (uint k = 0; k < job.target_count; k++) {
+        float w = morph_weights[job.weight_base + k];
         if (w != 0.0) {
-            uint at = (k * params.vertex_count + v) * 3;
-            p += w * vec3(morph_positions[at], morph_positions[at + 1], morph_positions[at + 2]);
-            if (params.morph_normals != 0) {
-                n += w * vec3(morph_normals[at], morph_normals[at + 1], morph_normals[at + 2]);
+            uint at = (k * job.vertex_count + v) * 3;
+            p += w * vec3(morph_positions[job.morph_base + at], morph_positions[job.morph_base + at + 1], morph_positions[job.morph_base + at + 2]);
+            if (job.morph_normal_base != ~0u) {
+                uint an = job.morph_normal_base + at;
+                n += w * vec3(morph_normals[an], morph_normals[an + 1], morph_normals[an + 2]);
             }
         }
     }
     mat4 m;
-    if (params.skinned != 0) {
-        vec4 w = weights[v];
-        uvec2 js = joints[v];
+    if (job.skinned != 0) {
+        vec4 w = weights[iv];
+        uvec2 js = joints[iv];
         m = mat4(0.0);
         for (uint k = 0; k < 4; k++) {
             if (w[k] != 0.0) {
-                m += joint_matrices[joint(js, k)] * w[k];
+                m += joint_matrices[joint(job, js, k)] * w[k];
             }
         }
     } else {
-        m = joint_matrices[0];
+        m = joint_matrices[job.joint_base];
     }
     mat3 m3 = mat3(m);
     // The inverse transpose up to a positive factor, which the normalize removes: the cofactor
@@ -80,10 +102,11 @@ void main() {
     vec3 sp = (m * vec4(p, 1.0)).xyz;
     sn = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
     st = dot(st, st) > 0.0 ? normalize(st) : vec3(0.0);
-    skinned[base] = floatBitsToUint(vec4(sp, sn.x));
-    skinned[base + 1] = floatBitsToUint(vec4(sn.yz, st.xy));
-    skinned[base + 2] = floatBitsToUint(vec4(st.z, t.w, w2.zw));
+    uint out_at = (job.out_base + v) * 5u;
+    skinned[out_at] = floatBitsToUint(vec4(sp, sn.x));
+    skinned[out_at + 1] = floatBitsToUint(vec4(sn.yz, st.xy));
+    skinned[out_at + 2] = floatBitsToUint(vec4(st.z, t.w, w2.zw));
     // uv1, texcoord1, colour and padding pass through unchanged.
-    skinned[base + 3] = bind[base + 3];
-    skinned[base + 4] = bind[base + 4];
+    skinned[out_at + 3] = bind[base + 3];
+    skinned[out_at + 4] = bind[base + 4];
 }

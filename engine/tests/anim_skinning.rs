@@ -3,7 +3,7 @@
 //! need the Khronos samples ($GLTF_SAMPLES_DIR, default ../shared/gltf-samples) but no Python.
 
 use engine::anim::skin_cpu::{skin_cpu, DeformData};
-use engine::anim::skin_gpu::{SkinPipeline, SkinnedMesh};
+use engine::anim::skin_gpu::{JobSpec, Owner, SkinBatch, SkinPipeline};
 use engine::anim::{joint_count, node_joint_matrices, Rig};
 use glam::{Mat4, Quat, Vec3};
 use pack::Vertex;
@@ -27,6 +27,17 @@ fn gpu_skinning_equals_the_cpu_reference_on_the_sample_models() {
     let Some(dir) = samples() else { return };
     let gpu = gpu();
     let mut pipe = SkinPipeline::new(&gpu).unwrap();
+    // Every deforming node of the four models, each a job of one batch with its own pose (owner)
+    // and data (source), skinned in one dispatch as the renderer does: each job's range of the
+    // output must match the CPU reference for that node alone.
+    struct Case {
+        label: String,
+        data: DeformData,
+        joints: Vec<Mat4>,
+        weights: Vec<f32>,
+        cpu: Vec<Vertex>,
+    }
+    let mut cases = Vec::new();
     // (model, time in seconds): times inside each model's clip, away from its keys.
     for (name, time) in [("SimpleSkin", 1.3f32), ("RiggedSimple", 0.9), ("BoxAnimated", 1.7), ("SimpleMorph", 0.7)] {
         let pack = cook(&dir, name);
@@ -44,26 +55,36 @@ fn gpu_skinning_equals_the_cpu_reference_on_the_sample_models() {
             let weights = rig.node_weights(node, &pose).to_vec();
             let mut cpu = data.vertices.clone();
             skin_cpu(&data, &weights, &joints, &mut cpu);
-            let mut skinned = SkinnedMesh::new(&gpu, &pipe, &data, joints.len()).unwrap();
-            skinned.update(&joints, &weights);
-            let gpu_out = skinned.run_and_read_back(&gpu, &pipe).unwrap();
-            skinned.destroy(&gpu);
-            let err = relative_error(&cpu, &gpu_out);
-            println!(
-                "{name} node {node}: {} vertices, {} joints, {} morph targets, GPU vs CPU relative error {err:.2e}",
-                cpu.len(),
-                joints.len(),
-                data.targets
-            );
-            assert!(err <= 1e-4, "{name} node {node}: GPU differs from the CPU reference by {err:e} of the model size");
-            let normals_ok = cpu.iter().zip(&gpu_out).all(|(a, b)| (Vec3::from(a.normal) - Vec3::from(b.normal)).length() < 1e-4);
-            assert!(normals_ok, "{name} node {node}: skinned normals differ");
             moved = moved.max(relative_error(&cpu, &data.vertices));
             deformed_meshes += 1;
+            cases.push(Case { label: format!("{name} node {node}"), data, joints, weights, cpu });
         }
         assert!(deformed_meshes > 0, "{name}: no mesh node");
         // The pose at `time` must actually deform something, or the comparison proves little.
         assert!(moved > 1e-3, "{name}: the pose at {time} s leaves every vertex in place");
+    }
+    let sources: Vec<&DeformData> = cases.iter().map(|c| &c.data).collect();
+    let owners: Vec<Owner> = cases.iter().map(|c| Owner { joints: c.joints.len(), targets: c.data.targets }).collect();
+    let jobs: Vec<JobSpec> = (0..cases.len()).map(|k| JobSpec { owner: k, source: k }).collect();
+    let mut batch = SkinBatch::new(&gpu, &pipe, &sources, &owners, &jobs, 1).unwrap();
+    for (k, c) in cases.iter().enumerate() {
+        batch.update(0, k, &c.joints, &c.weights);
+    }
+    let outputs = batch.run_and_read_back(&gpu, &pipe).unwrap();
+    batch.destroy(&gpu);
+    assert_eq!(outputs.len(), cases.len());
+    for (c, gpu_out) in cases.iter().zip(&outputs) {
+        let err = relative_error(&c.cpu, gpu_out);
+        println!(
+            "{}: {} vertices, {} joints, {} morph targets, GPU vs CPU relative error {err:.2e}",
+            c.label,
+            c.cpu.len(),
+            c.joints.len(),
+            c.data.targets
+        );
+        assert!(err <= 1e-4, "{}: GPU differs from the CPU reference by {err:e} of the model size", c.label);
+        let normals_ok = c.cpu.iter().zip(gpu_out).all(|(a, b)| (Vec3::from(a.normal) - Vec3::from(b.normal)).length() < 1e-4);
+        assert!(normals_ok, "{}: skinned normals differ", c.label);
     }
     pipe.destroy(&gpu);
     assert_clean(&gpu);
@@ -111,9 +132,9 @@ fn gpu_skinning_handles_300_joints_and_four_influences() {
             .collect();
         let mut cpu = data.vertices.clone();
         skin_cpu(&data, &[], &mats, &mut cpu);
-        let mut skinned = SkinnedMesh::new(&gpu, &pipe, &data, joints_n).unwrap();
-        skinned.update(&mats, &[]);
-        let out = skinned.run_and_read_back(&gpu, &pipe).unwrap();
+        let mut skinned = SkinBatch::single(&gpu, &pipe, &data, joints_n).unwrap();
+        skinned.update(0, 0, &mats, &[]);
+        let out = skinned.run_and_read_back(&gpu, &pipe).unwrap().remove(0);
         skinned.destroy(&gpu);
         let err = relative_error(&cpu, &out);
         assert!(err <= 1e-5, "mirror {mirror}: relative error {err:e}");
@@ -181,14 +202,17 @@ fn measure_skinning_64_characters_of_10k_vertices() {
         morph_normals: vec![],
     };
     let mats: Vec<Mat4> = (0..joints_n).map(|j| Mat4::from_rotation_z(j as f32 * 0.01)).collect();
-    let mut meshes: Vec<SkinnedMesh> = (0..64).map(|_| SkinnedMesh::new(&gpu, &pipe, &data, joints_n).unwrap()).collect();
-    for m in &mut meshes {
-        m.update(&mats, &[]);
+    // 64 characters of one mesh: one source, 64 owners, skinned in one dispatch.
+    let owners = vec![Owner { joints: joints_n, targets: 0 }; 64];
+    let jobs: Vec<JobSpec> = (0..64).map(|k| JobSpec { owner: k, source: 0 }).collect();
+    let mut batch = SkinBatch::new(&gpu, &pipe, &[&data], &owners, &jobs, 1).unwrap();
+    for k in 0..64 {
+        batch.update(0, k, &mats, &[]);
     }
     let mut times = Vec::new();
     for _ in 0..5 {
         let t = std::time::Instant::now();
-        gpu.one_shot(|cb| meshes.iter().for_each(|m| m.record(&gpu, &pipe, cb))).unwrap();
+        gpu.one_shot(|cb| batch.record(&gpu, &pipe, cb)).unwrap();
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
     times.sort_by(f64::total_cmp);
@@ -196,9 +220,7 @@ fn measure_skinning_64_characters_of_10k_vertices() {
         "skinning 64 x {n} vertices ({joints_n} joints) on {}: median {:.2} ms per frame (submit + wait)",
         gpu.caps.device_name, times[2]
     );
-    for m in &mut meshes {
-        m.destroy(&gpu);
-    }
+    batch.destroy(&gpu);
     pipe.destroy(&gpu);
     if let Some(dir) = samples() {
         let pack = cook(&dir, "RiggedSimple");

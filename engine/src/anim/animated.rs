@@ -12,7 +12,7 @@
 //! the largest joint scale).
 
 use crate::anim::skin_cpu::DeformData;
-use crate::anim::skin_gpu::{SkinPipeline, SkinnedMesh};
+use crate::anim::skin_gpu::{JobSpec, Owner, SkinBatch, SkinPipeline};
 use crate::anim::route::Route;
 use crate::anim::{joint_count, Animator, Rig};
 use crate::render::cull::world_sphere;
@@ -48,7 +48,8 @@ pub struct AnimatedInstance {
     morph_reach: Vec<f32>,
     /// Bind bounds of the mesh as a sphere (unskinned, morph-only instances).
     bind_sphere: (Vec3, f32),
-    lods: Vec<SkinnedMesh>,
+    /// Per LOD, its job in the scene's `SkinBatch`.
+    jobs: Vec<u32>,
     /// This frame's (LOD) jobs wanted, reset every frame.
     wanted: Vec<bool>,
 }
@@ -67,9 +68,15 @@ pub struct AnimatedScene {
     /// Scene instance -> index into `instances`.
     lookup: Vec<Option<u32>>,
     pipe: SkinPipeline,
+    /// Every instance's LODs as jobs of one batch (None only while `new` builds the instances).
+    batch: Option<SkinBatch>,
+    /// This frame's wanted jobs (reused).
+    frame_jobs: Vec<u32>,
     /// CPU milliseconds the last `advance` took (sampling, globals, joint matrices, bounds).
     pub cpu_ms: f64,
-    /// Skinning jobs (instance LODs) the last recorded frame dispatched, and their vertices.
+    /// Skinning jobs (instance LODs) the last recorded frame skinned, the dispatches they took
+    /// (one, unless past 65 535 workgroups), and their vertices.
+    pub jobs: u32,
     pub dispatches: u32,
     pub skinned_vertices: u64,
 }
@@ -116,20 +123,43 @@ impl AnimatedScene {
             instances: Vec::new(),
             lookup: vec![None; scene.instances.len()],
             pipe,
+            batch: None,
+            frame_jobs: Vec::new(),
             cpu_ms: 0.0,
+            jobs: 0,
             dispatches: 0,
             skinned_vertices: 0,
         });
+        // The skinning jobs: per instance and LOD, the deform data of (mesh, LOD, skinned or
+        // not), uploaded once however many instances show it.
+        let mut sources: Vec<((u32, usize, bool), DeformData)> = Vec::new();
+        let (mut owners, mut jobs) = (Vec::new(), Vec::new());
         for (i, &node) in instance_nodes.iter().enumerate() {
             if !animated_node(pack, node) {
                 continue;
             }
-            let inst = out
-                .instance(gpu, pack, scene, i, node, frames_in_flight)
-                .with_context(|| format!("animating node '{}'", pack.manifest.nodes[node].name))?;
+            let (mut inst, data) = out.instance(pack, scene, i, node).with_context(|| format!("animating node '{}'", pack.manifest.nodes[node].name))?;
+            let mesh = scene.instances[i].mesh;
+            owners.push(Owner { joints: inst.joints.len(), targets: inst.morph_reach.len() });
+            for (lod, d) in data.into_iter().enumerate() {
+                let key = (mesh, lod, d.joints.is_some());
+                let source = match sources.iter().position(|(k, _)| *k == key) {
+                    Some(k) => k,
+                    None => {
+                        sources.push((key, d));
+                        sources.len() - 1
+                    }
+                };
+                inst.jobs.push(jobs.len() as u32);
+                jobs.push(JobSpec { owner: owners.len() - 1, source });
+            }
             out.lookup[i] = Some(out.instances.len() as u32);
             out.instances.push(inst);
         }
+        let sources: Vec<&DeformData> = sources.iter().map(|(_, d)| d).collect();
+        out.batch = Some(SkinBatch::new(gpu, &out.pipe, &sources, &owners, &jobs, frames_in_flight)?);
+        // Room for every job: recording allocates nothing.
+        out.frame_jobs = Vec::with_capacity(jobs.len());
         out.start_characters(pack);
         Ok(Some(out.keep()))
     }
@@ -165,17 +195,16 @@ impl AnimatedScene {
         }
     }
 
-    fn instance(&self, gpu: &Gpu, pack: &Pack, scene: &GpuScene, index: usize, node: usize, slots: usize) -> Result<AnimatedInstance> {
+    /// Animated instance `index` (on node `node`), and per LOD the data its skinning job deforms
+    /// (the caller makes the jobs).
+    fn instance(&self, pack: &Pack, scene: &GpuScene, index: usize, node: usize) -> Result<(AnimatedInstance, Vec<DeformData>)> {
         let mesh = &scene.meshes[scene.instances[index].mesh as usize];
         let joints = vec![Mat4::IDENTITY; joint_count(pack, node)];
-        let mut lods = gpu.own(Vec::with_capacity(mesh.lods.len()));
         // Every LOD's own data (vertices, skin, morph deltas): each is skinned and morphed from
         // its own, and the culling margins below hold whichever LOD is drawn.
         let mut all: Vec<DeformData> = Vec::with_capacity(mesh.lods.len());
         for lod in 0..mesh.lods.len() {
-            let data = DeformData::for_node(pack, node, lod).context("an animated node without a mesh")?;
-            lods.push(SkinnedMesh::with_slots(gpu, &self.pipe, &data, joints.len(), slots)?);
-            all.push(data);
+            all.push(DeformData::for_node(pack, node, lod).context("an animated node without a mesh")?);
         }
         if all.is_empty() {
             anyhow::bail!("a mesh without LODs");
@@ -209,7 +238,7 @@ impl AnimatedScene {
             // Nothing to play: the animator holds the rest pose (`advance` skips sampling).
             animator.speed = 0.0;
         }
-        Ok(AnimatedInstance {
+        let instance = AnimatedInstance {
             instance: index as u32,
             node: node as u32,
             animator,
@@ -221,8 +250,9 @@ impl AnimatedScene {
             morph_reach,
             bind_sphere: ((mesh.bounds_min + mesh.bounds_max) * 0.5, (mesh.bounds_max - mesh.bounds_min).length() * 0.5),
             wanted: vec![false; mesh.lods.len()],
-            lods: lods.keep(),
-        })
+            jobs: Vec::with_capacity(mesh.lods.len()),
+        };
+        Ok((instance, all))
     }
 
     /// The animated instance drawing scene instance `instance`, if it is animated.
@@ -281,9 +311,9 @@ impl AnimatedScene {
     }
 
     /// Record this frame's skinning: write the joint matrices and morph weights of every
-    /// (instance, LOD) that `draws` or `casters` use into frame slot `slot`'s buffers, dispatch
-    /// each once (the frame graph makes the outputs readable as vertex attributes: the skinning
-    /// pass writes `render::frame::SKINNED`).
+    /// instance that `draws` or `casters` use into frame slot `slot`'s buffers, and skin each
+    /// (instance, LOD) they use once, all in one dispatch (the frame graph makes the output
+    /// readable as vertex attributes: the skinning pass writes `render::frame::SKINNED`).
     pub fn record(&mut self, gpu: &Gpu, cb: vk::CommandBuffer, slot: usize, draws: &[Draw], casters: &[Draw]) {
         for a in &mut self.instances {
             a.wanted.fill(false);
@@ -293,38 +323,36 @@ impl AnimatedScene {
                 self.instances[i].wanted[d.lod as usize] = true;
             }
         }
-        self.dispatches = 0;
-        self.skinned_vertices = 0;
-        let dev = &gpu.device;
-        for a in &mut self.instances {
-            let weights = self.rig.node_weights(a.node as usize, &a.animator.pose);
-            for (lod, job) in a.lods.iter_mut().enumerate() {
-                if !a.wanted[lod] {
-                    continue;
-                }
-                job.update_slot(slot, &a.joints, weights);
-                if self.dispatches == 0 {
-                    unsafe { dev.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipe.pipeline) };
-                }
-                job.dispatch(gpu, &self.pipe, cb, slot);
-                self.dispatches += 1;
-                self.skinned_vertices += job.output(slot).size / pack::VERTEX_STRIDE as u64;
+        let Some(batch) = self.batch.as_mut() else { return };
+        self.frame_jobs.clear();
+        for (owner, a) in self.instances.iter().enumerate() {
+            if !a.wanted.contains(&true) {
+                continue;
             }
+            batch.update(slot, owner, &a.joints, self.rig.node_weights(a.node as usize, &a.animator.pose));
+            self.frame_jobs.extend(a.jobs.iter().zip(&a.wanted).filter(|(_, &w)| w).map(|(&j, _)| j));
+        }
+        self.jobs = self.frame_jobs.len() as u32;
+        (self.dispatches, self.skinned_vertices) = (0, 0);
+        if !self.frame_jobs.is_empty() {
+            unsafe { gpu.device.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, self.pipe.pipeline) };
+            (self.dispatches, self.skinned_vertices) = batch.dispatch(gpu, &self.pipe, cb, slot, &self.frame_jobs);
         }
     }
 
-    /// The skinned vertex buffer of scene instance `instance` at `lod` in frame slot `slot`
-    /// (world space, indexed by the mesh's own indices from vertex 0), if it is animated.
-    pub fn vertex_buffer(&self, instance: u32, lod: u8, slot: usize) -> Option<vk::Buffer> {
+    /// The skinned vertices of scene instance `instance` at `lod` in frame slot `slot` (world
+    /// space, indexed by the mesh's own indices from the returned base vertex), if it is
+    /// animated.
+    pub fn vertex_buffer(&self, instance: u32, lod: u8, slot: usize) -> Option<(vk::Buffer, i32)> {
         let a = &self.instances[self.index_of(instance)?];
-        Some(a.lods[lod as usize].output(slot).buffer)
+        let batch = self.batch.as_ref()?;
+        let (first, _) = batch.output_range(a.jobs[lod as usize] as usize);
+        Some((batch.output(slot).buffer, first as i32))
     }
 
     pub fn destroy(&mut self, gpu: &Gpu) {
-        for a in &mut self.instances {
-            for job in &mut a.lods {
-                job.destroy(gpu);
-            }
+        if let Some(b) = &mut self.batch {
+            b.destroy(gpu);
         }
         self.pipe.destroy(gpu);
     }

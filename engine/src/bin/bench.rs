@@ -519,11 +519,12 @@ mod skinned_bench {
         let wall = skinning_wall_ms(&gpu, &pack, renderer.animation.as_mut().unwrap(), args.frames)?;
         let a = renderer.animation.as_ref().unwrap();
         println!(
-            "skinned: {} on {}, {} characters ({} animated instances), {} dispatches / {} vertices skinned per frame, {} frames at {}x{}",
+            "skinned: {} on {}, {} characters ({} animated instances), {} jobs in {} dispatch(es) / {} vertices skinned per frame, {} frames at {}x{}",
             path.display(),
             gpu.caps.device_name,
             args.characters,
             animated,
+            a.jobs,
             a.dispatches,
             a.skinned_vertices,
             args.frames,

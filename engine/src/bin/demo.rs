@@ -443,8 +443,9 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     }
     if let Some(a) = &renderer.animation {
         println!(
-            "animation: {} animated instances, {} skinning dispatches ({} vertices) last frame, skinning gpu_ms median {:.3}, animation cpu_ms last frame {:.3}",
+            "animation: {} animated instances, {} skinning jobs in {} dispatch(es) ({} vertices) last frame, skinning gpu_ms median {:.3}, animation cpu_ms last frame {:.3}",
             a.instances.len(),
+            a.jobs,
             a.dispatches,
             a.skinned_vertices,
             median(&skin_ms).unwrap_or(0.0),

@@ -91,7 +91,7 @@ destroy_by_method! {
     crate::scene::GpuScene,
     crate::anim::animated::AnimatedScene,
     crate::anim::skin_gpu::SkinPipeline,
-    crate::anim::skin_gpu::SkinnedMesh,
+    crate::anim::skin_gpu::SkinBatch,
     crate::app::headless::Offscreen,
     crate::render::renderer::Renderer,
     crate::app::swapchain::Swapchain,

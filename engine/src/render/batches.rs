@@ -120,7 +120,7 @@ impl Batcher {
             let d = draws[i as usize];
             let inst = &scene.instances[d.instance as usize];
             let (vertices, base_vertex, model) = match skinned(&d) {
-                Some(b) => (b, 0, Mat4::IDENTITY),
+                Some((b, first)) => (b, first, Mat4::IDENTITY),
                 None => (scene.vertex_buffer.buffer, scene.meshes[mesh as usize].lods[lod as usize].base_vertex, inst.world),
             };
             // A mirrored instance (negative determinant) reverses its winding.

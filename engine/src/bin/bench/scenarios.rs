@@ -596,6 +596,7 @@ fn counters(gpu: &Gpu, r: &Renderer, scene: &GpuScene, world: &World) -> Map<Str
     put("sim_steps", json!(world.clock.steps));
     if let Some(a) = &r.animation {
         put("animated_instances", json!(a.instances.len()));
+        put("skinning_jobs", json!(a.jobs));
         put("skinning_dispatches", json!(a.dispatches));
         put("skinned_vertices", json!(a.skinned_vertices));
     }
