@@ -17,6 +17,19 @@ pub fn max_anisotropy(gpu: &Gpu) -> Option<f32> {
     gpu.caps.sampler_anisotropy.map(|max| max.min(16.0))
 }
 
+/// Whether a mipmapped texture whose sampler asks for linear mipmap filtering (trilinear) gets
+/// it: yes on GPUs; on a CPU device the nearer level only (bilinear within it), since lavapipe
+/// pays for every texel it filters: the demo flythrough's shading pass took 0.75x the time, the
+/// frame 0.88x (README, "Frame budget"; the screens' SSIM against trilinear in
+/// tests/test_render.py). `ENGINE_TRILINEAR=1` forces trilinear everywhere, `=0` turns it off.
+pub fn trilinear(gpu: &Gpu) -> bool {
+    match std::env::var("ENGINE_TRILINEAR").as_deref() {
+        Ok("1") => true,
+        Ok("0") => false,
+        _ => gpu.caps.device_type != vk::PhysicalDeviceType::CPU,
+    }
+}
+
 /// The samplers made so far, by state and anisotropy. A pack has a handful of distinct states,
 /// so a list searched in order is all the lookup needs.
 #[derive(Default)]
@@ -29,7 +42,12 @@ impl SamplerCache {
     /// `max_anisotropy` allows) only when there is a mip chain to filter and the state filters
     /// minification linearly: without a chain it makes lavapipe take ~18x longer per frame
     /// (257 ms vs 14 ms on the temple level), and a NEAREST state asks for unfiltered texels.
-    pub fn for_texture(&mut self, gpu: &Gpu, state: Sampler, mip_levels: u32) -> Result<vk::Sampler> {
+    /// Linear mipmap filtering only where `trilinear` allows (material textures; the reflection
+    /// probes' roughness levels, read through `get`, always blend).
+    pub fn for_texture(&mut self, gpu: &Gpu, mut state: Sampler, mip_levels: u32) -> Result<vk::Sampler> {
+        if state.mipmap_filter == Some(Filter::Linear) && !trilinear(gpu) {
+            state.mipmap_filter = Some(Filter::Nearest);
+        }
         let mipmapped = mip_levels > 1 && state.mipmap_filter.is_some();
         let anisotropic = mipmapped && state.min_filter == Filter::Linear && max_anisotropy(gpu).is_some();
         self.get(gpu, state, anisotropic)
