@@ -426,7 +426,10 @@ def test_skinning_samples_match_numpy_skinning_of_the_source(gltf_samples, tmp_p
     assert len(got) == len(want) == 1
     size = np.linalg.norm(want[0].max(0) - want[0].min(0))
     assert got[0].shape == want[0].shape
-    err = np.abs(got[0] - want[0]).max() / size
+    # The cooker reorders vertices for the GPU's caches (the mesh_opt stage): compare as point
+    # sets, each point's nearest in the other set, both ways.
+    d = np.linalg.norm(got[0][:, None, :] - want[0][None, :, :], axis=2)
+    err = max(d.min(axis=1).max(), d.min(axis=0).max()) / size
     assert err < 1e-4, f"{model} at {t} s: relative error {err:.2e}"
     rest = numpy_pose(src, 0.0)[0]
     assert np.abs(want[0] - rest).max() / size > 1e-3, "the pose must move vertices for the check to mean anything"

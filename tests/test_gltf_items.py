@@ -187,7 +187,7 @@ static = false
 """)
     out = tmp_path / "props.pack"
     result = cook(level, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW, **IRRADIANCE), lods=False, mips=False))
-    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "write"]
+    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "mesh_opt", "write"]
     doc = manifest(out)
     packed = {n["name"]: n for n in doc["nodes"] if n["mesh"] is not None}
     assert {k: (n["is_static"], n["lightmap"] is not None) for k, n in packed.items()} == {"fixed/slab": (True, True), "loose/slab": (False, False)}

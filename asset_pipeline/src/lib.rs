@@ -86,6 +86,7 @@ mod bake;
 mod lightmap_post;
 mod lod;
 mod mips;
+mod mesh_opt;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -101,5 +102,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lightmap_post::register(m)?;
     lod::register(m)?;
     mips::register(m)?;
+    mesh_opt::register(m)?;
     Ok(())
 }

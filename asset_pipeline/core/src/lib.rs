@@ -14,6 +14,7 @@ mod lights;
 mod load;
 mod material;
 mod mesh;
+pub mod mesh_opt;
 pub mod measure;
 pub mod pack_build;
 mod scene;

@@ -87,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--allow-external-uris", action="store_true",
                         help="let the source read files outside its folder tree (absolute paths, file: URIs, '..' leading out); "
                              "off, such a path is an error")
+    parser.add_argument("--no-mesh-opt", action="store_true",
+                        help="keep every LOD's triangles and vertices in the order they were made (no vertex cache, overdraw and fetch ordering)")
     parser.add_argument("--no-mips", action="store_true", help="skip the textures stage (textures keep one level)")
     parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
                         help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
@@ -131,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, chunks=not args.no_chunks, chunk=chunk,
                             bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
-                            mips=not args.no_mips, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
+                            mips=not args.no_mips, mesh_opt=not args.no_mesh_opt, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
                             allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)

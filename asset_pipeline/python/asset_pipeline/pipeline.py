@@ -49,6 +49,7 @@ class CookSettings:
     texels_per_metre: float | None = None
     baking: bool = True  # bake lightmaps and probes (when the scene has lightmap UVs)
     mips: bool = True  # mip chains for material textures (lightmaps keep one level)
+    mesh_opt: bool = True  # every LOD in vertex cache, overdraw and vertex fetch order (mesh_opt.py)
     mip_filter: str | None = None  # box|tent|bspline|mitchell|catmull-rom|lanczos3; None = per usage (mitchell, tent for hdr)
     force: bool = False  # ignore every cache entry and rebuild
     cache_dir: Path | None = None  # default: .cook-cache beside the output
@@ -87,6 +88,7 @@ class CookResult:
     bake: dict = field(default_factory=dict)  # the bake's (texels, rays, seconds per page and instance)
     scene: "ir.Scene | None" = None  # the scene as written (None when up to date)
     chunks: dict = field(default_factory=dict)  # the chunk stage's (chunks.split_chunks' stats)
+    mesh_opt: dict = field(default_factory=dict)  # the mesh_opt stage's (mesh_opt.MeshOptStats.as_dict)
 
 
 def _settings_doc(obj) -> object:
@@ -243,6 +245,10 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     if settings.lods:
         scene, rec = _lod_stage(scene, settings, cache, progress, executor, locked=frozenset(chunk_stats.get("chunk_meshes", ())))
         stages.append(rec)
+    mesh_opt_stats: dict = {}
+    if settings.mesh_opt and scene.meshes:
+        scene, mesh_opt_stats, rec = _mesh_opt_stage(scene, cache, progress)
+        stages.append(rec)
 
     if settings.mips and scene.textures:
         scene, rec = _textures_stage(scene, settings, cache, progress, executor)
@@ -262,14 +268,14 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
 
     report = None
     if settings.report:
-        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene)
+        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene, mesh_opt_stats)
     outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
     record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
     write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene,
-                      chunks=chunk_stats)
+                      chunks=chunk_stats, mesh_opt=mesh_opt_stats)
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
@@ -537,6 +543,39 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
     meshes = [dataclasses.replace(m, lods=[m.base, *chain]) for m, chain in zip(scene.meshes, chains)]
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), rec
+
+
+def _mesh_opt_stage(scene: ir.Scene, cache: StageCache, progress: Progress):
+    """Cache, overdraw and fetch order for every LOD of every mesh (mesh_opt.py), one cache
+    entry per mesh (its LODs and their statistics)."""
+    from asset_pipeline.mesh_opt import MeshOptStats, add, optimize_mesh
+
+    rec = StageRecord("mesh_opt", items=len(scene.meshes))
+    t0 = time.perf_counter()
+    total = MeshOptStats()
+    meshes = []
+    with progress.stage("mesh_opt", len(scene.meshes)) as bar:
+        for m in scene.meshes:
+            key = Hasher("mesh_opt")
+            for lod in m.lods:
+                for name in sorted(lod.attributes):
+                    key.text(name).array(lod.attributes[name])
+                key.array(lod.triangles).array(lod.materials).array(lod.lightmap_blocks).array(lod.morph_positions).array(lod.morph_normals).text(repr(lod.error))
+            key = key.key()
+            hit = cache.load("mesh_opt", key)
+            if hit is not None:
+                new = dataclasses.replace(m, lods=ir.lods_from_wire(hit[0]["lods"], hit[1]))
+                stats = MeshOptStats(**hit[0]["stats"])
+                rec.cached += 1
+            else:
+                new, stats = optimize_mesh(m)
+                docs, arrays = ir.lods_to_wire(new.lods)
+                cache.store("mesh_opt", key, {"lods": docs, "stats": dataclasses.asdict(stats)}, arrays)
+            add(total, stats)
+            meshes.append(new)
+            bar.advance()
+    rec.seconds = time.perf_counter() - t0
+    return dataclasses.replace(scene, meshes=meshes), total.as_dict(), rec
 
 
 # ---- bake -----------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ def _row(*cells) -> str:
 
 
 def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict, bake_stats: dict | None = None, exrs=(),
-                 chunk_stats: dict | None = None, atlas_scene: ir.Scene | None = None) -> Path:
+                 chunk_stats: dict | None = None, atlas_scene: ir.Scene | None = None, mesh_opt_stats: dict | None = None) -> Path:
     """`atlas_scene`: the scene as its lightmap atlas was laid out (before the chunk stage: a
     chart a chunk border cuts is drawn as one chart), for the atlas previews; default `scene`."""
     path = out.with_suffix(".report.md")
@@ -37,6 +37,13 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
     for k, m in enumerate(scene.meshes):
         for i, lod in enumerate(m.lods):
             lines.append(_row(m.name if i == 0 else "", "yes" if k in static and i == 0 else "", i, lod.triangle_count, lod.vertex_count, f"{lod.error:.4f}"))
+    if mesh_opt_stats:
+        m = mesh_opt_stats
+        lines += ["", "## Mesh optimisation", "",
+                  f"Vertex cache (FIFO of {m['cache_size']}), vertices transformed per triangle (ACMR): every LOD "
+                  f"{m['acmr_before']:.3f} -> {m['acmr_after']:.3f} over {m['triangles']} triangles; LOD 0 "
+                  f"{m['lod0_acmr_before']:.3f} -> {m['lod0_acmr_after']:.3f}. Vertices {m['vertices_before']} -> {m['vertices_after']} "
+                  "(unused ones dropped)."]
     if chunk_stats:
         from asset_pipeline.chunks import describe
 

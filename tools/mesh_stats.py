@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""The mesh optimisation stage's numbers (issue 24) for the demo level and every shared glTF
+sample: vertex cache ACMR (16-entry FIFO) before and after over every LOD and LOD 0 alone,
+the bound no order can beat (each vertex transformed once: vertices / triangles), vertex
+counts and vertex bytes (the pack's vertex layout) before and after.
+
+    .venv/bin/python tools/mesh_stats.py [--samples DIR]
+
+Each source is cooked without baking (the stage's input does not depend on the bake) into a
+temporary directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+VERTEX_BYTES = 80  # pack::Vertex
+
+
+def sources(samples: Path) -> list[Path]:
+    found = [REPO / "content" / "levels" / "temple.toml", REPO / "content" / "levels" / "characters" / "golem.gltf"]
+    if samples.is_dir():
+        found += sorted(p for p in samples.rglob("*") if p.suffix.lower() in (".gltf", ".glb"))
+    else:
+        print(f"mesh_stats: no glTF samples at {samples} (set GLTF_SAMPLES_DIR); the level and golem only", file=sys.stderr)
+    return found
+
+
+def main() -> int:
+    from asset_pipeline.pipeline import CookSettings, CookError, cook
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--samples", type=Path, default=Path(os.environ.get("GLTF_SAMPLES_DIR") or REPO.parent / "shared" / "gltf-samples"))
+    args = ap.parse_args()
+    print("| source | triangles (all LODs) | ACMR before | ACMR after | ACMR bound | LOD 0 ACMR before | after | vertices before | after | vertex bytes before | after |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for src in sources(args.samples):
+            name = src.relative_to(args.samples) if src.is_relative_to(args.samples) else src.relative_to(REPO)
+            try:
+                r = cook(src, Path(tmp) / "out.pack", CookSettings(baking=False, report=False, force=True, cache_dir=Path(tmp) / "cache"))
+            except CookError as e:
+                print(f"| {name} | cook failed: {e} |")
+                continue
+            s = r.mesh_opt
+            if not s:
+                print(f"| {name} | no meshes |")
+                continue
+            print(f"| {name} | {s['triangles']} | {s['acmr_before']:.3f} | {s['acmr_after']:.3f} | {s['vertices_after'] / max(s['triangles'], 1):.3f} | {s['lod0_acmr_before']:.3f} | {s['lod0_acmr_after']:.3f} "
+                  f"| {s['vertices_before']} | {s['vertices_after']} | {s['vertices_before'] * VERTEX_BYTES} | {s['vertices_after'] * VERTEX_BYTES} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
