@@ -66,7 +66,7 @@ class Pack:
         lod = self.doc["meshes"][mesh]["lods"][level]
         v, i = lod["vertices"], lod["indices"]
         vertices = np.frombuffer(self.data, VERTEX, lod["vertex_count"], v["offset"])
-        indices = np.frombuffer(self.data, "<u4", lod["index_count"], i["offset"])
+        indices = np.frombuffer(self.data, {"u16": "<u2", "u32": "<u4"}[lod["index_format"]], lod["index_count"], i["offset"])
         materials = np.zeros(len(indices) // 3, np.int64)
         blocks = np.full(len(indices) // 3, -1, np.int64)
         for s in lod["submeshes"]:

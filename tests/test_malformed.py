@@ -654,7 +654,7 @@ def forge(b: bytes, manifest: Callable[[dict], object] = lambda m: None, data: C
 
 def set_index_in_data(d: bytearray, m: dict, value: int) -> None:
     lod = m["meshes"][0]["lods"][0]
-    struct.pack_into("<I", d, lod["indices"]["offset"] + 4, value)
+    struct.pack_into({"u16": "<H", "u32": "<I"}[lod["index_format"]], d, lod["indices"]["offset"] + {"u16": 2, "u32": 4}[lod["index_format"]], value)
 
 
 def flip(b: bytes, at: int) -> bytes:
@@ -669,6 +669,10 @@ PACK_CASES = {
     "truncated-header": (lambda p: p[:20], "truncated pack"),
     "truncated-body": (lambda p: p[:-100], "truncated pack: the header says"),
     "future-version": (lambda p: patch(p, 8, "<I", 99), "pack format version 99 is not supported"),
+    # A pack from the build before 16-bit indices (format 6): the message says what to do.
+    "old-version": (lambda p: patch(p, 8, "<I", 6), "pack format version 6 is not supported (this build reads version 7); re-cook the content"),
+    "index-format-unknown": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u8")), "malformed pack: metadata"),
+    "index-format-too-wide": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u32")), "bytes stored but"),
     "flipped-data-byte": (lambda p: flip(p, len(p) - 7), "checksum mismatch"),
     "flipped-header-byte": (lambda p: flip(p, 30), "checksum mismatch"),
     "trailing-bytes": (lambda p: p + b"\0" * 16, "unexpected trailing bytes"),

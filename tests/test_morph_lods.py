@@ -49,7 +49,7 @@ def pack_lods(manifest: dict, data: bytes, mesh: int) -> list[dict]:
         n = lod["vertex_count"]
         vertices = _array(data, lod["vertices"], np.uint8, (n, VERTEX_STRIDE))
         positions = np.ascontiguousarray(vertices[:, :12]).view(np.float32).reshape(n, 3)
-        triangles = _array(data, lod["indices"], np.uint32, (-1, 3))
+        triangles = _array(data, lod["indices"], {"u16": np.uint16, "u32": np.uint32}[lod["index_format"]], (-1, 3)).astype(np.uint32)
         morph = None if dl["morph"] is None else _array(data, dl["morph"]["positions"], np.float32, (targets, n, 3))
         out.append({"positions": positions, "triangles": triangles, "error": lod["error"], "morph": morph, "skin": dl["skin"]})
     return out

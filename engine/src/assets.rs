@@ -92,17 +92,27 @@ impl GpuScene {
     pub fn upload(gpu: &Gpu, pack: &Pack, layouts: SceneLayouts) -> Result<GpuScene> {
         let material_layout = layouts.material;
         let m = &pack.manifest;
-        // Concatenate every mesh's vertices and indices: one bind for the whole scene.
+        // Concatenate every mesh's vertices and indices: one vertex buffer for the whole scene,
+        // one index buffer holding the 32-bit LODs' indices and then the 16-bit ones (draws bind
+        // it at the region of their LOD's width).
         let mut vertex_bytes = Vec::new();
         let mut index_bytes = Vec::new();
+        let mut index_bytes_16 = Vec::new();
         let mut meshes = Vec::with_capacity(m.meshes.len());
         for mesh in &m.meshes {
             let mut lods = Vec::with_capacity(mesh.lods.len());
             for lod in &mesh.lods {
                 let (bounds, occluder) = lod_geometry(pack, lod, mesh);
+                let (region, index_type) = match lod.index_format {
+                    pack::IndexFormat::U16 => (&mut index_bytes_16, vk::IndexType::UINT16),
+                    pack::IndexFormat::U32 => (&mut index_bytes, vk::IndexType::UINT32),
+                };
+                let first_index = (region.len() / lod.index_format.size()) as u32;
+                region.extend_from_slice(pack.bytes(lod.indices));
                 lods.push(GpuLod {
                     base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
-                    first_index: (index_bytes.len() / 4) as u32,
+                    first_index,
+                    index_type,
                     submeshes: lod.submeshes.clone(),
                     error: lod.error,
                     triangles: lod.index_count / 3,
@@ -110,7 +120,6 @@ impl GpuScene {
                     occluder,
                 });
                 vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
-                index_bytes.extend_from_slice(pack.bytes(lod.indices));
             }
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),
@@ -122,6 +131,12 @@ impl GpuScene {
         }
         // Everything made below is owned until the scene is whole: an error frees what was made.
         let vertex_buffer = gpu.own(Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?);
+        // The 32-bit region's length is a multiple of 4, so the 16-bit region starts aligned.
+        let index_offset_16 = index_bytes.len() as vk::DeviceSize;
+        index_bytes.extend_from_slice(&index_bytes_16);
+        if index_bytes.is_empty() {
+            index_bytes.resize(4, 0); // a buffer cannot be empty
+        }
         let index_buffer = gpu.own(Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?);
 
         // The lightmap pages (and their direction textures) go into array textures below, not
@@ -294,6 +309,7 @@ impl GpuScene {
             instances,
             vertex_buffer: vertex_buffer.keep(),
             index_buffer: index_buffer.keep(),
+            index_offset_16,
             textures: textures.keep(),
             white: white.keep(),
             lightmaps: lightmaps.keep(),
@@ -327,7 +343,7 @@ fn lod_geometry(pack: &Pack, lod: &pack::MeshLod, mesh: &pack::Mesh) -> (LocalBo
         None => LocalBounds { min: Vec3::from(mesh.bounds_min), max: Vec3::from(mesh.bounds_max) },
     };
     let occluder = (lod.index_count as usize / 3 <= MAX_OCCLUDER_TRIANGLES && lod.index_count >= 3).then(|| {
-        let indices: Vec<u32> = pack.bytes(lod.indices).chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+        let indices = pack.indices(lod);
         let submeshes: Vec<(u32, u32)> = lod.submeshes.iter().map(|s| (s.first_index, s.index_count)).collect();
         Arc::new(OccluderMesh::new(&positions, &indices, &submeshes))
     });
@@ -433,7 +449,7 @@ fn flock_mesh(gpu: &Gpu, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
     let m = &pack.manifest;
     let lod = &m.meshes[mesh as usize].lods[0];
     let vertices = pack::Vertex::read_all(pack.bytes(lod.vertices));
-    let indices: Vec<u32> = pack.bytes(lod.indices).chunks_exact(4).map(bytemuck::pod_read_unaligned).collect();
+    let indices = pack.indices(lod);
     let mut corners: Vec<[f32; 6]> = Vec::with_capacity(indices.len());
     let mut parts = Vec::new();
     for sub in &lod.submeshes {

@@ -270,12 +270,14 @@ fn morph_lods_pack() -> Pack {
             }
         }
         let deltas: Vec<f32> = verts.iter().flat_map(|v| field(v.position)).collect();
-        let index_bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let index_format = pack::IndexFormat::for_vertices(verts.len());
+        let index_bytes = index_format.encode(&idx);
         lods.push(MeshLod {
             vertices: b.push_bytes(Vertex::slice_as_bytes(&verts)),
             vertex_count: verts.len() as u32,
             indices: b.push_bytes(&index_bytes),
             index_count: idx.len() as u32,
+            index_format,
             submeshes: vec![Submesh { first_index: 0, index_count: idx.len() as u32, material: 0, lightmap_block: None }],
             error: 0.0,
         });

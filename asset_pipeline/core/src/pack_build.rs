@@ -1,8 +1,8 @@
 //! Scene IR -> pack: interleave vertices into the GPU layout, group triangles into submeshes,
-//! and lay out the data blob.
+//! store indices 16-bit where they fit, and lay out the data blob.
 
 use crate::ir::{LodIr, SceneIr};
-use pack::{Mesh, MeshLod, Pack, PackBuilder, Submesh, Vertex};
+use pack::{IndexFormat, Mesh, MeshLod, Pack, PackBuilder, Submesh, Vertex};
 
 /// Build the pack for a scene. Errors name the object that is inconsistent.
 pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
@@ -152,12 +152,13 @@ fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
     let too_big = || format!("more than {} vertices or indices", u32::MAX);
     let vertex_count = u32::try_from(n).map_err(|_| too_big())?;
     let index_count = u32::try_from(indices.len()).map_err(|_| too_big())?;
-    let index_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+    let index_format = IndexFormat::for_vertices(n);
     Ok(MeshLod {
         vertices: b.push_bytes(Vertex::slice_as_bytes(&vertices)),
         vertex_count,
-        indices: b.push_bytes(&index_bytes),
+        indices: b.push_bytes(&index_format.encode(&indices)),
         index_count,
+        index_format,
         submeshes,
         error: lod.error,
     })

@@ -130,7 +130,7 @@ fn vertices(p: &Pack, mesh: usize) -> Vec<pack::Vertex> {
 }
 
 fn indices(p: &Pack, mesh: usize) -> Vec<u32> {
-    p.bytes(p.manifest.meshes[mesh].lods[0].indices).chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
+    p.indices(&p.manifest.meshes[mesh].lods[0])
 }
 
 #[test]

@@ -25,6 +25,8 @@
 //! Version 5: directional lightmaps (`LightmapLayout::directions`; with them a page's texture
 //! holds b0 and the sun's visibility instead of B).
 //! Version 6: reflection probes (`Manifest::reflection_probes`).
+//! Version 7: 16-bit indices where a LOD has at most 65 536 vertices (`MeshLod::index_format`);
+//! LODs in vertex cache and fetch order (the cooker's mesh_opt stage).
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
@@ -44,7 +46,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads
@@ -197,6 +199,11 @@ impl Pack {
     /// for a pack that came from `from_bytes`).
     pub fn bytes(&self, r: BufferRange) -> &[u8] {
         &self.data[r.offset as usize..(r.offset + r.len) as usize]
+    }
+
+    /// A LOD's indices, whatever their stored width, as u32.
+    pub fn indices(&self, lod: &MeshLod) -> Vec<u32> {
+        lod.index_format.decode(self.bytes(lod.indices)).collect()
     }
 }
 

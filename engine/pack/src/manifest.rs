@@ -301,14 +301,55 @@ pub struct MeshLod {
     /// `Vertex` array, `vertex_count * VERTEX_STRIDE` bytes.
     pub vertices: BufferRange,
     pub vertex_count: u32,
-    /// u32 triangle list indices into this LOD's vertices.
+    /// Triangle list indices into this LOD's vertices, `index_format` wide.
     pub indices: BufferRange,
     pub index_count: u32,
+    pub index_format: IndexFormat,
     /// Ranges of `indices` drawn with one material (and lightmap block) each.
     pub submeshes: Vec<Submesh>,
     /// Geometric error to LOD 0 in metres, object space (an upper bound of the measured
     /// two-sided Hausdorff distance); 0 for LOD 0. Non-decreasing along the chain.
     pub error: f32,
+}
+
+/// How wide a LOD's indices are: 16 bits where every index fits (a LOD of at most 65 536
+/// vertices: half the index bytes to store, upload and fetch), else 32.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum IndexFormat {
+    U16,
+    U32,
+}
+
+impl IndexFormat {
+    /// The narrowest format that can index `vertex_count` vertices.
+    pub fn for_vertices(vertex_count: usize) -> IndexFormat {
+        if vertex_count <= 1 << 16 { IndexFormat::U16 } else { IndexFormat::U32 }
+    }
+
+    /// Bytes per index.
+    pub fn size(self) -> usize {
+        match self {
+            IndexFormat::U16 => 2,
+            IndexFormat::U32 => 4,
+        }
+    }
+
+    /// Little-endian indices of this width, as u32 (a trailing partial index is ignored).
+    pub fn decode(self, bytes: &[u8]) -> impl Iterator<Item = u32> + '_ {
+        bytes.chunks_exact(self.size()).map(move |b| match self {
+            IndexFormat::U16 => u16::from_le_bytes([b[0], b[1]]) as u32,
+            IndexFormat::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        })
+    }
+
+    /// `indices` in this width, little-endian (each must fit: see `for_vertices`).
+    pub fn encode(self, indices: &[u32]) -> Vec<u8> {
+        match self {
+            IndexFormat::U16 => indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect(),
+            IndexFormat::U32 => indices.iter().flat_map(|&i| i.to_le_bytes()).collect(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -571,9 +612,9 @@ impl Manifest {
             for (l, lod) in m.lods.iter().enumerate() {
                 let (at, len) = (lod.indices.offset as usize, lod.indices.len as usize);
                 let bytes = data.get(at..at.saturating_add(len)).unwrap_or_default();
-                if let Some((k, v)) = bytes
-                    .chunks_exact(4)
-                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                if let Some((k, v)) = lod
+                    .index_format
+                    .decode(bytes)
                     .enumerate()
                     .find(|&(_, v)| v >= lod.vertex_count)
                 {
@@ -661,7 +702,7 @@ impl Manifest {
             for (l, lod) in m.lods.iter().enumerate() {
                 let what = format!("mesh {i} '{}' LOD {l}", m.name);
                 in_data(&format!("{what} vertices"), lod.vertices, lod.vertex_count as u64 * VERTEX_STRIDE as u64)?;
-                in_data(&format!("{what} indices"), lod.indices, lod.index_count as u64 * 4)?;
+                in_data(&format!("{what} indices"), lod.indices, lod.index_count as u64 * lod.index_format.size() as u64)?;
                 if !(lod.error >= last_error) || !lod.error.is_finite() {
                     return bad(format!("{what}: error {} is not finite and non-decreasing (previous {last_error})", lod.error));
                 }

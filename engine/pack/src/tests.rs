@@ -29,7 +29,7 @@ fn sample() -> Pack {
     });
     let uv = TextureTransform { tex_coord: 1, offset: [0.5, 0.0], rotation: 0.3, scale: [2.0, 1.0] };
     b.manifest.materials.push(Material { base_color_texture: Some(0), base_color_uv: uv, ..Default::default() });
-    let lod1 = b.push_bytes(&idx[..12]);
+    let lod1 = b.push_bytes(&IndexFormat::U16.encode(&[0, 1, 2]));
     b.manifest.meshes.push(Mesh {
         name: "quad".into(),
         lods: vec![
@@ -38,6 +38,7 @@ fn sample() -> Pack {
                 vertex_count: 4,
                 indices,
                 index_count: 6,
+                index_format: IndexFormat::U32,
                 submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_block: Some(0) }],
                 error: 0.0,
             },
@@ -46,6 +47,7 @@ fn sample() -> Pack {
                 vertex_count: 4,
                 indices: lod1,
                 index_count: 3,
+                index_format: IndexFormat::U16,
                 submeshes: vec![Submesh { first_index: 0, index_count: 3, material: 0, lightmap_block: Some(0) }],
                 error: 0.5,
             },
@@ -399,7 +401,7 @@ fn animated_lods() -> Pack {
     let vertices = push(&mut p, Vertex::slice_as_bytes(&verts));
     let indices = push(&mut p, &[0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
     let lod1 = &mut p.manifest.meshes[0].lods[1];
-    (lod1.vertices, lod1.vertex_count, lod1.indices, lod1.index_count) = (vertices, 3, indices, 3);
+    (lod1.vertices, lod1.vertex_count, lod1.indices, lod1.index_count, lod1.index_format) = (vertices, 3, indices, 3, IndexFormat::U32);
     let joints = push(&mut p, &[0u8; 3 * 8]);
     let weights = push(&mut p, &f32s(&[1.0, 0.0, 0.0, 0.0].repeat(3)));
     let positions = push(&mut p, &f32s(&[0.0, 0.1, 0.0, 0.0, 0.2, 0.0, 0.0, 0.3, 0.0]));
@@ -532,4 +534,25 @@ fn reflection_probes_round_trip_and_bad_ones_are_rejected_by_name() {
         let e = p.to_bytes().unwrap_err().to_string();
         assert!(e.contains(want), "want '{want}' in: {e}");
     }
+}
+
+#[test]
+fn indices_of_either_width_read_back_and_are_checked() {
+    let p = sample();
+    assert_eq!(p.indices(&p.manifest.meshes[0].lods[0]), vec![0, 1, 2, 2, 1, 3]);
+    assert_eq!(p.indices(&p.manifest.meshes[0].lods[1]), vec![0, 1, 2]);
+    assert_eq!(IndexFormat::for_vertices(65_536), IndexFormat::U16);
+    assert_eq!(IndexFormat::for_vertices(65_537), IndexFormat::U32);
+    assert_eq!(IndexFormat::U16.decode(&IndexFormat::U16.encode(&[0, 65_535, 7])).collect::<Vec<_>>(), vec![0, 65_535, 7]);
+    // A 16-bit index past the LOD's vertices.
+    let mut bad = sample();
+    let at = bad.manifest.meshes[0].lods[1].indices.offset as usize;
+    bad.data[at + 2..at + 4].copy_from_slice(&4u16.to_le_bytes());
+    let e = bad.to_bytes().unwrap_err();
+    assert!(e.to_string().contains("mesh 0 'quad' LOD 1: index 1 is 4, but the LOD has 4 vertices"), "{e}");
+    // The stored length must be the count times the width.
+    let mut bad = sample();
+    bad.manifest.meshes[0].lods[1].index_format = IndexFormat::U32;
+    let e = bad.to_bytes().unwrap_err();
+    assert!(e.to_string().contains("mesh 0 'quad' LOD 1 indices: 6 bytes stored but 12 expected"), "{e}");
 }

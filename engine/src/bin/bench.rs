@@ -23,7 +23,7 @@ use engine::render::renderer::{Lighting, Renderer};
 use engine::scene::GpuScene;
 use engine::stats::median;
 use glam::{Mat4, Vec3};
-use pack::{Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
+use pack::{IndexFormat, Material, Mesh, MeshLod, Node, Pack, PackBuilder, Submesh, Vertex};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -97,12 +97,11 @@ fn boxes_builder(placements: impl Iterator<Item = Mat4>) -> PackBuilder {
         }
     }
     let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
-    let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
-    let indices = b.push_bytes(&bytes);
+    let indices = b.push_bytes(&IndexFormat::U16.encode(&idx));
     b.manifest.materials.push(Material::default());
     b.manifest.meshes.push(Mesh {
         name: "cube".into(),
-        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_block: None }], error: 0.0 }],
+        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, index_format: IndexFormat::U16, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_block: None }], error: 0.0 }],
         bounds_min: [-0.5; 3],
         bounds_max: [0.5; 3],
     });

@@ -279,7 +279,7 @@ impl MeshKit {
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 0, &[setup.frame_set], &[]);
             d.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout, 2, &[scene.scene_set], &[]);
             d.cmd_bind_vertex_buffers(cb, 0, &[scene.vertex_buffer.buffer, setup.instances], &[0, 0]);
-            d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, 0, vk::IndexType::UINT32);
+            let mut bound_index_type = None;
             let mut bound = vk::Pipeline::null();
             let mut bound_vertices = scene.vertex_buffer.buffer;
             let mut bound_front = None;
@@ -302,6 +302,11 @@ impl MeshKit {
                 if bound_front != Some(batch.front) {
                     d.cmd_set_front_face(cb, batch.front);
                     bound_front = Some(batch.front);
+                }
+                if bound_index_type != Some(lod.index_type) {
+                    let offset = if lod.index_type == vk::IndexType::UINT16 { scene.index_offset_16 } else { 0 };
+                    d.cmd_bind_index_buffer(cb, scene.index_buffer.buffer, offset, lod.index_type);
+                    bound_index_type = Some(lod.index_type);
                 }
                 if it.pipeline != bound {
                     d.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, it.pipeline);

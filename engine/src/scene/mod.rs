@@ -19,7 +19,10 @@ use glam::{Mat4, Vec3};
 #[derive(Debug, Clone)]
 pub struct GpuLod {
     pub base_vertex: i32,
+    /// In indices of `index_type`, from the start of the index buffer's region of that width
+    /// (`GpuScene::index_offset_16` for 16-bit).
     pub first_index: u32,
+    pub index_type: vk::IndexType,
     pub submeshes: Vec<pack::Submesh>,
     /// Geometric error to LOD 0, metres in object space (0 for LOD 0).
     pub error: f32,
@@ -176,7 +179,9 @@ pub struct GpuScene {
     /// culling spheres.
     pub instances: Instances,
     pub vertex_buffer: Buffer,
+    /// Every LOD's indices: the 32-bit ones from 0, the 16-bit ones from `index_offset_16`.
     pub index_buffer: Buffer,
+    pub index_offset_16: vk::DeviceSize,
     /// The pack's textures by index; None for the baked lightmap pages, which live in `lightmaps`.
     pub(crate) textures: Vec<Option<Image>>,
     pub(crate) white: Image,

@@ -40,7 +40,7 @@ impl WalkMesh {
         for (node, w) in m.nodes.iter().zip(&world) {
             let Some(mesh) = node.mesh.filter(|_| node.is_static).and_then(|i| m.meshes.get(i as usize)) else { continue };
             let Some(lod) = mesh.lods.first() else { continue };
-            triangles.extend(lod_triangles(pack.bytes(lod.vertices), pack.bytes(lod.indices), *w));
+            triangles.extend(lod_triangles(pack.bytes(lod.vertices), &pack.indices(lod), *w));
         }
         WalkMesh::new(triangles)
     }
@@ -143,17 +143,14 @@ impl WalkMesh {
     }
 }
 
-/// World-space triangles of one LOD: `Vertex` records (position first) and u32 indices.
-fn lod_triangles<'a>(vertices: &'a [u8], indices: &'a [u8], world: Mat4) -> impl Iterator<Item = [Vec3; 3]> + 'a {
+/// World-space triangles of one LOD: `Vertex` records (position first) and its indices.
+fn lod_triangles<'a>(vertices: &'a [u8], indices: &'a [u32], world: Mat4) -> impl Iterator<Item = [Vec3; 3]> + 'a {
     let position = move |i: u32| {
         let at = i as usize * pack::VERTEX_STRIDE;
         let f = |k: usize| vertices.get(at + 4 * k..at + 4 * k + 4).map_or(0.0, |b| f32::from_le_bytes(b.try_into().unwrap()));
         world.transform_point3(Vec3::new(f(0), f(1), f(2)))
     };
-    indices.chunks_exact(12).map(move |c| {
-        let i = |k: usize| u32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
-        [position(i(0)), position(i(1)), position(i(2))]
-    })
+    indices.chunks_exact(3).map(move |c| [position(c[0]), position(c[1]), position(c[2])])
 }
 
 /// The height of triangle `t` above x/z `p`, if `p` is inside its projection.
@@ -304,7 +301,7 @@ mod tests {
         let indices = b.push_bytes(&(0u32..6).flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
         b.manifest.meshes.push(pack::Mesh {
             name: "floor".into(),
-            lods: vec![pack::MeshLod { vertices, vertex_count: 6, indices, index_count: 6, submeshes: vec![], error: 0.0 }],
+            lods: vec![pack::MeshLod { vertices, vertex_count: 6, indices, index_count: 6, index_format: pack::IndexFormat::U32, submeshes: vec![], error: 0.0 }],
             bounds_min: [-2.0, 0.0, -2.0],
             bounds_max: [2.0, 0.0, 2.0],
         });

@@ -64,6 +64,7 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
             vertex_count: 4,
             indices,
             index_count: 6,
+            index_format: pack::IndexFormat::U32,
             submeshes: vec![Submesh { first_index: 0, index_count: 6, material: 0, lightmap_block: None }],
             error: 0.0,
         }],
