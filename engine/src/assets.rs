@@ -34,13 +34,14 @@ struct MaterialConstants {
 const MATERIAL_SLOTS: u32 = 5;
 
 /// Size of the (A, B) table: 32 x 32 texels over (n.v, roughness), as the brief's tests.
-const DFG_LUT_SIZE: u32 = 32;
+const DFG_LUT_SIZE: u32 = shading::DFG_TABLE_SIZE;
 
-/// The table as R16G16_SFLOAT texels, computed once a process (it is the same for every scene).
+/// The table as R16G16_SFLOAT texels, converted once a process (it is the same for every
+/// scene; computed ahead of time, `shading::DfgLut::engine`).
 fn dfg_lut_texels() -> &'static [u8] {
     static TEXELS: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
     TEXELS.get_or_init(|| {
-        let lut = shading::DfgLut::new(DFG_LUT_SIZE);
+        let lut = shading::DfgLut::engine();
         lut.texels.iter().flat_map(|t| t.map(half::f16::from_f32)).flat_map(|h| h.to_le_bytes()).collect()
     })
 }

@@ -11,8 +11,9 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 mod dfg;
+mod dfg_table;
 pub mod sh;
-pub use dfg::{dfg, specular_albedo, DfgLut};
+pub use dfg::{dfg, specular_albedo, DfgLut, DFG_TABLE_SIZE};
 
 /// Filament's fp16-safe floor on perceptual roughness (α ≥ 0.002): α = 0 is singular.
 pub const MIN_ROUGHNESS: f64 = 0.045;

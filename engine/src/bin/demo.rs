@@ -5,6 +5,7 @@
 //!
 //! Exit status: 0 ok, 1 runtime failure, 2 bad arguments or a bad pack, 3 validation errors.
 
+use std::time::Instant;
 use engine::scene::camera::Camera;
 use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
 use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
@@ -214,7 +215,35 @@ fn has_display() -> bool {
     ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
 }
 
+/// Where the time from launch to the first frame went, stage by stage (printed headless as
+/// "start-up: ..."; `tools/startup.py` reads it).
+struct Startup {
+    launch: Instant,
+    last: Instant,
+    stages: Vec<(&'static str, f64)>,
+}
+
+impl Startup {
+    fn new() -> Startup {
+        let now = Instant::now();
+        Startup { launch: now, last: now, stages: Vec::new() }
+    }
+
+    /// The time since the previous mark was spent on `what`.
+    fn mark(&mut self, what: &'static str) {
+        let now = Instant::now();
+        self.stages.push((what, (now - self.last).as_secs_f64() * 1e3));
+        self.last = now;
+    }
+
+    fn line(&self) -> String {
+        let parts: Vec<String> = self.stages.iter().map(|(what, ms)| format!("{what} {ms:.1} ms")).collect();
+        format!("start-up: {}; launch to first frame {:.1} ms", parts.join(", "), (self.last - self.launch).as_secs_f64() * 1e3)
+    }
+}
+
 fn main() -> ExitCode {
+    let mut startup = Startup::new();
     let args = match parse_args() {
         Ok(a) => a,
         Err(e) => {
@@ -243,6 +272,7 @@ fn main() -> ExitCode {
         }
     }
     let pack = &packs[0];
+    startup.mark("read packs");
     let gpu_opts = GpuOptions { validation: args.validation, device: args.device.clone(), surface_extensions: vec![], pipeline_cache: GpuOptions::default_pipeline_cache() };
 
     if !args.headless && has_display() {
@@ -267,7 +297,7 @@ fn main() -> ExitCode {
             Err(e) => eprintln!("demo: cannot use a window ({e:#}); rendering headless instead"),
         }
     }
-    match headless(&args, pack, &gpu_opts) {
+    match headless(&args, pack, &gpu_opts, startup) {
         Ok(code) => code,
         Err(e) if e.is::<DeviceLost>() => exit_device_lost(&e),
         Err(e) => {
@@ -308,9 +338,10 @@ fn validation_verdict(enabled: bool, errors: usize) -> ExitCode {
     }
 }
 
-fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Result<ExitCode> {
+fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: Startup) -> anyhow::Result<ExitCode> {
     let gpu = Gpu::new(gpu_opts)?;
     println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
+    startup.mark("device");
     let mut target = Offscreen::new(&gpu, args.width, args.height)?;
     let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1)?;
     renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
@@ -321,8 +352,10 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     }
     // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
     let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
+    startup.mark("renderer");
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     renderer.animation = engine::anim::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
+    startup.mark("scene upload");
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
     let flight = (args.flight > 0.0).then(|| flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
@@ -332,6 +365,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
     }
     let mut world = engine::sim::level::world_from_spawns(&pack.manifest.spawns, &pack.manifest.pillars, min, max);
     engine::sim::level::warm_up(&mut world);
+    startup.mark("simulation warm-up");
     // Long enough for every requested screen unless the frame count was given.
     let frames = args.frames.unwrap_or_else(|| args.screens.iter().map(|&(k, _)| k + 1).max().unwrap_or(0).max(100));
     if let Some(&(_, secs)) = args.screens.iter().find(|&&(k, _)| k >= frames) {
@@ -377,6 +411,10 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions) -> anyhow::Re
         };
         if let Some(o) = overlay.as_mut() {
             o.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(&gpu, &renderer, 0));
+        }
+        if f == 0 {
+            startup.mark("first frame");
+            println!("{}", startup.line());
         }
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
