@@ -99,13 +99,29 @@ impl Pack {
     /// Read and fully validate a pack file.
     pub fn read_file(path: &std::path::Path) -> Result<Pack, PackError> {
         let bytes = std::fs::read(path).map_err(|e| PackError::Io(e.to_string()))?;
-        Pack::from_bytes(&bytes)
+        Pack::from_vec(bytes)
+    }
+
+    /// `from_bytes` for a file read whole: the data blob stays in the same allocation (moved to
+    /// its front) instead of being copied into a new one, so loading reads the file once and
+    /// touches no second copy of its pages.
+    pub fn from_vec(mut bytes: Vec<u8>) -> Result<Pack, PackError> {
+        let (manifest, data) = Pack::parse(&bytes)?;
+        bytes.truncate(data.end);
+        bytes.drain(..data.start);
+        Ok(Pack { manifest, data: bytes })
     }
 
     /// Decode a pack from memory. The checks run from the outside in, so each kind of damage
     /// gets its own error: not a pack at all, a pack from another version, a pack cut short,
     /// a pack whose bytes changed, and finally a pack whose contents do not make sense.
     pub fn from_bytes(bytes: &[u8]) -> Result<Pack, PackError> {
+        let (manifest, data) = Pack::parse(bytes)?;
+        Ok(Pack { manifest, data: bytes[data].to_vec() })
+    }
+
+    /// Check a whole file and decode its manifest; returns the data blob's byte range in it.
+    fn parse(bytes: &[u8]) -> Result<(Manifest, std::ops::Range<usize>), PackError> {
         if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
             return Err(PackError::NotAPack);
         }
@@ -148,10 +164,10 @@ impl Pack {
         }
         // The checksum matched, so what follows can only fail for a pack written wrongly (or
         // forged with a matching checksum): report it as malformed, naming the part.
-        let section = |name: &str, off: u64, len: u64| -> Result<&[u8], PackError> {
+        let section = |name: &str, off: u64, len: u64| -> Result<std::ops::Range<usize>, PackError> {
             let end = off.checked_add(len).filter(|&e| e <= actual && off >= HEADER_LEN as u64);
             match end {
-                Some(end) => Ok(&bytes[off as usize..end as usize]),
+                Some(end) => Ok(off as usize..end as usize),
                 None => Err(PackError::Malformed(format!(
                     "{name} section {off}..+{len} lies outside the file ({actual} bytes)"
                 ))),
@@ -159,11 +175,11 @@ impl Pack {
         };
         let meta = section("metadata", header.meta_off, header.meta_len)?;
         let data = section("data", header.data_off, header.data_len)?;
-        let manifest: Manifest = serde_json::from_slice(meta)
+        let manifest: Manifest = serde_json::from_slice(&bytes[meta])
             .map_err(|e| PackError::Malformed(format!("metadata: {e}")))?;
         manifest.validate(data.len() as u64)?;
-        manifest.validate_indices(data)?;
-        Ok(Pack { manifest, data: data.to_vec() })
+        manifest.validate_indices(&bytes[data.clone()])?;
+        Ok((manifest, data))
     }
 
     /// Encode to bytes (header, metadata, data). `Pack::from_bytes` inverts this exactly.

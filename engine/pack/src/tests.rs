@@ -98,6 +98,8 @@ fn round_trip_is_exact() {
     let q = Pack::from_bytes(&bytes).unwrap();
     assert_eq!(p, q);
     assert_eq!(q.to_bytes().unwrap(), bytes, "encoding is deterministic");
+    assert_eq!(Pack::from_vec(bytes.clone()).unwrap(), q, "a file read whole keeps its data in place, the same pack");
+    assert!(matches!(Pack::from_vec(bytes[..bytes.len() - 1].to_vec()), Err(PackError::Truncated { .. })));
     let v = &q.bytes(q.manifest.meshes[0].lods[0].vertices)[..VERTEX_STRIDE];
     assert_eq!(&v[0..4], &0.0f32.to_le_bytes());
     assert_eq!(&v[56..60], &0.25f32.to_le_bytes(), "texcoord1.u");
