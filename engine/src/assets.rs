@@ -4,10 +4,10 @@
 //! instances from the node hierarchy, and each small LOD's triangles kept on the CPU for
 //! occlusion culling. What it makes is a `scene::GpuScene`.
 
-use crate::gpu::{Buffer, Gpu, Image};
+use crate::gpu::{Gpu, Image, Uploader};
 use crate::render::occlusion::{OccluderMesh, MAX_OCCLUDER_TRIANGLES};
 use crate::render::samplers::SamplerCache;
-use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, LocalBounds, SceneLayouts, TextureSlots};
+use crate::scene::{max_scale, world_transforms, BakedLighting, FlockMesh, GpuLod, GpuMaterial, GpuMesh, GpuScene, Instance, Instances, LocalBounds, SceneLayouts, TextureSlots, UploadStats};
 use anyhow::{Context, Result};
 use ash::vk;
 use glam::Vec3;
@@ -29,6 +29,10 @@ struct MaterialConstants {
     metallic_roughness_uv: [[f32; 4]; 2],
     occlusion_uv: [[f32; 4]; 2],
 }
+
+/// The staging ring scenes upload through (`gpu::Uploader`): the demo level (25 MB) goes in
+/// one submit; bigger packs take one more per 32 MiB.
+const UPLOAD_RING_BYTES: u64 = 32 << 20;
 
 /// Texture slots of a material's descriptor set (set 1), in binding order.
 const MATERIAL_SLOTS: u32 = 5;
@@ -93,25 +97,33 @@ impl GpuScene {
     pub fn upload(gpu: &Gpu, pack: &Pack, layouts: SceneLayouts) -> Result<GpuScene> {
         let material_layout = layouts.material;
         let m = &pack.manifest;
-        // Concatenate every mesh's vertices and indices: one vertex buffer for the whole scene,
-        // one index buffer holding the 32-bit LODs' indices and then the 16-bit ones (draws bind
-        // it at the region of their LOD's width).
-        let mut vertex_bytes = Vec::new();
-        let mut index_bytes = Vec::new();
-        let mut index_bytes_16 = Vec::new();
+        // Every upload below goes through one staging ring, flushed at the end: a few submits
+        // for the whole scene. Everything made is owned until the scene is whole: an error
+        // frees what was made.
+        // (No bigger than the pack's data, plus room for what the loader makes itself: a small
+        // pack gets a small ring.)
+        let mut up = gpu.own(Uploader::new(UPLOAD_RING_BYTES.min(pack.data.len() as u64 + (1 << 20))));
+        // Every mesh's vertices and indices, in the order they are laid out: one vertex buffer
+        // for the whole scene, one index buffer holding the 32-bit LODs' indices and then the
+        // 16-bit ones (draws bind it at the region of their LOD's width).
+        let mut vertex_parts: Vec<&[u8]> = Vec::new();
+        let mut index_parts: Vec<&[u8]> = Vec::new();
+        let mut index_parts_16: Vec<&[u8]> = Vec::new();
+        let (mut vertices, mut indices, mut indices_16) = (0usize, 0usize, 0usize);
         let mut meshes = Vec::with_capacity(m.meshes.len());
         for mesh in &m.meshes {
             let mut lods = Vec::with_capacity(mesh.lods.len());
             for lod in &mesh.lods {
                 let (bounds, occluder) = lod_geometry(pack, lod, mesh);
-                let (region, index_type) = match lod.index_format {
-                    pack::IndexFormat::U16 => (&mut index_bytes_16, vk::IndexType::UINT16),
-                    pack::IndexFormat::U32 => (&mut index_bytes, vk::IndexType::UINT32),
+                let (parts, count, index_type) = match lod.index_format {
+                    pack::IndexFormat::U16 => (&mut index_parts_16, &mut indices_16, vk::IndexType::UINT16),
+                    pack::IndexFormat::U32 => (&mut index_parts, &mut indices, vk::IndexType::UINT32),
                 };
-                let first_index = (region.len() / lod.index_format.size()) as u32;
-                region.extend_from_slice(pack.bytes(lod.indices));
+                let first_index = *count as u32;
+                *count += lod.index_count as usize;
+                parts.push(pack.bytes(lod.indices));
                 lods.push(GpuLod {
-                    base_vertex: (vertex_bytes.len() / pack::VERTEX_STRIDE) as i32,
+                    base_vertex: vertices as i32,
                     first_index,
                     index_type,
                     submeshes: lod.submeshes.clone(),
@@ -120,7 +132,8 @@ impl GpuScene {
                     bounds,
                     occluder,
                 });
-                vertex_bytes.extend_from_slice(pack.bytes(lod.vertices));
+                vertices += lod.vertex_count as usize;
+                vertex_parts.push(pack.bytes(lod.vertices));
             }
             meshes.push(GpuMesh {
                 name: mesh.name.clone(),
@@ -130,15 +143,14 @@ impl GpuScene {
                 errors: mesh.lods.iter().map(|l| l.error).collect(),
             });
         }
-        // Everything made below is owned until the scene is whole: an error frees what was made.
-        let vertex_buffer = gpu.own(Buffer::with_data(gpu, "vertices", &vertex_bytes, vk::BufferUsageFlags::VERTEX_BUFFER)?);
+        let vertex_buffer = gpu.own(up.buffer(gpu, "vertices", &vertex_parts, vk::BufferUsageFlags::VERTEX_BUFFER)?);
         // The 32-bit region's length is a multiple of 4, so the 16-bit region starts aligned.
-        let index_offset_16 = index_bytes.len() as vk::DeviceSize;
-        index_bytes.extend_from_slice(&index_bytes_16);
-        if index_bytes.is_empty() {
-            index_bytes.resize(4, 0); // a buffer cannot be empty
+        let index_offset_16 = (indices * 4) as vk::DeviceSize;
+        index_parts.extend(index_parts_16);
+        if indices + indices_16 == 0 {
+            index_parts.push(&[0; 4]); // a buffer cannot be empty
         }
-        let index_buffer = gpu.own(Buffer::with_data(gpu, "indices", &index_bytes, vk::BufferUsageFlags::INDEX_BUFFER)?);
+        let index_buffer = gpu.own(up.buffer(gpu, "indices", &index_parts, vk::BufferUsageFlags::INDEX_BUFFER)?);
 
         // The lightmap pages (and their direction textures) go into array textures below, not
         // into images of their own.
@@ -159,34 +171,34 @@ impl GpuScene {
             let mips: Vec<&[u8]> = mips.iter().map(|m| m.as_ref()).collect();
             let extent = vk::Extent2D { width: t.width, height: t.height };
             textures.push(Some(
-                Image::sampled_with_mips(gpu, &t.name, format, extent, &mips)
+                Image::sampled_with_mips(gpu, &mut up, &t.name, format, extent, &mips)
                     .with_context(|| format!("uploading texture '{}'", t.name))?,
             ));
         }
         // Empty texture slots hold this (the pipelines made for a material's `TextureSlots`
         // do not sample them; those for every slot read white, which changes nothing).
-        let white = gpu.own(Image::sampled_with_mips(gpu, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?);
+        let white = gpu.own(Image::sampled_with_mips(gpu, &mut up, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?);
         let lightmaps = gpu.own(match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
             Some(l) => {
                 let layers: Vec<&[u8]> = pages.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
                 let [width, height] = l.pages[0];
-                Image::sampled_array(gpu, "lightmaps", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width, height }, &layers)
+                Image::sampled_array(gpu, &mut up, "lightmaps", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width, height }, &layers)
                     .with_context(|| format!("uploading {} lightmap pages of {width}x{height}", layers.len()))?
             }
-            None => Image::sampled_array(gpu, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
+            None => Image::sampled_array(gpu, &mut up, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
         });
         let lightmap_directions = gpu.own(match m.lightmap.as_ref().filter(|l| !l.directions.is_empty()) {
             Some(l) => {
                 let layers: Vec<&[u8]> = directions.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
                 let [width, height] = l.pages[0];
-                Image::sampled_array(gpu, "lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width, height }, &layers)
+                Image::sampled_array(gpu, &mut up, "lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width, height }, &layers)
                     .with_context(|| format!("uploading {} lightmap direction pages of {width}x{height}", layers.len()))?
             }
-            None => Image::sampled_array(gpu, "no lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[128, 128, 128, 255]])?,
+            None => Image::sampled_array(gpu, &mut up, "no lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[128, 128, 128, 255]])?,
         });
-        let reflection_cubes = gpu.own(reflection_cubes(gpu, pack)?);
+        let reflection_cubes = gpu.own(reflection_cubes(gpu, &mut up, pack)?);
         let reflection_bytes = reflection_probe_bytes(pack);
-        let reflection_probes = gpu.own(Buffer::with_data(gpu, "reflection probes", &reflection_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
+        let reflection_probes = gpu.own(up.buffer(gpu, "reflection probes", &[&reflection_bytes], vk::BufferUsageFlags::STORAGE_BUFFER)?);
         let mut samplers = gpu.own(SamplerCache::default());
 
         let material_count = m.materials.len() as u32;
@@ -245,7 +257,7 @@ impl GpuScene {
 
         // Set 2: one for the whole scene.
         let probe_bytes = probe_buffer_bytes(pack);
-        let probes = gpu.own(Buffer::with_data(gpu, "probes", &probe_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
+        let probes = gpu.own(up.buffer(gpu, "probes", &[&probe_bytes], vk::BufferUsageFlags::STORAGE_BUFFER)?);
         let mut constants: Vec<MaterialConstants> = m
             .materials
             .iter()
@@ -265,7 +277,7 @@ impl GpuScene {
             constants.push(MaterialConstants::default());
         }
         let constant_bytes: &[u8] = bytemuck::cast_slice(&constants);
-        let material_constants = gpu.own(Buffer::with_data(gpu, "material constants", constant_bytes, vk::BufferUsageFlags::STORAGE_BUFFER)?);
+        let material_constants = gpu.own(up.buffer(gpu, "material constants", &[constant_bytes], vk::BufferUsageFlags::STORAGE_BUFFER)?);
         // Lightmaps are read between their texels, never past the page's edge.
         let clamped = pack::Sampler { wrap_s: pack::Wrap::Clamp, wrap_t: pack::Wrap::Clamp, mipmap_filter: None, ..Default::default() };
         let lightmap_sampler = samplers.get(gpu, clamped, false)?;
@@ -274,7 +286,7 @@ impl GpuScene {
         let image_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmaps.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let direction_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: lightmap_directions.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let lut_extent = vk::Extent2D { width: DFG_LUT_SIZE, height: DFG_LUT_SIZE };
-        let dfg_lut = gpu.own(Image::sampled_with_mips(gpu, "dfg lut", vk::Format::R16G16_SFLOAT, lut_extent, &[dfg_lut_texels()])?);
+        let dfg_lut = gpu.own(Image::sampled_with_mips(gpu, &mut up, "dfg lut", vk::Format::R16G16_SFLOAT, lut_extent, &[dfg_lut_texels()])?);
         let lut_info = [vk::DescriptorImageInfo { sampler: lightmap_sampler, image_view: dfg_lut.view, image_layout: vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL }];
         let probe_info = [vk::DescriptorBufferInfo { buffer: probes.buffer, offset: 0, range: vk::WHOLE_SIZE }];
         // Trilinear between the roughness levels; cube sampling is seamless across faces.
@@ -297,13 +309,19 @@ impl GpuScene {
         for mesh in m.spawns.iter().filter(|s| s.kind == "boids").filter_map(|s| s.params.get("mesh")?.as_u64()) {
             let mesh = mesh as u32; // the pack checked it names one of its meshes
             if !flock_meshes.iter().any(|(m, _)| *m == mesh) {
-                let f = flock_mesh(gpu, pack, mesh)?;
+                let f = flock_mesh(gpu, &mut up, pack, mesh)?;
                 flock_meshes.push((mesh, f));
             }
         }
 
+        // The copies run: the scene is ready once this returns.
+        up.flush(gpu)?;
+        let upload = UploadStats { submits: up.submits, bytes: up.bytes };
+        up.destroy(gpu);
+
         static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         Ok(GpuScene {
+            upload,
             id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             meshes,
             materials,
@@ -374,15 +392,15 @@ fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
 
 /// The reflection probes' cubes as one cube-map array (half RGBA), in the pack's probe order;
 /// one black 1-texel cube when there are none (the binding must hold a view).
-fn reflection_cubes(gpu: &Gpu, pack: &Pack) -> Result<Image> {
+fn reflection_cubes(gpu: &Gpu, up: &mut Uploader, pack: &Pack) -> Result<Image> {
     let format = vk::Format::R16G16B16A16_SFLOAT;
     match pack.manifest.reflection_probes.as_ref().filter(|r| !r.probes.is_empty()) {
         Some(r) => {
             let cubes: Vec<&[u8]> = r.probes.iter().map(|p| pack.bytes(p.data)).collect();
-            Image::sampled_cubes(gpu, "reflection probes", format, r.face_size, r.levels, 8, &cubes)
+            Image::sampled_cubes(gpu, up, "reflection probes", format, r.face_size, r.levels, 8, &cubes)
                 .with_context(|| format!("uploading {} reflection probes of {} texels a face", cubes.len(), r.face_size))
         }
-        None => Image::sampled_cubes(gpu, "no reflection probes", format, 1, 1, 8, &[&[0u8; 6 * 8]]),
+        None => Image::sampled_cubes(gpu, up, "no reflection probes", format, 1, 1, 8, &[&[0u8; 6 * 8]]),
     }
 }
 
@@ -446,7 +464,7 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
 }
 
 /// Mesh `mesh`'s full detail as a flock mesh (see `scene::FlockMesh`).
-fn flock_mesh(gpu: &Gpu, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
+fn flock_mesh(gpu: &Gpu, up: &mut Uploader, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
     let m = &pack.manifest;
     let lod = &m.meshes[mesh as usize].lods[0];
     let vertices = pack::Vertex::read_all(pack.bytes(lod.vertices));
@@ -463,6 +481,6 @@ fn flock_mesh(gpu: &Gpu, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
     }
     let radius = vertices.iter().map(|v| Vec3::from(v.position).length()).fold(0.0, f32::max);
     let name = format!("flock mesh '{}'", m.meshes[mesh as usize].name);
-    let vertices = Buffer::with_data(gpu, &name, bytemuck::cast_slice(&corners), vk::BufferUsageFlags::VERTEX_BUFFER)?;
+    let vertices = up.buffer(gpu, &name, &[bytemuck::cast_slice(&corners)], vk::BufferUsageFlags::VERTEX_BUFFER)?;
     Ok(FlockMesh { vertices, parts, radius })
 }

@@ -356,6 +356,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
     let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
     renderer.animation = engine::anim::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
     startup.mark("scene upload");
+    println!("scene upload: {} bytes in {} submits", scene.upload.bytes, scene.upload.submits);
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
     let flight = (args.flight > 0.0).then(|| flight::Flight::for_pack(&pack.manifest, min, max, args.flight));

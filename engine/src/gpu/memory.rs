@@ -1,6 +1,6 @@
 //! Buffers and images with their memory, and uploads through a staging buffer.
 
-use super::Gpu;
+use super::{Gpu, Uploader};
 use anyhow::{anyhow, bail, Context, Result};
 use std::sync::atomic::Ordering;
 use ash::vk;
@@ -37,19 +37,13 @@ impl Buffer {
         &slice[..self.size as usize]
     }
 
-    /// A device-local buffer filled with `bytes` through a staging copy.
+    /// A device-local buffer filled with `bytes` through a staging copy, now (one submit; a
+    /// loader of many buffers batches them through an `Uploader`).
     pub fn with_data(gpu: &Gpu, name: &str, bytes: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer> {
         // The staging buffer is freed when this returns, whichever way.
-        let mut staging = gpu.own(Buffer::new(gpu, "staging", bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?);
-        staging.mapped()[..bytes.len()].copy_from_slice(bytes);
-        let dst = gpu.own(Buffer::new(gpu, name, bytes.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?);
-        // An empty pack's vertex and index buffers: nothing to copy (a copy of 0 bytes is invalid).
-        if bytes.is_empty() {
-            return Ok(dst.keep());
-        }
-        gpu.one_shot(|cb| unsafe {
-            gpu.device.cmd_copy_buffer(cb, staging.buffer, dst.buffer, &[vk::BufferCopy::default().size(bytes.len() as u64)]);
-        })?;
+        let mut up = gpu.own(Uploader::new(bytes.len() as u64));
+        let dst = gpu.own(up.buffer(gpu, name, &[bytes], usage)?);
+        up.flush(gpu)?;
         Ok(dst.keep())
     }
 
@@ -116,7 +110,7 @@ pub struct Image {
     pub extent: vk::Extent2D,
     pub mip_levels: u32,
     /// Array layers (1 unless made by `sampled_array`).
-    layers: u32,
+    pub(super) layers: u32,
     allocation: Option<Allocation>,
 }
 
@@ -175,18 +169,24 @@ impl Image {
         Ok(made.keep())
     }
 
-    /// A sampled image with every mip level uploaded from `mips` (level 0 first, tightly packed),
-    /// left in SHADER_READ_ONLY_OPTIMAL.
-    pub fn sampled_with_mips(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, mips: &[&[u8]]) -> Result<Image> {
+    /// Array layers.
+    pub fn layers(&self) -> u32 {
+        self.layers
+    }
+
+    /// A sampled image with every mip level uploaded from `mips` (level 0 first, tightly packed)
+    /// through `up`, in SHADER_READ_ONLY_OPTIMAL once `up` has flushed.
+    pub fn sampled_with_mips(gpu: &Gpu, up: &mut Uploader, name: &str, format: vk::Format, extent: vk::Extent2D, mips: &[&[u8]]) -> Result<Image> {
         let image = gpu.own(Image::new(gpu, name, format, extent, mips.len() as u32, vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST, vk::ImageAspectFlags::COLOR)?);
         let parts: Vec<(&[u8], u32, u32)> = mips.iter().enumerate().map(|(level, bytes)| (*bytes, level as u32, 0)).collect();
-        image.upload(gpu, &parts)?;
+        up.image(gpu, &image, &parts)?;
         Ok(image.keep())
     }
 
     /// A sampled 2D array image of one level, layer i uploaded from `layers[i]` (tightly
-    /// packed), seen through a 2D-array view, left in SHADER_READ_ONLY_OPTIMAL.
-    pub fn sampled_array(gpu: &Gpu, name: &str, format: vk::Format, extent: vk::Extent2D, layers: &[&[u8]]) -> Result<Image> {
+    /// packed) through `up`, seen through a 2D-array view, in SHADER_READ_ONLY_OPTIMAL once `up`
+    /// has flushed.
+    pub fn sampled_array(gpu: &Gpu, up: &mut Uploader, name: &str, format: vk::Format, extent: vk::Extent2D, layers: &[&[u8]]) -> Result<Image> {
         let info = vk::ImageCreateInfo::default()
             .format(format)
             .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
@@ -195,14 +195,15 @@ impl Image {
             .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST);
         let image = gpu.own(Image::create(gpu, name, &info, vk::ImageViewType::TYPE_2D_ARRAY, vk::ImageAspectFlags::COLOR)?);
         let parts: Vec<(&[u8], u32, u32)> = layers.iter().enumerate().map(|(layer, bytes)| (*bytes, 0, layer as u32)).collect();
-        image.upload(gpu, &parts)?;
+        up.image(gpu, &image, &parts)?;
         Ok(image.keep())
     }
 
     /// Cube maps of `size`² texels a face and `levels` mips as one cube-map array (view
     /// CUBE_ARRAY, `imageCubeArray`), cube i uploaded from `cubes[i]`: [level][face +X, −X, +Y,
-    /// −Y, +Z, −Z][row][column], tightly packed. Left in SHADER_READ_ONLY_OPTIMAL.
-    pub fn sampled_cubes(gpu: &Gpu, name: &str, format: vk::Format, size: u32, levels: u32, texel_bytes: usize, cubes: &[&[u8]]) -> Result<Image> {
+    /// −Y, +Z, −Z][row][column], tightly packed, through `up`. In SHADER_READ_ONLY_OPTIMAL once
+    /// `up` has flushed.
+    pub fn sampled_cubes(gpu: &Gpu, up: &mut Uploader, name: &str, format: vk::Format, size: u32, levels: u32, texel_bytes: usize, cubes: &[&[u8]]) -> Result<Image> {
         anyhow::ensure!(gpu.caps.cube_arrays, "{name}: the device cannot sample cube-map arrays (imageCubeArray)");
         let info = vk::ImageCreateInfo::default()
             .flags(vk::ImageCreateFlags::CUBE_COMPATIBLE)
@@ -224,34 +225,8 @@ impl Image {
                 }
             }
         }
-        image.upload(gpu, &parts)?;
+        up.image(gpu, &image, &parts)?;
         Ok(image.keep())
-    }
-
-    /// Copy `parts` (texels, mip level, array layer) into a new colour image through one
-    /// staging buffer and leave every level and layer in SHADER_READ_ONLY_OPTIMAL.
-    fn upload(&self, gpu: &Gpu, parts: &[(&[u8], u32, u32)]) -> Result<()> {
-        let total: usize = parts.iter().map(|p| p.0.len()).sum();
-        let mut staging = gpu.own(Buffer::new(gpu, "texture staging", total as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?);
-        let mut regions = Vec::with_capacity(parts.len());
-        let mut offset = 0usize;
-        for &(bytes, level, layer) in parts {
-            staging.mapped()[offset..offset + bytes.len()].copy_from_slice(bytes);
-            regions.push(
-                vk::BufferImageCopy::default()
-                    .buffer_offset(offset as u64)
-                    .image_subresource(vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: level, base_array_layer: layer, layer_count: 1 })
-                    .image_extent(vk::Extent3D { width: (self.extent.width >> level).max(1), height: (self.extent.height >> level).max(1), depth: 1 }),
-            );
-            offset += bytes.len();
-        }
-        let range = vk::ImageSubresourceRange { layer_count: self.layers, ..full_range(vk::ImageAspectFlags::COLOR, self.mip_levels) };
-        gpu.one_shot(|cb| unsafe {
-            barrier(gpu, cb, self.image, range, Transition::UNDEFINED_TO_TRANSFER_DST);
-            gpu.device.cmd_copy_buffer_to_image(cb, staging.buffer, self.image, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &regions);
-            barrier(gpu, cb, self.image, range, Transition::TRANSFER_DST_TO_SAMPLED);
-        })?;
-        Ok(())
     }
 
     /// Free the view, the image and its memory (once: later calls do nothing).

@@ -7,7 +7,7 @@
 //! Objects are not freed on drop in general: the device may still be reading them (a frame in
 //! flight), which only the owner knows; `destroy` after the right fence is the owner's job.
 
-use super::{Buffer, Gpu, Image, SlotBuffers};
+use super::{Buffer, Gpu, Image, SlotBuffers, Uploader};
 use ash::vk;
 use std::ops::{Deref, DerefMut};
 
@@ -78,6 +78,7 @@ macro_rules! destroy_by_method {
 destroy_by_method! {
     Buffer,
     Image,
+    Uploader,
     SlotBuffers,
     crate::render::samplers::SamplerCache,
     crate::render::mesh_draw::MeshKit,

@@ -15,6 +15,13 @@ use anyhow::Result;
 use ash::vk;
 use glam::{Mat4, Vec3};
 
+/// A scene upload's submits (each one fence wait) and bytes (`gpu::Uploader`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct UploadStats {
+    pub submits: u32,
+    pub bytes: u64,
+}
+
 /// Where one level of detail of a mesh lives inside the shared buffers.
 #[derive(Debug, Clone)]
 pub struct GpuLod {
@@ -178,6 +185,8 @@ pub struct GpuScene {
     /// The placed meshes, behind handles (`spawn`, `set_transform`, `despawn`), with their
     /// culling spheres.
     pub instances: Instances,
+    /// What loading it took: submits through the staging ring and bytes copied.
+    pub upload: UploadStats,
     pub vertex_buffer: Buffer,
     /// Every LOD's indices: the 32-bit ones from 0, the 16-bit ones from `index_offset_16`.
     pub index_buffer: Buffer,
