@@ -13,35 +13,26 @@ temporary directory.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+from content_sources import display_name, samples_dir, sources
+
 VERTEX_BYTES = 80  # pack::Vertex
-
-
-def sources(samples: Path) -> list[Path]:
-    found = [REPO / "content" / "levels" / "temple.toml", REPO / "content" / "levels" / "characters" / "golem.gltf"]
-    if samples.is_dir():
-        found += sorted(p for p in samples.rglob("*") if p.suffix.lower() in (".gltf", ".glb"))
-    else:
-        print(f"mesh_stats: no glTF samples at {samples} (set GLTF_SAMPLES_DIR); the level and golem only", file=sys.stderr)
-    return found
 
 
 def main() -> int:
     from asset_pipeline.pipeline import CookSettings, CookError, cook
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--samples", type=Path, default=Path(os.environ.get("GLTF_SAMPLES_DIR") or REPO.parent / "shared" / "gltf-samples"))
+    ap.add_argument("--samples", type=Path, default=samples_dir())
     args = ap.parse_args()
     print("| source | triangles (all LODs) | ACMR before | ACMR after | ACMR bound | LOD 0 ACMR before | after | vertices before | after | vertex bytes before | after |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
-        for src in sources(args.samples):
-            name = src.relative_to(args.samples) if src.is_relative_to(args.samples) else src.relative_to(REPO)
+        for src in sources(args.samples, "mesh_stats"):
+            name = display_name(src, args.samples)
             try:
                 r = cook(src, Path(tmp) / "out.pack", CookSettings(baking=False, report=False, force=True, cache_dir=Path(tmp) / "cache"))
             except CookError as e:

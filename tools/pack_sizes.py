@@ -21,16 +21,7 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-
-
-def sources(samples: Path) -> list[Path]:
-    found = [REPO / "content" / "levels" / "temple.toml", REPO / "content" / "levels" / "characters" / "golem.gltf"]
-    if samples.is_dir():
-        found += sorted(p for p in samples.rglob("*") if p.suffix.lower() in (".gltf", ".glb"))
-    else:
-        print(f"pack_sizes: no glTF samples at {samples} (set GLTF_SAMPLES_DIR); the level and golem only", file=sys.stderr)
-    return found
+from content_sources import display_name, samples_dir, sources
 
 
 def breakdown(manifest: dict) -> Counter:
@@ -56,14 +47,14 @@ def main() -> int:
     from asset_pipeline.pipeline import CookError, CookSettings, cook
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--samples", type=Path, default=Path(os.environ.get("GLTF_SAMPLES_DIR") or REPO.parent / "shared" / "gltf-samples"))
+    ap.add_argument("--samples", type=Path, default=samples_dir())
     ap.add_argument("--quality", choices=["draft", "medium", "high"], default="draft")
     args = ap.parse_args()
     print("| source | source bytes | pack bytes | pack / source | vertices | indices | textures | lightmaps | reflection probes | other |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
-        for src in sources(args.samples):
-            name = src.relative_to(args.samples) if src.is_relative_to(args.samples) else src.relative_to(REPO)
+        for src in sources(args.samples, "pack_sizes"):
+            name = display_name(src, args.samples)
             out = Path(tmp) / "out.pack"
             try:
                 r = cook(src, out, CookSettings(report=False, force=True, cache_dir=Path(tmp) / "cache", bake=BakeSettings(preset=args.quality)))
