@@ -10,6 +10,10 @@ pub fn exercise(pack: &Pack) {
     for mesh in &m.meshes {
         for lod in &mesh.lods {
             ranges.extend([lod.vertices, lod.indices]);
+            // Either index width reads back whole and in range.
+            let indices = pack.indices(lod);
+            assert_eq!(indices.len(), lod.index_count as usize);
+            assert!(indices.iter().all(|&i| i < lod.vertex_count));
         }
     }
     for t in &m.textures {

@@ -7,7 +7,10 @@ use libfuzzer_sys::fuzz_target;
 mod common;
 
 fuzz_target!(|data: &[u8]| {
-    if let Ok(pack) = pack::Pack::from_bytes(data) {
+    let read = pack::Pack::from_bytes(data);
+    // A file read whole (`read_file`) keeps its data in place: the same pack or the same error.
+    assert_eq!(pack::Pack::from_vec(data.to_vec()), read);
+    if let Ok(pack) = read {
         common::exercise(&pack);
     }
 });
