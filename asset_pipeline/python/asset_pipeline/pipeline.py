@@ -493,6 +493,15 @@ def _chunks_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, pr
 # ---- LOD chains ---------------------------------------------------------------------------------
 
 
+def _hash_lod(key: Hasher, lod: ir.Lod) -> Hasher:
+    """A LOD's geometry into a stage key: every attribute by name, triangles, their materials and
+    lightmap blocks, morph deltas."""
+    for name in sorted(lod.attributes):
+        key.text(name).array(lod.attributes[name])
+    key.array(lod.triangles).array(lod.materials).array(lod.lightmap_blocks)
+    return key.array(lod.morph_positions).array(lod.morph_normals)
+
+
 def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress, executor=None, locked=frozenset()):
     """`locked`: meshes simplified with their open borders kept (level chunks, chunks.py)."""
     from asset_pipeline.executor import lod_chain
@@ -512,11 +521,7 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
         todo = []
         for i, m in enumerate(scene.meshes):
             base = m.base
-            key = Hasher("lod").settings(chunk_doc if i in locked else doc)
-            for name in sorted(base.attributes):
-                key.text(name).array(base.attributes[name])
-            key = key.array(base.triangles).array(base.materials).array(base.lightmap_blocks)
-            key = key.array(base.morph_positions).array(base.morph_normals).key()
+            key = _hash_lod(Hasher("lod").settings(chunk_doc if i in locked else doc), base).key()
             keys[i] = key
             hit = cache.load("lod", key)
             if hit is not None:
@@ -558,9 +563,7 @@ def _mesh_opt_stage(scene: ir.Scene, cache: StageCache, progress: Progress):
         for m in scene.meshes:
             key = Hasher("mesh_opt")
             for lod in m.lods:
-                for name in sorted(lod.attributes):
-                    key.text(name).array(lod.attributes[name])
-                key.array(lod.triangles).array(lod.materials).array(lod.lightmap_blocks).array(lod.morph_positions).array(lod.morph_normals).text(repr(lod.error))
+                _hash_lod(key, lod).text(repr(lod.error))
             key = key.key()
             hit = cache.load("mesh_opt", key)
             if hit is not None:
