@@ -1,7 +1,7 @@
 //! Block-compression encoders compared on the shared glTF samples' textures (issue 24): Intel's
 //! ISPC texture compressor (`intel_tex_2`: BC1, BC4, BC5, BC7) against a pure-Rust one
 //! (`texpresso`, a port of libsquish: BC1, BC4, BC5), per texture class as the materials use
-//! them, on one thread: quality against the source (colour: PSNR in linear light; normal maps:
+//! them, on one thread (BC7 at three of its speed settings: basic, fast, ultra fast): quality against the source (colour: PSNR in linear light; normal maps:
 //! mean and 99th-percentile angular error with z rebuilt from x, y; single channel: PSNR) and
 //! encode time per megatexel. Decoding for the metrics is `bcdec_rs` (an independent decoder).
 //!
@@ -162,6 +162,8 @@ fn encode(encoder: &str, format: &str, t: &Texture) -> Vec<u8> {
     let channel = |c: usize| -> Vec<u8> { t.rgba.iter().skip(c).step_by(4).copied().collect() };
     match (encoder, format) {
         ("intel_tex_2", "BC7") => intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_basic_settings(), &surface),
+        ("intel_tex_2 fast", "BC7") => intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_fast_settings(), &surface),
+        ("intel_tex_2 ultra fast", "BC7") => intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_ultra_fast_settings(), &surface),
         ("intel_tex_2", "BC1") => intel_tex_2::bc1::compress_blocks(&surface),
         ("intel_tex_2", "BC4") => {
             let r = channel(0);
@@ -241,6 +243,8 @@ fn main() {
     }
     let runs: &[(Class, &str, &str)] = &[
         (Class::Colour, "intel_tex_2", "BC7"),
+        (Class::Colour, "intel_tex_2 fast", "BC7"),
+        (Class::Colour, "intel_tex_2 ultra fast", "BC7"),
         (Class::Colour, "intel_tex_2", "BC1"),
         (Class::Colour, "texpresso", "BC1"),
         (Class::Data, "intel_tex_2", "BC7"),
