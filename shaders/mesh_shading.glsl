@@ -6,7 +6,7 @@
 // Set 1: the material's textures, each with its own sampler; white where the slot is empty.
 layout(set = 1, binding = 0) uniform sampler2D base_color_tex; // _SRGB format: sampled as linear
 layout(set = 1, binding = 1) uniform sampler2D emissive_tex;   // _SRGB format: sampled as linear
-layout(set = 1, binding = 2) uniform sampler2D normal_tex;     // n * 0.5 + 0.5 (white: no map, scale 0)
+layout(set = 1, binding = 2) uniform sampler2D normal_tex;     // xy: n.xy * 0.5 + 0.5 (white: no map, scale 0)
 layout(set = 1, binding = 3) uniform sampler2D metallic_roughness_tex; // g: roughness, b: metallic
 layout(set = 1, binding = 4) uniform sampler2D occlusion_tex;  // r
 
@@ -282,8 +282,10 @@ vec3 shading_normal(float scale) {
     vec3 t = in_tangent.xyz - n * dot(n, in_tangent.xyz);
     float tl = dot(t, t);
     if (HAS_NORMAL && scale != 0.0 && tl > 1e-12) {
-        vec3 ts = texture(normal_tex, in_normal_uv, MIP_BIAS).xyz * 2.0 - 1.0;
-        ts.xy *= scale;
+        // x and y only, z rebuilt (the map is unit length, z >= 0 in tangent space): BC5 keeps
+        // two channels, and every normal format reads the same way.
+        vec2 xy = texture(normal_tex, in_normal_uv, MIP_BIAS).xy * 2.0 - 1.0;
+        vec3 ts = vec3(xy * scale, sqrt(max(1.0 - dot(xy, xy), 0.0)));
         t *= inversesqrt(tl);
         vec3 b = cross(n, t) * (in_tangent.w < 0.0 ? -1.0 : 1.0);
         n = normalize(ts.x * t + ts.y * b + ts.z * n);

@@ -76,7 +76,38 @@ fn vk_format(f: TextureFormat) -> vk::Format {
         TextureFormat::Rgba8Unorm => vk::Format::R8G8B8A8_UNORM,
         TextureFormat::Rgba16Float => vk::Format::R16G16B16A16_SFLOAT,
         TextureFormat::Rgba16Unorm => vk::Format::R16G16B16A16_UNORM,
+        TextureFormat::Bc7Srgb => vk::Format::BC7_SRGB_BLOCK,
+        TextureFormat::Bc7Unorm => vk::Format::BC7_UNORM_BLOCK,
+        TextureFormat::Bc5Unorm => vk::Format::BC5_UNORM_BLOCK,
+        TextureFormat::Bc4Unorm => vk::Format::BC4_UNORM_BLOCK,
     }
+}
+
+/// The plain format a block-compressed one decodes to (`pack::bc::decode`'s layout): every one
+/// of them is sampled with linear filtering on every Vulkan device.
+fn decoded_vk_format(f: TextureFormat) -> vk::Format {
+    match f {
+        TextureFormat::Bc7Srgb => vk::Format::R8G8B8A8_SRGB,
+        TextureFormat::Bc7Unorm => vk::Format::R8G8B8A8_UNORM,
+        TextureFormat::Bc5Unorm => vk::Format::R8G8_UNORM,
+        TextureFormat::Bc4Unorm => vk::Format::R8_UNORM,
+        plain => vk_format(plain),
+    }
+}
+
+/// Whether block-compressed textures are sampled as they are (`true`) or decoded at load.
+/// GPUs sample them natively (a quarter to an eighth of the memory and bandwidth); CPU devices
+/// get them decoded, since lavapipe decodes every texel it filters: sampling BC7 made the demo
+/// flythrough's shading pass 5.9x slower (8.3 -> 49.1 ms, README "Texture formats").
+/// `ENGINE_BC=native` or `=decode` forces either. A device without the format (or without
+/// linear filtering of it) always gets the decoded texels.
+fn native_bc(gpu: &Gpu, format: TextureFormat) -> bool {
+    let wanted = match std::env::var("ENGINE_BC").as_deref() {
+        Ok("native") => true,
+        Ok("decode") => false,
+        _ => gpu.caps.device_type != vk::PhysicalDeviceType::CPU,
+    };
+    wanted && can_filter(gpu, vk_format(format))
 }
 
 /// Whether the device can sample `format` with linear filtering (every format the pack uses is
@@ -93,6 +124,75 @@ pub fn unorm16_to_half(bytes: &[u8]) -> Vec<u8> {
     bytes.chunks_exact(2).flat_map(|b| half::f16::from_f32(u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0).to_le_bytes()).collect()
 }
 
+/// One texture's levels as they go to the device: the format, and each level's bytes (the
+/// pack's own, or converted).
+type Texels<'a> = (vk::Format, Vec<std::borrow::Cow<'a, [u8]>>);
+
+/// Every material texture's levels in the format the device samples (`None` for those `skip`
+/// says the loader places elsewhere: the lightmap pages). Block-compressed textures the device
+/// does not sample natively (`native_bc`) are decoded here, in parallel over every level of
+/// every texture; 16-bit UNORM normal maps become half floats where the device cannot filter
+/// them.
+fn material_texels<'a>(gpu: &Gpu, pack: &'a Pack, skip: impl Fn(u32) -> bool) -> Result<Vec<Option<Texels<'a>>>> {
+    use rayon::prelude::*;
+    let m = &pack.manifest;
+    let plans: Vec<Option<(vk::Format, bool)>> = m
+        .textures
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            (!skip(i as u32)).then(|| {
+                if t.format.is_compressed() && !native_bc(gpu, t.format) {
+                    (decoded_vk_format(t.format), true)
+                } else if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, vk_format(t.format)) {
+                    (vk::Format::R16G16B16A16_SFLOAT, true)
+                } else {
+                    (vk_format(t.format), false)
+                }
+            })
+        })
+        .collect();
+    // (texture, level) pairs that need converting: a big texture's levels spread over threads.
+    let jobs: Vec<(usize, usize)> = plans
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| matches!(p, Some((_, true))))
+        .flat_map(|(i, _)| (0..m.textures[i].mips.len()).map(move |l| (i, l)))
+        .collect();
+    let converted: Vec<Result<Vec<u8>>> = jobs
+        .par_iter()
+        .map(|&(i, l)| {
+            let t = &m.textures[i];
+            let bytes = pack.bytes(t.mips[l]);
+            if t.format == TextureFormat::Rgba16Unorm {
+                return Ok(unorm16_to_half(bytes));
+            }
+            let (w, h) = ((t.width >> l).max(1), (t.height >> l).max(1));
+            pack::bc::decode(t.format, w, h, bytes).with_context(|| format!("texture '{}' level {l}: blocks do not decode", t.name))
+        })
+        .collect();
+    let mut converted = jobs.into_iter().zip(converted).peekable();
+    let mut out = Vec::with_capacity(plans.len());
+    for (i, plan) in plans.into_iter().enumerate() {
+        let Some((format, convert)) = plan else {
+            out.push(None);
+            continue;
+        };
+        let t = &m.textures[i];
+        let mips = if convert {
+            let mut mips = Vec::with_capacity(t.mips.len());
+            while let Some(((_, _), bytes)) = converted.next_if(|((j, _), _)| *j == i) {
+                mips.push(std::borrow::Cow::Owned(bytes?));
+            }
+            mips
+        } else {
+            t.mips.iter().map(|r| std::borrow::Cow::Borrowed(pack.bytes(*r))).collect()
+        };
+        out.push(Some((format, mips)));
+    }
+    Ok(out)
+}
+
 impl GpuScene {
     pub fn upload(gpu: &Gpu, pack: &Pack, layouts: SceneLayouts) -> Result<GpuScene> {
         let material_layout = layouts.material;
@@ -100,9 +200,16 @@ impl GpuScene {
         // Every upload below goes through one staging ring, flushed at the end: a few submits
         // for the whole scene. Everything made is owned until the scene is whole: an error
         // frees what was made.
-        // (No bigger than the pack's data, plus room for what the loader makes itself: a small
-        // pack gets a small ring.)
-        let mut up = gpu.own(Uploader::new(UPLOAD_RING_BYTES.min(pack.data.len() as u64 + (1 << 20))));
+        // (No bigger than the pack's data, plus what decoding textures adds and room for what
+        // the loader makes itself: a small pack gets a small ring.)
+        let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
+        let directions: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.directions);
+        let texels = material_texels(gpu, pack, |i| pages.contains(&i) || directions.contains(&i))?;
+        let grown: u64 = m.textures.iter().zip(&texels).filter_map(|(t, x)| {
+            let stored: u64 = t.mips.iter().map(|r| r.len).sum();
+            Some(x.as_ref()?.1.iter().map(|b| b.len() as u64).sum::<u64>().saturating_sub(stored))
+        }).sum();
+        let mut up = gpu.own(Uploader::new(UPLOAD_RING_BYTES.min(pack.data.len() as u64 + grown + (1 << 20))));
         // Every mesh's vertices and indices, in the order they are laid out: one vertex buffer
         // for the whole scene, one index buffer holding the 32-bit LODs' indices and then the
         // 16-bit ones (draws bind it at the region of their LOD's width).
@@ -154,20 +261,12 @@ impl GpuScene {
 
         // The lightmap pages (and their direction textures) go into array textures below, not
         // into images of their own.
-        let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
-        let directions: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.directions);
         let mut textures = gpu.own(Vec::with_capacity(m.textures.len()));
-        for (i, t) in m.textures.iter().enumerate() {
-            if pages.contains(&(i as u32)) || directions.contains(&(i as u32)) {
+        for (t, texels) in m.textures.iter().zip(texels) {
+            let Some((format, mips)) = texels else {
                 textures.push(None);
                 continue;
-            }
-            let mut format = vk_format(t.format);
-            let mut mips: Vec<std::borrow::Cow<[u8]>> = t.mips.iter().map(|r| pack.bytes(*r).into()).collect();
-            if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, format) {
-                format = vk::Format::R16G16B16A16_SFLOAT;
-                mips = mips.iter().map(|m| unorm16_to_half(m).into()).collect();
-            }
+            };
             let mips: Vec<&[u8]> = mips.iter().map(|m| m.as_ref()).collect();
             let extent = vk::Extent2D { width: t.width, height: t.height };
             textures.push(Some(

@@ -58,9 +58,10 @@ fn the_demo_level_goes_up_in_one_submit() {
     let gpu = gpu();
     let renderer = engine::render::renderer::Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1).unwrap();
     let mut scene = engine::scene::GpuScene::upload(&gpu, &pack, renderer.layouts()).unwrap();
-    // Every buffer, texture, mip level and lightmap page of the level (22.6 MB) in one submit.
+    // Every buffer, texture, mip level and lightmap page of the level (16.6 MB as stored, 20.0
+    // MB once a CPU device's textures are decoded) in one submit.
     assert_eq!(scene.upload.submits, 1, "{:?}", scene.upload);
-    assert!(scene.upload.bytes > 20_000_000, "{:?}", scene.upload);
+    assert!(scene.upload.bytes as f64 > 0.8 * pack.data.len() as f64, "{:?} of a pack of {} bytes", scene.upload, pack.data.len());
     scene.destroy(&gpu);
     let mut renderer = renderer;
     renderer.destroy(&gpu);

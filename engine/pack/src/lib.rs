@@ -27,6 +27,8 @@
 //! Version 6: reflection probes (`Manifest::reflection_probes`).
 //! Version 7: 16-bit indices where a LOD has at most 65 536 vertices (`MeshLod::index_format`);
 //! LODs in vertex cache and fetch order (the cooker's mesh_opt stage).
+//! Version 8: block-compressed material textures (`TextureFormat::Bc7Srgb`, `Bc7Unorm`,
+//! `Bc5Unorm`, `Bc4Unorm`; levels are whole 4x4 blocks, `TextureFormat::level_bytes`).
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
@@ -34,6 +36,7 @@
 //! per-vertex parsing.
 
 mod anim;
+pub mod bc;
 mod error;
 mod manifest;
 mod write;
@@ -46,7 +49,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

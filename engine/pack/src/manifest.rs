@@ -457,11 +457,11 @@ impl Material {
     pub fn texture_slots(&self) -> [(&'static str, Option<u32>, &'static [TextureFormat]); 5] {
         use TextureFormat::*;
         [
-            ("base colour", self.base_color_texture, &[Rgba8Srgb, Rgba8Unorm]),
-            ("normal", self.normal_texture, &[Rgba16Unorm, Rgba8Unorm]),
-            ("metallic-roughness", self.metallic_roughness_texture, &[Rgba8Unorm]),
-            ("occlusion", self.occlusion_texture, &[Rgba8Unorm]),
-            ("emissive", self.emissive_texture, &[Rgba8Srgb]),
+            ("base colour", self.base_color_texture, &[Rgba8Srgb, Rgba8Unorm, Bc7Srgb]),
+            ("normal", self.normal_texture, &[Rgba16Unorm, Rgba8Unorm, Bc5Unorm]),
+            ("metallic-roughness", self.metallic_roughness_texture, &[Rgba8Unorm, Bc7Unorm]),
+            ("occlusion", self.occlusion_texture, &[Rgba8Unorm, Bc7Unorm, Bc4Unorm]),
+            ("emissive", self.emissive_texture, &[Rgba8Srgb, Bc7Srgb]),
         ]
     }
 
@@ -508,13 +508,23 @@ pub enum TextureFormat {
     Rgba16Float,
     /// 16-bit RGBA, linear (cooked normal maps: rgb = n * 0.5 + 0.5, unit length within 3e-5).
     Rgba16Unorm,
+    /// BC7, sRGB-encoded colour with alpha (base colour, emission).
+    Bc7Srgb,
+    /// BC7, linear data (metallic-roughness, packed occlusion).
+    Bc7Unorm,
+    /// BC5, two linear channels: a normal map's x, y as n * 0.5 + 0.5 (z = sqrt(1 - x² - y²)).
+    Bc5Unorm,
+    /// BC4, one linear channel in R (occlusion).
+    Bc4Unorm,
 }
 
 impl TextureFormat {
-    pub fn bytes_per_texel(self) -> u64 {
+    /// Bytes of a texel of a plain format; `None` for a block-compressed one (`block_bytes`).
+    pub fn bytes_per_texel(self) -> Option<u64> {
         match self {
-            TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => 4,
-            TextureFormat::Rgba16Float | TextureFormat::Rgba16Unorm => 8,
+            TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => Some(4),
+            TextureFormat::Rgba16Float | TextureFormat::Rgba16Unorm => Some(8),
+            TextureFormat::Bc4Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm => None,
         }
     }
 }
@@ -754,8 +764,8 @@ impl Manifest {
             }
             for (l, r) in t.mips.iter().enumerate() {
                 let (w, h) = ((t.width >> l).max(1) as u64, (t.height >> l).max(1) as u64);
-                // u32 x u32 fits in u64, times the texel size need not.
-                let Some(bytes) = (w * h).checked_mul(t.format.bytes_per_texel()) else {
+                // u32 x u32 fits in u64, times the texel (or block) size need not.
+                let Some(bytes) = t.format.level_bytes(w as u32, h as u32) else {
                     return bad(format!("texture {i} '{}': {}x{} is too large", t.name, t.width, t.height));
                 };
                 in_data(&format!("texture {i} '{}' mip {l}", t.name), *r, bytes)?;

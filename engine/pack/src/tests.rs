@@ -218,7 +218,7 @@ fn dangling_references_are_rejected_before_writing() {
     let mut p = sample();
     p.manifest.materials[0].normal_texture = Some(0);
     let e = p.to_bytes().unwrap_err().to_string();
-    assert!(e.contains("normal texture 0 't' is Rgba8Srgb, expected one of [Rgba16Unorm, Rgba8Unorm]"), "{e}");
+    assert!(e.contains("normal texture 0 't' is Rgba8Srgb, expected one of [Rgba16Unorm, Rgba8Unorm, Bc5Unorm]"), "{e}");
 
     let mut p = sample();
     p.manifest.meshes[0].lods[1].error = -1.0;
@@ -557,4 +557,53 @@ fn indices_of_either_width_read_back_and_are_checked() {
     bad.manifest.meshes[0].lods[1].index_format = IndexFormat::U32;
     let e = bad.to_bytes().unwrap_err();
     assert!(e.to_string().contains("mesh 0 'quad' LOD 1 indices: 6 bytes stored but 12 expected"), "{e}");
+}
+
+/// A BC4 block whose every texel is `v` (both endpoints `v`, every index 0).
+fn bc4_block(v: u8) -> [u8; 8] {
+    [v, v, 0, 0, 0, 0, 0, 0]
+}
+
+#[test]
+fn compressed_levels_are_whole_blocks_and_decode_cropped_to_the_level() {
+    // 5x3: two blocks across (the second hangs 3 texels over), one down.
+    let f = TextureFormat::Bc4Unorm;
+    assert_eq!(f.level_bytes(5, 3), Some(16));
+    assert_eq!(f.level_bytes(1, 1), Some(8));
+    assert_eq!(TextureFormat::Bc7Srgb.level_bytes(8, 8), Some(64));
+    assert_eq!(TextureFormat::Rgba8Srgb.level_bytes(5, 3), Some(60));
+    let blocks: Vec<u8> = [bc4_block(10), bc4_block(20)].concat();
+    let texels = bc::decode(f, 5, 3, &blocks).unwrap();
+    assert_eq!(texels, [[10, 10, 10, 10, 20]; 3].concat());
+    // BC5: x from the first half of a block, y from the second.
+    let blocks: Vec<u8> = [bc4_block(10), bc4_block(30), bc4_block(50), bc4_block(70)].concat();
+    let texels = bc::decode(TextureFormat::Bc5Unorm, 6, 2, &blocks).unwrap();
+    assert_eq!(&texels[..12], &[10, 30, 10, 30, 10, 30, 10, 30, 50, 70, 50, 70]);
+    assert_eq!(texels.len(), 6 * 2 * 2);
+    // Wrong lengths and plain formats decode to nothing.
+    assert_eq!(bc::decode(f, 5, 3, &blocks[..8]), None);
+    assert_eq!(bc::decode(TextureFormat::Rgba8Unorm, 1, 1, &[0; 4]), None);
+}
+
+#[test]
+fn compressed_textures_round_trip_and_are_checked_by_block_size_and_slot() {
+    let mut p = sample();
+    let l0 = push(&mut p, &[bc4_block(1), bc4_block(2), bc4_block(3), bc4_block(4)].concat());
+    let l1 = push(&mut p, &bc4_block(5));
+    let l2 = push(&mut p, &bc4_block(6));
+    let ao = p.manifest.textures.len();
+    p.manifest.textures.push(Texture { name: "ao".into(), width: 6, height: 5, format: TextureFormat::Bc4Unorm, mips: vec![l0, l1, l2], sampler: Sampler::default() });
+    p.manifest.materials[0].occlusion_texture = Some(ao as u32);
+    let bytes = p.to_bytes().unwrap();
+    assert_eq!(Pack::from_bytes(&bytes).unwrap(), p);
+    // A level the size of plain texels (6x5 x 4 bytes) is not the size of its blocks.
+    let mut q = p.clone();
+    q.manifest.textures[ao].mips[0] = push(&mut q, &[0; 120]);
+    let e = q.to_bytes().unwrap_err().to_string();
+    assert!(e.contains(&format!("texture {ao} 'ao' mip 0")), "{e}");
+    // BC4 holds one channel: not a base colour.
+    let mut q = p.clone();
+    q.manifest.materials[0].base_color_texture = Some(ao as u32);
+    let e = q.to_bytes().unwrap_err().to_string();
+    assert!(e.contains(&format!("base colour texture {ao} 'ao' is Bc4Unorm")), "{e}");
 }
