@@ -111,7 +111,7 @@ def cooked(room, tmp_path_factory):
 
 def test_bake_writes_exr_pages_and_puts_lightmaps_and_probes_in_the_pack(cooked):
     out, result = cooked
-    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "mesh_opt", "textures", "write"]
+    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "mesh_opt", "textures", "compress", "write"]
     exr = out.with_name("room.lightmap0.exr")
     img = read_exr(exr)
     # Readable by the OpenEXR package as well, as half floats.

@@ -331,9 +331,9 @@ def test_the_switch_off_gives_the_mesh_whole_and_no_chunk_stage(cooks):
     report = whole.path.with_suffix(".report.md").read_text()
     assert "## Level chunks" not in report and "| chunks |" not in report
     stages = re.findall(r"^\| (\w+) \| \d+ \| \d+ \| [\d.]+ \|$", report, re.M)
-    assert stages == ["level", "uv2", "bake", "lod", "mesh_opt", "textures", "write"], stages
+    assert stages == ["level", "uv2", "bake", "lod", "mesh_opt", "textures", "compress", "write"], stages
     stages = re.findall(r"^\| (\w+) \| \d+ \| \d+ \| [\d.]+ \|$", cooks["chunks"].path.with_suffix(".report.md").read_text(), re.M)
-    assert stages == ["level", "uv2", "bake", "chunks", "lod", "mesh_opt", "textures", "write"], stages
+    assert stages == ["level", "uv2", "bake", "chunks", "lod", "mesh_opt", "textures", "compress", "write"], stages
 
 
 def test_a_cook_that_splits_nothing_is_the_no_chunks_cook_byte_for_byte(cooks, tmp_path):

@@ -187,7 +187,7 @@ static = false
 """)
     out = tmp_path / "props.pack"
     result = cook(level, out, CookSettings(bake=BakeSettings(preset="draft", samples=16, probe_samples=16, post=RAW, **IRRADIANCE), lods=False, mips=False))
-    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "mesh_opt", "write"]
+    assert [s.name for s in result.stages] == ["level", "uv2", "bake", "chunks", "mesh_opt", "compress", "write"]
     doc = manifest(out)
     packed = {n["name"]: n for n in doc["nodes"] if n["mesh"] is not None}
     assert {k: (n["is_static"], n["lightmap"] is not None) for k, n in packed.items()} == {"fixed/slab": (True, True), "loose/slab": (False, False)}
@@ -437,7 +437,7 @@ def test_mip_levels_filter_across_edges_as_the_sampler_wraps_and_no_mipmaps_keep
         s.node(name, mesh=s.quad_mesh(name, (1, 1), s.material(name, texture=t)), translation=[2.0 * k, 0, 0])
     src = s.write(tmp_path / "samplers.gltf")
     out = tmp_path / "samplers.pack"
-    result = cook(src, out, CookSettings(lods=False, baking=False, force=True))
+    result = cook(src, out, CookSettings(lods=False, baking=False, force=True, compress=False))
     index = {t.name: i for i, t in enumerate(result.scene.textures)}
     assert set(cases) <= set(index), index
     doc = manifest(out)

@@ -156,7 +156,7 @@ def test_cooked_alpha_tested_texture_has_a_full_chain_that_keeps_its_coverage(tm
     src = tmp_path / "leaves.gltf"
     src.write_text(json.dumps(quad_gltf(png_bytes(rgba), "MASK", 0.5)))
     out = tmp_path / "leaves.pack"
-    result = cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    result = cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False, compress=False))
     assert result.summary["texture_mips"] == [8]
     fmt, levels = _core.read_pack_texture(out, 0)
     assert fmt == "Rgba8Srgb" and [l.shape[:2] for l in levels] == [(128 >> k, 128 >> k) for k in range(8)]
@@ -173,11 +173,11 @@ def test_cooked_alpha_tested_texture_has_a_full_chain_that_keeps_its_coverage(tm
     # The same texture on a blended material is not rescaled: its coverage thins out.
     src2 = tmp_path / "blend.gltf"
     src2.write_text(json.dumps(quad_gltf(png_bytes(rgba), "BLEND")))
-    cook(src2, tmp_path / "blend.pack", CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    cook(src2, tmp_path / "blend.pack", CookSettings(lods=False, lightmap_uvs=False, baking=False, compress=False))
     _, plain = _core.read_pack_texture(tmp_path / "blend.pack", 0)
     assert abs(coverage(plain[3], 0.5) - c0) > 0.02
     # A re-cook to another path takes the chain from the stage cache.
-    again = cook(src, tmp_path / "again.pack", CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    again = cook(src, tmp_path / "again.pack", CookSettings(lods=False, lightmap_uvs=False, baking=False, compress=False))
     stage = next(s for s in again.stages if s.name == "textures")
     assert (stage.items, stage.cached) == (1, 1)
     assert _core.read_pack_texture(tmp_path / "again.pack", 0)[1][3].tobytes() == levels[3].tobytes()
@@ -277,7 +277,7 @@ def test_gltf_material_textures_are_imported_by_what_they_hold(tmp_path):
     src = tmp_path / "rock.gltf"
     src.write_text(json.dumps(material_gltf([png_bytes(colour), png_bytes(bumpy_normals(32, 8)), png_bytes(data)], material)))
     out = tmp_path / "rock.pack"
-    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False, compress=False))
     manifest = json.loads(_core.read_pack_manifest(str(out)))
     [m] = manifest["materials"]
     assert m["base_color_texture"] == m["emissive_texture"], "one image read as colour twice is one texture"
@@ -306,7 +306,7 @@ def test_a_16_bit_normal_map_keeps_its_bits(tmp_path):
     material = {"name": "m", "normalTexture": {"index": 0}}
     src.write_text(json.dumps(material_gltf([png_bytes(normals16)], material)))
     out = tmp_path / "n.pack"
-    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False))
+    cook(src, out, CookSettings(lods=False, lightmap_uvs=False, baking=False, compress=False))
     fmt, levels = _core.read_pack_texture(str(out), 0)
     # Level 0 is only renormalised: within a few 16-bit steps of the authored texels, which
     # an 8-bit detour would have moved by ~128 steps.

@@ -50,7 +50,7 @@ def test_recook_with_nothing_changed_does_no_work_and_touches_nothing(level_copy
     first = cook_detailed(level_copy, out, progress=False, settings=QUICK)
     assert not first.up_to_date
     names = [s.name for s in first.stages]
-    assert names == ["level", "uv2", "bake", "chunks", "lod", "mesh_opt", "textures", "write"], names
+    assert names == ["level", "uv2", "bake", "chunks", "lod", "mesh_opt", "textures", "compress", "write"], names
     assert all(s.cached == 0 for s in first.stages)
     assert out.with_suffix(".report.md").exists() and out.with_name("temple.lightmap0.exr").exists()
     before = snapshot(out_dir)

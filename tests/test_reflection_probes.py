@@ -318,7 +318,7 @@ def test_a_cooked_level_carries_its_probes_per_the_contract(cooked_room):
     # The cooker hands the cubes to the Rust core in the wire form (ir.to_wire); the core writes the pack.
     assert rp is not None, ("the pack has no reflection_probes: the Rust pack writer (cook_core wire.rs, pack_build.rs) does not "
                             "write the wire's 'reflection_probes' yet (/work/notes_tmp/reflection_wire.md)")
-    assert version == 7
+    assert version == 8
     assert (rp["face_size"], rp["levels"]) == (64, 5)  # draft
     texels = ir.cube_texels(64, 5)
     assert [p["name"] for p in rp["probes"]] == ["room", "reflection_probe_1"]

@@ -5,6 +5,9 @@ prints on its "start-up:" line. Given two demo binaries, runs them alternately (
 and prints both with their ratio, so the machine's drift falls on both alike.
 
     python3 tools/startup.py [--demo BIN [--demo BIN2]] [--runs N] PACK [PACK...]
+
+A PACK given as `A.pack,B.pack` gives each binary its own pack (two builds that read different
+pack versions, each with the same content cooked for it).
 """
 
 from __future__ import annotations
@@ -38,18 +41,23 @@ def run(demo: Path, pack: Path) -> dict[str, float]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("packs", nargs="+", type=Path)
+    ap.add_argument("packs", nargs="+", help="a pack, or A.pack,B.pack: one per binary")
     ap.add_argument("--demo", action="append", type=Path, help="demo binary (twice to compare two; default target/release/demo)")
     ap.add_argument("--runs", type=int, default=5, help="launches per binary and pack (default 5)")
     args = ap.parse_args()
     demos = args.demo or [REPO / "target" / "release" / "demo"]
-    for pack in args.packs:
+    for arg in args.packs:
+        packs = [Path(p) for p in arg.split(",")]
+        if len(packs) not in (1, len(demos)):
+            ap.error(f"{arg}: give one pack, or one per --demo")
+        packs = packs * len(demos) if len(packs) == 1 else packs
         runs: list[list[dict]] = [[] for _ in demos]
         for k in range(args.runs):
             order = range(len(demos)) if k % 2 == 0 else reversed(range(len(demos)))
             for d in order:
-                runs[d].append(run(demos[d], pack))
-        print(f"\n{pack} ({pack.stat().st_size} bytes), median of {args.runs} launches, ms:\n")
+                runs[d].append(run(demos[d], packs[d]))
+        sizes = ", ".join(f"{p} ({p.stat().st_size} bytes)" for p in dict.fromkeys(packs))
+        print(f"\n{sizes}, median of {args.runs} launches, ms:\n")
         names = list(runs[0][0])
         head = "| stage | " + " | ".join(str(d) for d in demos) + (" | B/A |" if len(demos) == 2 else " |")
         print(head)

@@ -86,6 +86,7 @@ mod bake;
 mod lightmap_post;
 mod lod;
 mod mips;
+mod compress;
 mod mesh_opt;
 
 #[pymodule]
@@ -102,6 +103,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lightmap_post::register(m)?;
     lod::register(m)?;
     mips::register(m)?;
+    compress::register(m)?;
     mesh_opt::register(m)?;
     Ok(())
 }

@@ -85,8 +85,9 @@ fn array<T: numpy::Element>(py: Python<'_>, v: Vec<T>, w: u32, h: u32) -> PyResu
     Ok(a.into_pyarray(py).into_any().unbind())
 }
 
-/// Every level of texture `index` in the pack at `path`, as written: `(format, [level arrays])`,
-/// each (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm. For tests and tools.
+/// Every level of texture `index` in the pack at `path`: `(format, [level arrays])`, each
+/// (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm; a block-compressed level
+/// decoded (pack::bc) to (h, w, c) uint8, c = 4 for BC7, 2 for BC5, 1 for BC4. For tests and tools.
 #[pyfunction]
 fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> PyResult<(String, Vec<Py<PyAny>>)> {
     let pack = py.detach(|| cook_core::read_pack(&path)).map_err(crate::raise)?;
@@ -103,6 +104,12 @@ fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> 
             }
             pack::TextureFormat::Rgba16Unorm => array(py, bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect::<Vec<u16>>(), w, h)?,
             pack::TextureFormat::Rgba8Srgb | pack::TextureFormat::Rgba8Unorm => array(py, bytes, w, h)?,
+            f => {
+                let texels = pack::bc::decode(f, w, h, &bytes).ok_or_else(|| PyValueError::new_err(format!("{}: texture {index} mip {l}: bad blocks", path.display())))?;
+                let channels = f.decoded().map_or(4, |d| d.channels());
+                let a = numpy::ndarray::Array3::from_shape_vec((h as usize, w as usize, channels), texels).map_err(|e| PyValueError::new_err(e.to_string()))?;
+                a.into_pyarray(py).into_any().unbind()
+            }
         });
     }
     Ok((format!("{:?}", t.format), levels))

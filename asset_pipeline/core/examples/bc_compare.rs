@@ -9,10 +9,6 @@
 //!
 //! (SAMPLES_DIR default: $GLTF_SAMPLES_DIR, else ../shared/gltf-samples.)
 
-// intel_tex_2's ISPC objects are C++: they need the C++ runtime at link time.
-#[link(name = "stdc++")]
-extern "C" {}
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -7,6 +7,7 @@
 mod accessor;
 pub mod anim;
 mod camera;
+pub mod compress;
 mod error;
 pub mod bake;
 pub mod ir;

@@ -284,7 +284,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
         let mut mips = Vec::with_capacity(t.mips.len());
         for (l, &index) in t.mips.iter().enumerate() {
             let a = r.get(index, &format!("texture {i} '{}' mip {l}", t.name))?;
-            let want = ((t.width >> l).max(1) as u64) * ((t.height >> l).max(1) as u64) * t.format.bytes_per_texel();
+            let want = t.format.level_bytes((t.width >> l).max(1), (t.height >> l).max(1)).unwrap_or(u64::MAX);
             if a.bytes.len() as u64 != want {
                 return Err(format!("texture {i} '{}' mip {l}: {} bytes, expected {want}", t.name, a.bytes.len()));
             }
@@ -461,9 +461,14 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                 TextureFormat::Rgba16Float => ("<f2", 2),
                 TextureFormat::Rgba16Unorm => ("<u2", 2),
                 TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => ("|u1", 1),
+                // Compressed levels cross as their blocks' bytes (one dimension).
+                TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc4Unorm => ("|u1", 1),
             };
             let mips = (0..t.mips.len())
                 .map(|l| {
+                    if t.format.is_compressed() {
+                        return w.push(dtype, vec![t.mips[l].len()], t.mips[l].clone());
+                    }
                     let shape = vec![(t.height >> l).max(1) as usize, (t.width >> l).max(1) as usize, 4];
                     debug_assert_eq!(shape.iter().product::<usize>() * channel_bytes, t.mips[l].len());
                     w.push(dtype, shape, t.mips[l].clone())

@@ -15,6 +15,7 @@ from pathlib import Path
 from asset_pipeline import CookError
 from asset_pipeline.bake import LIGHTMAP_MODES, PRESETS, BakeSettings
 from asset_pipeline.chunks import ChunkSettings
+from asset_pipeline.compress import parse_overrides
 from asset_pipeline.cook import cook_detailed
 from asset_pipeline.executor import EXECUTORS
 from asset_pipeline.pipeline import CookSettings
@@ -90,6 +91,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-mesh-opt", action="store_true",
                         help="keep every LOD's triangles and vertices in the order they were made (no vertex cache, overdraw and fetch ordering)")
     parser.add_argument("--no-mips", action="store_true", help="skip the textures stage (textures keep one level)")
+    parser.add_argument("--no-compress", action="store_true",
+                        help="store material textures uncompressed (RGBA8; normal maps RGBA16) instead of BC7, BC5 and BC4")
+    parser.add_argument("--texture-compression", action="append", metavar="PATTERN=MODE",
+                        help="per texture, by a glob of its name: auto (compress unless it misses its quality bar; the default), "
+                             "none (keep uncompressed) or force (compress whatever the quality); may repeat, the last match wins")
     parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
                         help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
     bake = parser.add_argument_group("baking (lightmaps, probes and reflection probes, for levels with lightmap UVs)")
@@ -121,6 +127,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--ray-address needs --executor ray")
     if args.no_chunks and (args.chunk_size is not None or args.chunk_triangles is not None):
         parser.error("--chunk-size and --chunk-triangles need level chunks (drop --no-chunks)")
+    try:
+        texture_compression = parse_overrides(args.texture_compression)
+    except ValueError as e:
+        parser.error(str(e))
+    if args.no_compress and texture_compression:
+        parser.error("--texture-compression needs compression (drop --no-compress)")
     chunk_options = {k: v for k, v in (("size", args.chunk_size), ("max_triangles", args.chunk_triangles)) if v is not None}
     chunk = ChunkSettings(**chunk_options) if chunk_options else None
     bake_settings = BakeSettings(preset=args.quality, lightmap_mode=args.lightmap_mode, samples=args.samples, bounces=args.bounces, probe_samples=args.probe_samples,
@@ -133,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
     settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, chunks=not args.no_chunks, chunk=chunk,
                             bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
-                            mips=not args.no_mips, mesh_opt=not args.no_mesh_opt, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
+                            mips=not args.no_mips, mesh_opt=not args.no_mesh_opt, compress=not args.no_compress,
+                            texture_compression=texture_compression, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
                             allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)

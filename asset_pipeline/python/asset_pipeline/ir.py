@@ -38,7 +38,9 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
 
 
 # Texture usages and the format each is stored in.
-USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr", "Rgba16Unorm": "normal"}
+USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr", "Rgba16Unorm": "normal",
+                   # Block-compressed (the compress stage): levels are 1-D uint8 arrays of 4x4 blocks.
+                   "Bc7Srgb": "color", "Bc7Unorm": "data", "Bc4Unorm": "data", "Bc5Unorm": "normal"}
 
 
 class IrError(ValueError):
@@ -172,8 +174,9 @@ class Texture:
     name: str
     width: int
     height: int
-    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float | Rgba16Unorm
-    # Level 0 first; (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm.
+    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float | Rgba16Unorm | Bc7Srgb | Bc7Unorm | Bc5Unorm | Bc4Unorm
+    # Level 0 first; (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm; for a
+    # block-compressed format, 1-D uint8 arrays of the level's 4x4 blocks.
     mips: list[np.ndarray]
     # How its mip levels are made: color (sRGB) | data (linear) | normal | hdr. None: what the
     # format implies (Rgba8Srgb colour, Rgba8Unorm data, Rgba16Float hdr, Rgba16Unorm normal).

@@ -49,6 +49,11 @@ class CookSettings:
     texels_per_metre: float | None = None
     baking: bool = True  # bake lightmaps and probes (when the scene has lightmap UVs)
     mips: bool = True  # mip chains for material textures (lightmaps keep one level)
+    # Block-compress material textures (compress.py: BC7 colour and data, BC5 normals, BC4
+    # occlusion), each kept uncompressed where it would miss its quality bar.
+    compress: bool = True
+    # Per texture: glob pattern of texture names -> "auto" | "none" | "force" (compress.py).
+    texture_compression: dict = field(default_factory=dict)
     mesh_opt: bool = True  # every LOD in vertex cache, overdraw and vertex fetch order (mesh_opt.py)
     mip_filter: str | None = None  # box|tent|bspline|mitchell|catmull-rom|lanczos3; None = per usage (mitchell, tent for hdr)
     force: bool = False  # ignore every cache entry and rebuild
@@ -89,6 +94,7 @@ class CookResult:
     scene: "ir.Scene | None" = None  # the scene as written (None when up to date)
     chunks: dict = field(default_factory=dict)  # the chunk stage's (chunks.split_chunks' stats)
     mesh_opt: dict = field(default_factory=dict)  # the mesh_opt stage's (mesh_opt.MeshOptStats.as_dict)
+    compress: dict = field(default_factory=dict)  # the compress stage's (compress.summarise)
 
 
 def _settings_doc(obj) -> object:
@@ -222,6 +228,8 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         bar.advance()
     rec.items, rec.seconds = 1, time.perf_counter() - t0
     stages.append(rec)
+    if settings.compress:
+        _check_compression_overrides(scene, settings)  # before any long stage runs
     for w in scene.warnings:
         progress.warning(w)
     if source.suffix.lower() != ".toml" and settings.sky_nits > 0:
@@ -253,6 +261,10 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     if settings.mips and scene.textures:
         scene, rec = _textures_stage(scene, settings, cache, progress, executor)
         stages.append(rec)
+    compress_stats: dict = {}
+    if settings.compress and scene.textures:
+        scene, compress_stats, rec = _compress_stage(scene, settings, cache, progress)
+        stages.append(rec)
 
     rec = StageRecord("write", items=1)
     t0 = time.perf_counter()
@@ -268,14 +280,14 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
 
     report = None
     if settings.report:
-        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene, mesh_opt_stats)
+        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene, mesh_opt_stats, compress_stats)
     outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
     stamp.parent.mkdir(parents=True, exist_ok=True)
     record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
     write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene,
-                      chunks=chunk_stats, mesh_opt=mesh_opt_stats)
+                      chunks=chunk_stats, mesh_opt=mesh_opt_stats, compress=compress_stats)
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
@@ -579,6 +591,59 @@ def _mesh_opt_stage(scene: ir.Scene, cache: StageCache, progress: Progress):
             bar.advance()
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), total.as_dict(), rec
+
+
+# ---- compress -------------------------------------------------------------------------------------
+
+
+def _check_compression_overrides(scene: ir.Scene, settings: CookSettings) -> None:
+    """Each override names a mode that exists and matches a texture of the source: a pattern that
+    matches nothing is a typo the user should hear about, not a setting silently ignored."""
+    from asset_pipeline import compress
+
+    overrides = dict(settings.texture_compression or {})
+    bad = [m for m in overrides.values() if m not in compress.MODES]
+    if bad:
+        raise CookError(f"{scene.source}: texture compression mode '{bad[0]}' is not one of {', '.join(compress.MODES)}")
+    missing = compress.unmatched(scene, overrides)
+    if missing:
+        names = ", ".join(f"'{t.name}'" for t in scene.textures[:8]) + (" ..." if len(scene.textures) > 8 else "")
+        raise CookError(f"{scene.source}: texture compression override '{missing[0]}' matches no texture (textures: {names or 'none'})")
+
+
+def _compress_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
+    """Block compression of every material texture's levels (compress.py's rules), one cache
+    entry per texture (its blocks and record); overrides were checked after the import."""
+    from asset_pipeline import compress
+
+    overrides = dict(settings.texture_compression or {})
+    classes = compress.texture_classes(scene)
+    rec = StageRecord("compress", items=len(classes))
+    t0 = time.perf_counter()
+    textures = list(scene.textures)
+    records = []
+    with progress.stage("compress", len(classes)) as bar:
+        for i, cls in classes.items():
+            t = textures[i]
+            mode = compress.mode_of(t.name, overrides)
+            key = Hasher("compress").settings({"class": cls, "mode": mode, "format": t.format, "size": [t.width, t.height]})
+            for m in t.mips:
+                key.array(m)
+            key = key.key()
+            hit = cache.load("compress", key)
+            if hit is not None:
+                record = hit[0]
+                if "kept" not in record:
+                    textures[i] = dataclasses.replace(t, format=record["format"], mips=list(hit[1]))
+                rec.cached += 1
+            else:
+                new, record = compress.compress_texture(t, cls, mode)
+                cache.store("compress", key, record, list(new.mips) if "kept" not in record else [])
+                textures[i] = new
+            records.append(record)
+            bar.advance()
+    rec.seconds = time.perf_counter() - t0
+    return dataclasses.replace(scene, textures=textures), compress.summarise(records), rec
 
 
 # ---- bake -----------------------------------------------------------------------------------------

@@ -15,7 +15,8 @@ def _row(*cells) -> str:
 
 
 def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: dict, bake_stats: dict | None = None, exrs=(),
-                 chunk_stats: dict | None = None, atlas_scene: ir.Scene | None = None, mesh_opt_stats: dict | None = None) -> Path:
+                 chunk_stats: dict | None = None, atlas_scene: ir.Scene | None = None, mesh_opt_stats: dict | None = None,
+                 compress_stats: dict | None = None) -> Path:
     """`atlas_scene`: the scene as its lightmap atlas was laid out (before the chunk stage: a
     chart a chunk border cuts is drawn as one chart), for the atlas previews; default `scene`."""
     path = out.with_suffix(".report.md")
@@ -44,6 +45,8 @@ def write_report(out: Path, scene: ir.Scene, summary: dict, stages, uv2_stats: d
                   f"{m['acmr_before']:.3f} -> {m['acmr_after']:.3f} over {m['triangles']} triangles; LOD 0 "
                   f"{m['lod0_acmr_before']:.3f} -> {m['lod0_acmr_after']:.3f}. Vertices {m['vertices_before']} -> {m['vertices_after']} "
                   "(unused ones dropped)."]
+    if compress_stats:
+        lines += _compress_section(compress_stats)
     if chunk_stats:
         from asset_pipeline.chunks import describe
 
@@ -91,3 +94,21 @@ def _previews(out: Path, scene: ir.Scene) -> list[Path]:
     folder = out.with_suffix(".report")
     folder.mkdir(exist_ok=True)
     return list(render(scene, folder))
+
+
+def _compress_section(c: dict) -> list[str]:
+    """Every material texture's stored format, its quality against the uncompressed levels (all
+    levels, texel-weighted) and bytes; why a texture was kept uncompressed."""
+    mb = lambda b: f"{b / 1e6:.2f}"
+    lines = ["", "## Texture compression", "",
+             f"{c['compressed']} of {c['textures']} textures block-compressed, {c['kept']} kept uncompressed; "
+             f"{mb(c['bytes_before'])} MB -> {mb(c['bytes_after'])} MB. Quality: PSNR (colour in linear light) "
+             "or mean / 99th-percentile angular error (normal maps, z rebuilt), all levels.", "",
+             _row("texture", "class", "size", "format", "effort", "quality", "MB before", "MB after", "note"),
+             _row("---", "---", "---", "---", "---", "---:", "---:", "---:", "---")]
+    for r in c["per_texture"]:
+        q = r.get("quality")
+        quality = "" if q is None else (f"{q['mean_deg']:.2f}° / {q['p99_deg']:.2f}°" if "mean_deg" in q else f"{q['psnr_db']:.1f} dB")
+        lines.append(_row(r["name"], r["class"], f"{r['size'][0]}x{r['size'][1]}", r["format"], r.get("effort", ""), quality,
+                          mb(r["bytes_before"]), mb(r["bytes_after"]), r.get("kept", "")))
+    return lines
