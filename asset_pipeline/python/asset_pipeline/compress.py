@@ -46,7 +46,7 @@ def texture_classes(scene: ir.Scene) -> dict[int, str]:
     compresses: those the materials read (a texture only the occlusion slot reads is occlusion),
     and unreferenced ones by their usage. Lightmap pages, their direction textures and HDR
     textures are left out."""
-    skip = set(scene.lightmap.textures) | set(scene.lightmap.directions) if scene.lightmap is not None else set()
+    skip = scene.baked_textures()
     slots: dict[int, set[str]] = {}
     for m in scene.materials:
         for slot, t in (("colour", m.base_color_texture), ("colour", m.emissive_texture), ("normal", m.normal_texture),

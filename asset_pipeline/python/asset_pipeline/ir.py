@@ -379,6 +379,12 @@ class Scene:
         """Meshes placed by at least one static node (they get lightmap UVs), in mesh order."""
         return sorted({n.mesh for n in self.nodes if n.static and n.mesh is not None})
 
+    def baked_textures(self) -> set[int]:
+        """Texture indices of the baked lightmap pages and their direction textures (one level,
+        half float / RGBA8: the textures and compress stages leave them as the bake made them)."""
+        lm = self.lightmap
+        return set(lm.textures) | set(lm.directions) if lm is not None else set()
+
     def static_nodes(self) -> list[int]:
         """Static instances: nodes that place a mesh and are static, in node order."""
         return [i for i, n in enumerate(self.nodes) if n.static and n.mesh is not None]

@@ -742,7 +742,7 @@ def _textures_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
     Textures that arrive with more than one level keep theirs."""
     from asset_pipeline.executor import texture_levels
 
-    skip = set(scene.lightmap.textures) | set(scene.lightmap.directions) if scene.lightmap is not None else set()
+    skip = scene.baked_textures()
     cutoffs = _alpha_cutoffs(scene)
     # A texture its sampler reads without mipmaps (glTF's NEAREST or LINEAR minification) keeps one level.
     todo = [i for i, t in enumerate(scene.textures)
