@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -67,3 +68,59 @@ def demo_level_uv2():
     settings = uv2.Uv2Settings(texels_per_metre=float(level.texels_per_metre))
     r = uv2.lightmap_uvs([(m.base, 1.0, m.texels_per_metre) for m in static], settings, names=[m.name for m in static])
     return static, r.placed, r.layout, r.stats, settings
+
+
+# ---- temporary files -------------------------------------------------------------------------
+# pytest.ini has pytest remove a passing test's tmp_path; the fixture below does the same for what
+# a module made with tmp_path_factory, once the module ends. The run's summary says how much the
+# tests wrote and the most the run held at once (what a CI machine's disk must have room for).
+
+def _tree_bytes(path: Path) -> int:
+    total = 0
+    for root, _dirs, files in os.walk(path):
+        for f in files:
+            try:
+                total += os.lstat(os.path.join(root, f)).st_size
+            except OSError:
+                pass
+    return total
+
+
+_TEMP = {"written": 0, "peak": 0}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _module_temporaries(request, tmp_path_factory):
+    """Remove the directories this module's fixtures made under the session's base temporary
+    directory when the module ends, unless one of its tests failed (then they stay, with the
+    failing test's own, for inspection)."""
+    base = tmp_path_factory.getbasetemp()
+    before = set(base.iterdir())
+    failed = request.session.testsfailed
+    yield
+    made = set(base.iterdir()) - before
+    _TEMP["written"] += sum(_tree_bytes(p) for p in made)
+    if request.session.testsfailed == failed:
+        for p in made:
+            shutil.rmtree(p, ignore_errors=True)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item):
+    # After the test body, before its fixtures are torn down: what the run holds now.
+    try:
+        return (yield)
+    finally:
+        factory = getattr(item.config, "_tmp_path_factory", None)
+        base = getattr(factory, "_basetemp", None)
+        if base is not None and base.is_dir():
+            _TEMP["peak"] = max(_TEMP["peak"], _tree_bytes(base))
+            own = item.funcargs.get("tmp_path") if hasattr(item, "funcargs") else None
+            if isinstance(own, Path) and own.is_dir():
+                _TEMP["written"] += _tree_bytes(own)
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _TEMP["peak"]:
+        terminalreporter.write_line(f"temporary files: tests' own directories wrote {_TEMP['written'] / 1e6:.0f} MB "
+                                    f"(module fixtures' included); the most held at once {_TEMP['peak'] / 1e6:.0f} MB")
