@@ -12,7 +12,7 @@ layout(set = 1, binding = 4) uniform sampler2D occlusion_tex;  // r
 
 // Set 2: the scene's baked light (engine/src/assets.rs). The lightmap pages as the layers of one
 // array (one black layer without a bake), the probe grid, and the material constants.
-layout(set = 2, binding = 0) uniform sampler2DArray lightmap; // B = H/pi in nits, half float
+layout(set = 2, binding = 0) uniform sampler2DArray lightmap; // B = H/pi in nits, half float or BC6H
 layout(std430, set = 2, binding = 1) readonly buffer Probes {
     vec4 origin;   // probe (i, j, k) at origin + (i, j, k) * spacing
     vec4 spacing;
@@ -23,8 +23,8 @@ layout(std430, set = 2, binding = 1) readonly buffer Probes {
 // of reflectance f0 returns f0 A + B of a uniform environment (engine/shading, `DfgLut`).
 layout(set = 2, binding = 3) uniform sampler2D dfg_lut;
 // Directional lightmaps (DIRECTIONAL): per page the luminance's L1 direction t, stored as
-// (128 + 127 t) / 255 in rgb ("MonoSH", shading.md §4.2); `lightmap` then holds b0 (rgb) and
-// the sun's visibility (a).
+// (128 + 127 t) / 255 in rgb and the sun's visibility in a ("MonoSH", shading.md §4.2; RGBA8
+// or BC7); `lightmap` then holds b0 (rgb).
 layout(set = 2, binding = 4) uniform sampler2DArray lightmap_direction;
 // Reflection probes (REFLECTIONS; shading.md §3): per probe a cube of radiance prefiltered for
 // GGX, level k holding roughness k / (levels - 1), as layers of one cube-map array; and the
@@ -418,12 +418,13 @@ vec4 shade(vec4 a) {
     vec3 l = vec3(0.0);
     if (LIGHTMAPPED && DIRECTIONAL) {
         vec3 at = vec3(in_lightmap_uv, in_lightmap_layer);
-        vec4 lm = lightmap_at(lightmap, at);
-        vec3 t = (lightmap_at(lightmap_direction, at).xyz * 255.0 - 128.0) / 127.0;
-        b = lm.rgb * max(1.0 + 2.0 * dot(t, n), 0.0);
+        vec3 b0 = lightmap_at(lightmap, at).rgb;
+        vec4 dir = lightmap_at(lightmap_direction, at);
+        vec3 t = (dir.xyz * 255.0 - 128.0) / 127.0;
+        b = b0 * max(1.0 + 2.0 * dot(t, n), 0.0);
         // The rough environment: the same light toward the lobe's dominant direction.
-        env = lm.rgb * max(1.0 + 2.0 * dot(t, r_dom), 0.0);
-        l += sun_reflected(n, v, kd, f0, alpha, nv, specular, lm.a);
+        env = b0 * max(1.0 + 2.0 * dot(t, r_dom), 0.0);
+        l += sun_reflected(n, v, kd, f0, alpha, nv, specular, dir.a);
     } else if (LIGHTMAPPED) {
         b = lightmap_at(lightmap, vec3(in_lightmap_uv, in_lightmap_layer)).rgb;
         // The lightmap's B stands for the environment too (no probe code in this variant: it

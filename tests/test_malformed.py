@@ -670,7 +670,7 @@ PACK_CASES = {
     "truncated-body": (lambda p: p[:-100], "truncated pack: the header says"),
     "future-version": (lambda p: patch(p, 8, "<I", 99), "pack format version 99 is not supported"),
     # A pack from the build before 16-bit indices (format 6): the message says what to do.
-    "old-version": (lambda p: patch(p, 8, "<I", 6), "pack format version 6 is not supported (this build reads version 8); re-cook the content"),
+    "old-version": (lambda p: patch(p, 8, "<I", 6), "pack format version 6 is not supported (this build reads version 9); re-cook the content"),
     "index-format-unknown": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u8")), "malformed pack: metadata"),
     "index-format-too-wide": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u32")), "bytes stored but"),
     "flipped-data-byte": (lambda p: flip(p, len(p) - 7), "checksum mismatch"),

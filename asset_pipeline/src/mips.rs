@@ -87,7 +87,8 @@ fn array<T: numpy::Element>(py: Python<'_>, v: Vec<T>, w: u32, h: u32) -> PyResu
 
 /// Every level of texture `index` in the pack at `path`: `(format, [level arrays])`, each
 /// (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm; a block-compressed level
-/// decoded (pack::bc) to (h, w, c) uint8, c = 4 for BC7, 2 for BC5, 1 for BC4. For tests and tools.
+/// decoded (pack::bc) to (h, w, c) uint8, c = 4 for BC7, 2 for BC5, 1 for BC4; BC6H to (h, w, 4)
+/// float16, alpha 1. For tests and tools.
 #[pyfunction]
 fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> PyResult<(String, Vec<Py<PyAny>>)> {
     let pack = py.detach(|| cook_core::read_pack(&path)).map_err(crate::raise)?;
@@ -104,18 +105,38 @@ fn read_pack_texture(py: Python<'_>, path: std::path::PathBuf, index: usize) -> 
             }
             pack::TextureFormat::Rgba16Unorm => array(py, bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect::<Vec<u16>>(), w, h)?,
             pack::TextureFormat::Rgba8Srgb | pack::TextureFormat::Rgba8Unorm => array(py, bytes, w, h)?,
-            f => {
-                let texels = pack::bc::decode(f, w, h, &bytes).ok_or_else(|| PyValueError::new_err(format!("{}: texture {index} mip {l}: bad blocks", path.display())))?;
-                let channels = f.decoded().map_or(4, |d| d.channels());
-                let a = numpy::ndarray::Array3::from_shape_vec((h as usize, w as usize, channels), texels).map_err(|e| PyValueError::new_err(e.to_string()))?;
-                a.into_pyarray(py).into_any().unbind()
-            }
+            f => decoded_array(py, f, w, h, &bytes).map_err(|_| PyValueError::new_err(format!("{}: texture {index} mip {l}: bad blocks", path.display())))?,
         });
     }
     Ok((format!("{:?}", t.format), levels))
 }
 
+/// One compressed level decoded (pack::bc): (h, w, c) uint8, or (h, w, 4) float16 for BC6H.
+fn decoded_array(py: Python<'_>, f: pack::TextureFormat, w: u32, h: u32, blocks: &[u8]) -> PyResult<Py<PyAny>> {
+    let texels = pack::bc::decode(f, w, h, blocks).ok_or_else(|| PyValueError::new_err(format!("{} bytes are not a {w}x{h} {f:?} level", blocks.len())))?;
+    if f.decoded() == Some(pack::bc::Decoded::Rgba16F) {
+        let bits: Vec<u16> = texels.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+        return array(py, bits, w, h)?.call_method1(py, "view", ("float16",));
+    }
+    let channels = f.decoded().map_or(4, |d| d.channels());
+    let a = Array3::from_shape_vec((h as usize, w as usize, channels), texels).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(a.into_pyarray(py).into_any().unbind())
+}
+
+/// `decode_blocks(format, width, height, blocks) -> array`: one level of a block-compressed
+/// format (the pack's name, e.g. "Bc6hUfloat") decoded as `read_pack_texture` decodes it; e.g. a
+/// face of a BC6H reflection cube. ValueError for an unknown or plain format or a wrong length.
+#[pyfunction]
+fn decode_blocks(py: Python<'_>, format: &str, width: u32, height: u32, blocks: Vec<u8>) -> PyResult<Py<PyAny>> {
+    let f: pack::TextureFormat = serde_json::from_value(serde_json::Value::String(format.into())).map_err(|_| PyValueError::new_err(format!("unknown texture format '{format}'")))?;
+    if !f.is_compressed() {
+        return Err(PyValueError::new_err(format!("{format} is not block-compressed")));
+    }
+    decoded_array(py, f, width, height, &blocks)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(decode_blocks, m)?)?;
     m.add_function(wrap_pyfunction!(mip_chain, m)?)?;
     m.add_function(wrap_pyfunction!(normal_chain, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_texture, m)?)?;

@@ -80,6 +80,7 @@ fn vk_format(f: TextureFormat) -> vk::Format {
         TextureFormat::Bc7Unorm => vk::Format::BC7_UNORM_BLOCK,
         TextureFormat::Bc5Unorm => vk::Format::BC5_UNORM_BLOCK,
         TextureFormat::Bc4Unorm => vk::Format::BC4_UNORM_BLOCK,
+        TextureFormat::Bc6hUfloat => vk::Format::BC6H_UFLOAT_BLOCK,
     }
 }
 
@@ -91,6 +92,7 @@ fn decoded_vk_format(f: TextureFormat) -> vk::Format {
         TextureFormat::Bc7Unorm => vk::Format::R8G8B8A8_UNORM,
         TextureFormat::Bc5Unorm => vk::Format::R8G8_UNORM,
         TextureFormat::Bc4Unorm => vk::Format::R8_UNORM,
+        TextureFormat::Bc6hUfloat => vk::Format::R16G16B16A16_SFLOAT,
         plain => vk_format(plain),
     }
 }
@@ -128,35 +130,32 @@ pub fn unorm16_to_half(bytes: &[u8]) -> Vec<u8> {
 /// pack's own, or converted).
 type Texels<'a> = (vk::Format, Vec<std::borrow::Cow<'a, [u8]>>);
 
-/// Every material texture's levels in the format the device samples (`None` for those `skip`
-/// says the loader places elsewhere: the lightmap pages). Block-compressed textures the device
-/// does not sample natively (`native_bc`) are decoded here, in parallel over every level of
-/// every texture; 16-bit UNORM normal maps become half floats where the device cannot filter
-/// them.
-fn material_texels<'a>(gpu: &Gpu, pack: &'a Pack, skip: impl Fn(u32) -> bool) -> Result<Vec<Option<Texels<'a>>>> {
+/// Every texture's levels in the format the device samples (material textures, and the
+/// lightmap pages and direction textures, which go into array textures). Block-compressed
+/// textures the device does not sample natively (`native_bc`) are decoded here, in parallel over
+/// every level of every texture; 16-bit UNORM normal maps become half floats where the device
+/// cannot filter them.
+fn device_texels<'a>(gpu: &Gpu, pack: &'a Pack) -> Result<Vec<Texels<'a>>> {
     use rayon::prelude::*;
     let m = &pack.manifest;
-    let plans: Vec<Option<(vk::Format, bool)>> = m
+    let plans: Vec<(vk::Format, bool)> = m
         .textures
         .iter()
-        .enumerate()
-        .map(|(i, t)| {
-            (!skip(i as u32)).then(|| {
-                if t.format.is_compressed() && !native_bc(gpu, t.format) {
-                    (decoded_vk_format(t.format), true)
-                } else if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, vk_format(t.format)) {
-                    (vk::Format::R16G16B16A16_SFLOAT, true)
-                } else {
-                    (vk_format(t.format), false)
-                }
-            })
+        .map(|t| {
+            if t.format.is_compressed() && !native_bc(gpu, t.format) {
+                (decoded_vk_format(t.format), true)
+            } else if t.format == TextureFormat::Rgba16Unorm && !can_filter(gpu, vk_format(t.format)) {
+                (vk::Format::R16G16B16A16_SFLOAT, true)
+            } else {
+                (vk_format(t.format), false)
+            }
         })
         .collect();
     // (texture, level) pairs that need converting: a big texture's levels spread over threads.
     let jobs: Vec<(usize, usize)> = plans
         .iter()
         .enumerate()
-        .filter(|(_, p)| matches!(p, Some((_, true))))
+        .filter(|(_, p)| p.1)
         .flat_map(|(i, _)| (0..m.textures[i].mips.len()).map(move |l| (i, l)))
         .collect();
     let converted: Vec<Result<Vec<u8>>> = jobs
@@ -173,11 +172,7 @@ fn material_texels<'a>(gpu: &Gpu, pack: &'a Pack, skip: impl Fn(u32) -> bool) ->
         .collect();
     let mut converted = jobs.into_iter().zip(converted).peekable();
     let mut out = Vec::with_capacity(plans.len());
-    for (i, plan) in plans.into_iter().enumerate() {
-        let Some((format, convert)) = plan else {
-            out.push(None);
-            continue;
-        };
+    for (i, (format, convert)) in plans.into_iter().enumerate() {
         let t = &m.textures[i];
         let mips = if convert {
             let mut mips = Vec::with_capacity(t.mips.len());
@@ -188,7 +183,7 @@ fn material_texels<'a>(gpu: &Gpu, pack: &'a Pack, skip: impl Fn(u32) -> bool) ->
         } else {
             t.mips.iter().map(|r| std::borrow::Cow::Borrowed(pack.bytes(*r))).collect()
         };
-        out.push(Some((format, mips)));
+        out.push((format, mips));
     }
     Ok(out)
 }
@@ -204,10 +199,10 @@ impl GpuScene {
         // the loader makes itself: a small pack gets a small ring.)
         let pages: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.textures);
         let directions: &[u32] = m.lightmap.as_ref().map_or(&[], |l| &l.directions);
-        let texels = material_texels(gpu, pack, |i| pages.contains(&i) || directions.contains(&i))?;
-        let grown: u64 = m.textures.iter().zip(&texels).filter_map(|(t, x)| {
+        let texels = device_texels(gpu, pack)?;
+        let grown: u64 = m.textures.iter().zip(&texels).map(|(t, x)| {
             let stored: u64 = t.mips.iter().map(|r| r.len).sum();
-            Some(x.as_ref()?.1.iter().map(|b| b.len() as u64).sum::<u64>().saturating_sub(stored))
+            x.1.iter().map(|b| b.len() as u64).sum::<u64>().saturating_sub(stored)
         }).sum();
         let mut up = gpu.own(Uploader::new(UPLOAD_RING_BYTES.min(pack.data.len() as u64 + grown + (1 << 20))));
         // Every mesh's vertices and indices, in the order they are laid out: one vertex buffer
@@ -262,35 +257,37 @@ impl GpuScene {
         // The lightmap pages (and their direction textures) go into array textures below, not
         // into images of their own.
         let mut textures = gpu.own(Vec::with_capacity(m.textures.len()));
-        for (t, texels) in m.textures.iter().zip(texels) {
-            let Some((format, mips)) = texels else {
+        for (i, (t, (format, mips))) in m.textures.iter().zip(&texels).enumerate() {
+            if pages.contains(&(i as u32)) || directions.contains(&(i as u32)) {
                 textures.push(None);
                 continue;
-            };
+            }
             let mips: Vec<&[u8]> = mips.iter().map(|m| m.as_ref()).collect();
             let extent = vk::Extent2D { width: t.width, height: t.height };
             textures.push(Some(
-                Image::sampled_with_mips(gpu, &mut up, &t.name, format, extent, &mips)
+                Image::sampled_with_mips(gpu, &mut up, &t.name, *format, extent, &mips)
                     .with_context(|| format!("uploading texture '{}'", t.name))?,
             ));
         }
         // Empty texture slots hold this (the pipelines made for a material's `TextureSlots`
         // do not sample them; those for every slot read white, which changes nothing).
         let white = gpu.own(Image::sampled_with_mips(gpu, &mut up, "white", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[255; 4]])?);
+        // Each set in one format (the pack checks it): the layers' level 0 as the device takes them.
+        let layers = |ids: &[u32]| -> (vk::Format, Vec<&[u8]>) { (texels[ids[0] as usize].0, ids.iter().map(|&t| texels[t as usize].1[0].as_ref()).collect()) };
         let lightmaps = gpu.own(match m.lightmap.as_ref().filter(|l| !l.textures.is_empty()) {
             Some(l) => {
-                let layers: Vec<&[u8]> = pages.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
+                let (format, layers) = layers(pages);
                 let [width, height] = l.pages[0];
-                Image::sampled_array(gpu, &mut up, "lightmaps", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width, height }, &layers)
+                Image::sampled_array(gpu, &mut up, "lightmaps", format, vk::Extent2D { width, height }, &layers)
                     .with_context(|| format!("uploading {} lightmap pages of {width}x{height}", layers.len()))?
             }
             None => Image::sampled_array(gpu, &mut up, "no lightmap", vk::Format::R16G16B16A16_SFLOAT, vk::Extent2D { width: 1, height: 1 }, &[&[0; 8]])?,
         });
         let lightmap_directions = gpu.own(match m.lightmap.as_ref().filter(|l| !l.directions.is_empty()) {
             Some(l) => {
-                let layers: Vec<&[u8]> = directions.iter().map(|&t| pack.bytes(m.textures[t as usize].mips[0])).collect();
+                let (format, layers) = layers(directions);
                 let [width, height] = l.pages[0];
-                Image::sampled_array(gpu, &mut up, "lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width, height }, &layers)
+                Image::sampled_array(gpu, &mut up, "lightmap directions", format, vk::Extent2D { width, height }, &layers)
                     .with_context(|| format!("uploading {} lightmap direction pages of {width}x{height}", layers.len()))?
             }
             None => Image::sampled_array(gpu, &mut up, "no lightmap directions", vk::Format::R8G8B8A8_UNORM, vk::Extent2D { width: 1, height: 1 }, &[&[128, 128, 128, 255]])?,
@@ -403,7 +400,7 @@ impl GpuScene {
             vk::WriteDescriptorSet::default().dst_set(scene_set).dst_binding(6).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(&reflection_info),
         ];
         unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
-        let baked = (!pages.is_empty()).then(|| baked_lighting(pack));
+        let baked = (!pages.is_empty()).then(|| baked_lighting(pack, &texels)).transpose()?;
         let mut flock_meshes = gpu.own(Vec::new());
         for mesh in m.spawns.iter().filter(|s| s.kind == "boids").filter_map(|s| s.params.get("mesh")?.as_u64()) {
             let mesh = mesh as u32; // the pack checked it names one of its meshes
@@ -492,15 +489,44 @@ fn probe_buffer_bytes(pack: &Pack) -> Vec<u8> {
 /// The reflection probes' cubes as one cube-map array (half RGBA), in the pack's probe order;
 /// one black 1-texel cube when there are none (the binding must hold a view).
 fn reflection_cubes(gpu: &Gpu, up: &mut Uploader, pack: &Pack) -> Result<Image> {
-    let format = vk::Format::R16G16B16A16_SFLOAT;
+    let half = vk::Format::R16G16B16A16_SFLOAT;
+    let texels = |size: u32| move |k: u32| ((size >> k).max(1) as usize).pow(2) * 8;
     match pack.manifest.reflection_probes.as_ref().filter(|r| !r.probes.is_empty()) {
-        Some(r) => {
-            let cubes: Vec<&[u8]> = r.probes.iter().map(|p| pack.bytes(p.data)).collect();
-            Image::sampled_cubes(gpu, up, "reflection probes", format, r.face_size, r.levels, 8, &cubes)
+        Some(r) if r.format.is_compressed() && !native_bc(gpu, r.format) => {
+            // Decoded like the material textures (a CPU device, or no BC6H): every face of
+            // every level of every probe in parallel, into the half-float layout.
+            use rayon::prelude::*;
+            let decoded: Vec<Vec<u8>> = r
+                .probes
+                .par_iter()
+                .map(|p| decode_cube(r, pack.bytes(p.data)).with_context(|| format!("reflection probe '{}': blocks do not decode", p.name)))
+                .collect::<Result<_>>()?;
+            let cubes: Vec<&[u8]> = decoded.iter().map(|c| c.as_slice()).collect();
+            Image::sampled_cubes(gpu, up, "reflection probes", half, r.face_size, r.levels, texels(r.face_size), &cubes)
                 .with_context(|| format!("uploading {} reflection probes of {} texels a face", cubes.len(), r.face_size))
         }
-        None => Image::sampled_cubes(gpu, up, "no reflection probes", format, 1, 1, 8, &[&[0u8; 6 * 8]]),
+        Some(r) => {
+            let cubes: Vec<&[u8]> = r.probes.iter().map(|p| pack.bytes(p.data)).collect();
+            Image::sampled_cubes(gpu, up, "reflection probes", vk_format(r.format), r.face_size, r.levels, |k| r.face_bytes(k) as usize, &cubes)
+                .with_context(|| format!("uploading {} reflection probes of {} texels a face", cubes.len(), r.face_size))
+        }
+        None => Image::sampled_cubes(gpu, up, "no reflection probes", half, 1, 1, texels(1), &[&[0u8; 6 * 8]]),
     }
+}
+
+/// One probe's BC6H cube (`data`) as half-float RGBA in the same [level][face] order.
+fn decode_cube(r: &pack::ReflectionProbes, data: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::new();
+    let mut at = 0usize;
+    for k in 0..r.levels {
+        let s = (r.face_size >> k).max(1);
+        let n = r.face_bytes(k) as usize;
+        for _ in 0..6 {
+            out.extend(pack::bc::decode(r.format, s, s, data.get(at..at + n)?)?);
+            at += n;
+        }
+    }
+    Some(out)
 }
 
 /// The reflection probes as the shaders walk them (std430, `ReflectionProbes` in
@@ -531,25 +557,39 @@ fn reflection_probe_bytes(pack: &Pack) -> Vec<u8> {
 /// luminance (textures.md eq. 21.1) of the lightmaps' covered texels times an albedo of 0.5.
 /// A directional texel's B is estimated toward its light's direction, which is near its
 /// surface's normal: b0 (1 + 2 |t|) plus the sun's E cos / pi times its visibility, the cosine
-/// taken to that direction (the pack does not hold the surface normal).
-fn baked_lighting(pack: &Pack) -> BakedLighting {
+/// taken to that direction (the pack does not hold the surface normal), times the sun's
+/// visibility (the direction texture's alpha). Read from the texels as the device got them,
+/// decoding a page the device samples block-compressed.
+fn baked_lighting(pack: &Pack, texels: &[Texels]) -> Result<BakedLighting> {
     let m = &pack.manifest;
     let (sun_dir, sun_lux, sun_angular_radius) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
         Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity, sun.angular_radius),
         None => (Vec3::Y, Vec3::ZERO, 0.0),
     };
+    // Level 0 of texture t in its plain layout (RGBA16F pages, RGBA8 directions).
+    let plain = |t: u32| -> Result<std::borrow::Cow<[u8]>> {
+        let tex = &m.textures[t as usize];
+        let (format, mips) = &texels[t as usize];
+        Ok(if tex.format.is_compressed() && *format == vk_format(tex.format) {
+            std::borrow::Cow::Owned(pack::bc::decode(tex.format, tex.width, tex.height, &mips[0]).with_context(|| format!("texture '{}': blocks do not decode", tex.name))?)
+        } else {
+            std::borrow::Cow::Borrowed(mips[0].as_ref())
+        })
+    };
     let luminance = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
     let (mut sum, mut count) = (0.0f64, 0u64);
     let (pages, directions) = m.lightmap.as_ref().map_or((&[][..], &[][..]), |l| (&l.textures[..], &l.directions[..]));
     for (p, &t) in pages.iter().enumerate() {
-        let tex = &m.textures[t as usize];
-        let dir_bytes = directions.get(p).map(|&d| pack.bytes(m.textures[d as usize].mips[0]));
-        for (i, px) in pack.bytes(tex.mips[0]).chunks_exact(8).enumerate() {
-            let c: [f32; 4] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
-            let mut lum = luminance(Vec3::new(c[0], c[1], c[2]));
-            if let Some(d) = dir_bytes {
-                let t = (Vec3::new(d[4 * i] as f32, d[4 * i + 1] as f32, d[4 * i + 2] as f32) - 128.0) / 127.0;
-                lum = lum * (1.0 + 2.0 * t.length().min(1.0)) + c[3] * luminance(sun_lux) * t.normalize_or_zero().dot(sun_dir).max(0.0) / std::f32::consts::PI;
+        let page = plain(t)?;
+        let dir_bytes = directions.get(p).map(|&d| plain(d)).transpose()?;
+        for (i, px) in page.chunks_exact(8).enumerate() {
+            let c: [f32; 3] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
+            let mut lum = luminance(Vec3::from(c));
+            if let Some(d) = &dir_bytes {
+                let d = &d[4 * i..4 * i + 4];
+                let t = (Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32) - 128.0) / 127.0;
+                let visibility = d[3] as f32 / 255.0;
+                lum = lum * (1.0 + 2.0 * t.length().min(1.0)) + visibility * luminance(sun_lux) * t.normalize_or_zero().dot(sun_dir).max(0.0) / std::f32::consts::PI;
             }
             if lum > 0.0 {
                 sum += (1e-4 + 0.5 * lum as f64).ln();
@@ -559,7 +599,7 @@ fn baked_lighting(pack: &Pack) -> BakedLighting {
     }
     let log_average = if count > 0 { (sum / count as f64).exp() as f32 } else { 1.0 };
     let sky = m.sky.map_or(Vec3::ZERO, |s| Vec3::from(s.color) * s.intensity);
-    BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: 0.18 / log_average }
+    Ok(BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: 0.18 / log_average })
 }
 
 /// Mesh `mesh`'s full detail as a flock mesh (see `scene::FlockMesh`).

@@ -77,9 +77,10 @@ fn quad_pack(normal_ts: Vec3, b0: f32, t: Vec3, vis: f32) -> Pack {
     let normal = texture(&mut b, "normal", TextureFormat::Rgba16Unorm, [1, 1], &[&texel]);
     b.manifest.materials.push(Material { base_color: [1.0; 4], metallic: 0.0, roughness: 1.0, normal_texture: Some(normal), normal_scale: 1.0, ..Material::default() });
     b.manifest.nodes.push(static_node("floor", Mat4::IDENTITY, mesh, 0));
-    let page: Vec<u8> = [b0, b0, b0, vis].map(half_bits).iter().flat_map(|h| h.to_le_bytes()).collect::<Vec<u8>>().repeat(16);
+    let page: Vec<u8> = [b0, b0, b0, 1.0].map(half_bits).iter().flat_map(|h| h.to_le_bytes()).collect::<Vec<u8>>().repeat(16);
     let lightmap = texture(&mut b, "lightmap0", TextureFormat::Rgba16Float, [4, 4], &[&page]);
-    let dir: Vec<u8> = [t.x, t.y, t.z].map(|c| (128.0 + (127.0 * c).round()) as u8).into_iter().chain([255]).collect::<Vec<u8>>().repeat(16);
+    // The direction's bytes 128 + 127 t, and the sun's visibility as alpha.
+    let dir: Vec<u8> = [t.x, t.y, t.z].map(|c| (128.0 + (127.0 * c).round()) as u8).into_iter().chain([(vis * 255.0).round() as u8]).collect::<Vec<u8>>().repeat(16);
     let direction = texture(&mut b, "lightmap0 direction", TextureFormat::Rgba8Unorm, [4, 4], &[&dir]);
     b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![lightmap], directions: vec![direction] });
     b.manifest.lights.push(sun(SUN_LUX, to_quad(towards_sun()), 0.0));

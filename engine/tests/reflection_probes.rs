@@ -12,7 +12,7 @@ use cook_core::bake::scene::{BakeScene, Geometry};
 use engine::render::renderer::Lighting;
 use engine::scene::camera::Camera;
 use glam::{Mat4, Vec3, Vec4Swizzles};
-use pack::{Material, PackBuilder, ReflectionProbe, ReflectionProbes, Vertex};
+use pack::{Material, PackBuilder, ReflectionProbe, ReflectionProbes, TextureFormat, Vertex};
 use std::sync::atomic::AtomicBool;
 
 mod common;
@@ -77,7 +77,7 @@ fn baked_probe(scene: &BakeScene, at: Vec3, face: usize, levels: usize) -> Vec<C
 fn push_probe(b: &mut PackBuilder, levels: &[Cube], position: Vec3, box_min: Vec3, box_max: Vec3, blend_distance: f32) {
     let data = b.push_bytes(&cube_bytes(levels));
     let probe = ReflectionProbe { name: "room".into(), position: position.to_array(), box_min: box_min.to_array(), box_max: box_max.to_array(), blend_distance, data };
-    b.manifest.reflection_probes = Some(ReflectionProbes { face_size: levels[0].size as u32, levels: levels.len() as u32, probes: vec![probe] });
+    b.manifest.reflection_probes = Some(ReflectionProbes { face_size: levels[0].size as u32, levels: levels.len() as u32, format: TextureFormat::Rgba16Float, probes: vec![probe] });
 }
 
 /// The world-space ray through pixel (x, y)'s centre.

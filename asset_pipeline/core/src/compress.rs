@@ -12,6 +12,11 @@
 //! - occlusion (a texture only the occlusion slot reads): BC4 of R; quality = PSNR of R.
 //! - normal (rgb = n * 0.5 + 0.5): BC5 of x, y; quality = angle between the input normal and
 //!   the decoded one with z = sqrt(1 - x² - y²), mean and 99th percentile, in degrees.
+//! - hdr (lightmap pages, reflection cube faces; half float): BC6H unsigned; quality = each
+//!   texel's relative error |decoded − input| / |input| (RGB vectors), median and 95th
+//!   percentile, over the texels that are not black in both.
+//! - direction (a directional lightmap's direction bytes and the sun's visibility in alpha):
+//!   BC7 linear with alpha; quality = PSNR of RGBA.
 
 use pack::{bc, TextureFormat};
 use rayon::prelude::*;
@@ -26,6 +31,8 @@ pub enum Class {
     Data,
     Occlusion,
     Normal,
+    Hdr,
+    Direction,
 }
 
 impl Class {
@@ -35,16 +42,19 @@ impl Class {
             "data" => Class::Data,
             "occlusion" => Class::Occlusion,
             "normal" => Class::Normal,
-            _ => return Err(format!("unknown texture class '{s}' (colour, data, occlusion, normal)")),
+            "hdr" => Class::Hdr,
+            "direction" => Class::Direction,
+            _ => return Err(format!("unknown texture class '{s}' (colour, data, occlusion, normal, hdr, direction)")),
         })
     }
 
     pub fn format(self) -> TextureFormat {
         match self {
             Class::Colour => TextureFormat::Bc7Srgb,
-            Class::Data => TextureFormat::Bc7Unorm,
+            Class::Data | Class::Direction => TextureFormat::Bc7Unorm,
             Class::Occlusion => TextureFormat::Bc4Unorm,
             Class::Normal => TextureFormat::Bc5Unorm,
+            Class::Hdr => TextureFormat::Bc6hUfloat,
         }
     }
 }
@@ -67,19 +77,20 @@ impl Effort {
     }
 }
 
-/// One level's texels as they arrive: RGBA8 (colour, data, occlusion; normal maps as authored)
-/// or RGBA16 UNORM (cooked normal maps).
+/// One level's texels as they arrive: RGBA8 (colour, data, occlusion, direction; normal maps
+/// as authored), RGBA16 UNORM (cooked normal maps) or RGBA half float (hdr).
 #[derive(Clone, Copy)]
 pub enum Texels<'a> {
     Rgba8(&'a [u8]),
     Rgba16(&'a [u16]),
+    Half(&'a [u16]),
 }
 
 impl Texels<'_> {
     fn len(&self) -> usize {
         match self {
             Texels::Rgba8(t) => t.len(),
-            Texels::Rgba16(t) => t.len(),
+            Texels::Rgba16(t) | Texels::Half(t) => t.len(),
         }
     }
 
@@ -88,6 +99,7 @@ impl Texels<'_> {
         match self {
             Texels::Rgba8(t) => t[i * 4 + c] as f64 / 255.0,
             Texels::Rgba16(t) => t[i * 4 + c] as f64 / 65535.0,
+            Texels::Half(t) => half::f16::from_bits(t[i * 4 + c]).to_f64(),
         }
     }
 
@@ -95,6 +107,7 @@ impl Texels<'_> {
         match self {
             Texels::Rgba8(t) => t[i * 4 + c],
             Texels::Rgba16(t) => ((t[i * 4 + c] as u32 * 255 + 32767) / 65535) as u8,
+            Texels::Half(_) => (self.get(i, c).clamp(0.0, 1.0) * 255.0).round() as u8,
         }
     }
 }
@@ -106,6 +119,8 @@ pub enum Quality {
     Psnr { db: f64 },
     /// Normal maps: angular error in degrees.
     Angle { mean: f64, p99: f64 },
+    /// HDR: relative error (a fraction, not percent).
+    Relative { median: f64, p95: f64 },
 }
 
 pub struct Compressed {
@@ -125,6 +140,9 @@ pub fn compress(class: Class, width: u32, height: u32, levels: &[Texels], effort
         if texels.len() != w as usize * h as usize * 4 {
             return Err(format!("level {l}: {} channel values for {w}x{h} RGBA texels", texels.len()));
         }
+        if (class == Class::Hdr) != matches!(texels, Texels::Half(_)) {
+            return Err(format!("level {l}: hdr textures (and only they) are half floats"));
+        }
         let source = input(class, w as usize, h as usize, texels);
         let blocks = encode(class, effort, &source);
         let decoded = bc::decode(format, w, h, &blocks).expect("the encoder writes whole levels");
@@ -139,17 +157,31 @@ pub fn compress(class: Class, width: u32, height: u32, levels: &[Texels], effort
 struct Source {
     width: usize,
     height: usize,
-    channels: usize,
     bytes: Vec<u8>,
+    /// Bytes a texel (the channels kept, or 8 for RGBA halves).
+    texel_bytes: usize,
 }
 
 fn input(class: Class, w: usize, h: usize, texels: &Texels) -> Source {
+    let (pw, ph) = (w.next_multiple_of(4), h.next_multiple_of(4));
+    if let (Class::Hdr, Texels::Half(t)) = (class, texels) {
+        // ISPC's BC6H reads RGBA halves (8 bytes a texel; alpha ignored).
+        let mut bytes = vec![0u8; pw * ph * 8];
+        for y in 0..ph {
+            for x in 0..pw {
+                let i = y.min(h - 1) * w + x.min(w - 1);
+                for c in 0..4 {
+                    bytes[(y * pw + x) * 8 + 2 * c..][..2].copy_from_slice(&t[i * 4 + c].to_le_bytes());
+                }
+            }
+        }
+        return Source { width: pw, height: ph, bytes, texel_bytes: 8 };
+    }
     let channels = match class {
-        Class::Colour | Class::Data => 4,
+        Class::Colour | Class::Data | Class::Direction | Class::Hdr => 4,
         Class::Normal => 2,
         Class::Occlusion => 1,
     };
-    let (pw, ph) = (w.next_multiple_of(4), h.next_multiple_of(4));
     let mut bytes = vec![0u8; pw * ph * channels];
     for y in 0..ph {
         for x in 0..pw {
@@ -163,7 +195,7 @@ fn input(class: Class, w: usize, h: usize, texels: &Texels) -> Source {
             }
         }
     }
-    Source { width: pw, height: ph, channels, bytes }
+    Source { width: pw, height: ph, bytes, texel_bytes: channels }
 }
 
 /// Rows of blocks per parallel job (ISPC encodes one strip on one thread).
@@ -172,13 +204,17 @@ const STRIP_BLOCK_ROWS: usize = 8;
 fn encode(class: Class, effort: Effort, s: &Source) -> Vec<u8> {
     let format = class.format();
     let block_bytes = format.block_bytes().unwrap() as usize;
-    let row_bytes = s.width * s.channels;
-    let opaque = s.channels == 4 && s.bytes.chunks_exact(4).all(|p| p[3] == 255);
+    let row_bytes = s.width * s.texel_bytes;
+    let opaque = s.texel_bytes == 4 && s.bytes.chunks_exact(4).all(|p| p[3] == 255);
     let bc7 = match (opaque, effort) {
         (true, Effort::Fast) => intel_tex_2::bc7::opaque_fast_settings(),
         (true, Effort::Basic) => intel_tex_2::bc7::opaque_basic_settings(),
         (false, Effort::Fast) => intel_tex_2::bc7::alpha_fast_settings(),
         (false, Effort::Basic) => intel_tex_2::bc7::alpha_basic_settings(),
+    };
+    let bc6h = match effort {
+        Effort::Fast => intel_tex_2::bc6h::fast_settings(),
+        Effort::Basic => intel_tex_2::bc6h::basic_settings(),
     };
     let strips: Vec<Vec<u8>> = s
         .bytes
@@ -187,7 +223,8 @@ fn encode(class: Class, effort: Effort, s: &Source) -> Vec<u8> {
             let (width, height) = (s.width as u32, (strip.len() / row_bytes) as u32);
             let stride = row_bytes as u32;
             match class {
-                Class::Colour | Class::Data => intel_tex_2::bc7::compress_blocks(&bc7, &intel_tex_2::RgbaSurface { width, height, stride, data: strip }),
+                Class::Colour | Class::Data | Class::Direction => intel_tex_2::bc7::compress_blocks(&bc7, &intel_tex_2::RgbaSurface { width, height, stride, data: strip }),
+                Class::Hdr => intel_tex_2::bc6h::compress_blocks(&bc6h, &intel_tex_2::RgbaSurface { width, height, stride, data: strip }),
                 Class::Normal => intel_tex_2::bc5::compress_blocks(&intel_tex_2::RgSurface { width, height, stride, data: strip }),
                 Class::Occlusion => intel_tex_2::bc4::compress_blocks(&intel_tex_2::RSurface { width, height, stride, data: strip }),
             }
@@ -207,7 +244,8 @@ fn srgb_to_linear(c: f64) -> f64 {
 struct ErrorSum {
     squared: f64,
     samples: u64,
-    angles: Vec<f32>,
+    /// Per-texel errors where a distribution is reported (angles, relative errors).
+    errors: Vec<f32>,
 }
 
 impl ErrorSum {
@@ -222,7 +260,7 @@ impl ErrorSum {
                     for c in 0..3 {
                         let s = match src {
                             Texels::Rgba8(t) => lin[t[i * 4 + c] as usize],
-                            Texels::Rgba16(_) => srgb_to_linear(src.get(i, c)),
+                            Texels::Rgba16(_) | Texels::Half(_) => srgb_to_linear(src.get(i, c)),
                         };
                         let e = s * a - lin[decoded[i * 4 + c] as usize] * b;
                         self.squared += e * e;
@@ -231,13 +269,28 @@ impl ErrorSum {
                 }
                 self.samples += 4 * n as u64;
             }
-            Class::Data => {
+            Class::Data | Class::Direction => {
+                let channels = if class == Class::Direction { 4 } else { 3 };
                 for i in 0..n {
-                    for c in 0..3 {
+                    for c in 0..channels {
                         self.squared += (src.get(i, c) - d(i, c, 4)).powi(2);
                     }
                 }
-                self.samples += 3 * n as u64;
+                self.samples += (channels * n) as u64;
+            }
+            Class::Hdr => {
+                let half = |i: usize, c: usize| half::f16::from_le_bytes([decoded[i * 8 + 2 * c], decoded[i * 8 + 2 * c + 1]]).to_f64();
+                let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                for i in 0..n {
+                    let s = [src.get(i, 0), src.get(i, 1), src.get(i, 2)];
+                    let e = [half(i, 0) - s[0], half(i, 1) - s[1], half(i, 2) - s[2]];
+                    let (ns, ne) = (norm(s), norm(e));
+                    if ns > 0.0 {
+                        self.errors.push((ne / ns) as f32);
+                    } else if ne > 0.0 {
+                        self.errors.push(f32::INFINITY); // black made not black
+                    }
+                }
             }
             Class::Occlusion => {
                 for i in 0..n {
@@ -246,7 +299,7 @@ impl ErrorSum {
                 self.samples += n as u64;
             }
             Class::Normal => {
-                self.angles.extend((0..n).map(|i| {
+                self.errors.extend((0..n).map(|i| {
                     let s = [src.get(i, 0) * 2.0 - 1.0, src.get(i, 1) * 2.0 - 1.0, src.get(i, 2) * 2.0 - 1.0];
                     let (x, y) = (d(i, 0, 2) * 2.0 - 1.0, d(i, 1, 2) * 2.0 - 1.0);
                     let r = [x, y, (1.0 - x * x - y * y).max(0.0).sqrt()];
@@ -261,11 +314,16 @@ impl ErrorSum {
     fn quality(mut self, class: Class) -> Quality {
         match class {
             Class::Normal => {
-                let n = self.angles.len().max(1);
-                let mean = self.angles.iter().map(|&a| a as f64).sum::<f64>() / n as f64;
-                self.angles.sort_by(f32::total_cmp);
-                let p99 = self.angles.get((n * 99 / 100).min(self.angles.len().saturating_sub(1))).copied().unwrap_or(0.0) as f64;
+                let n = self.errors.len().max(1);
+                let mean = self.errors.iter().map(|&a| a as f64).sum::<f64>() / n as f64;
+                self.errors.sort_by(f32::total_cmp);
+                let p99 = self.errors.get((n * 99 / 100).min(self.errors.len().saturating_sub(1))).copied().unwrap_or(0.0) as f64;
                 Quality::Angle { mean, p99 }
+            }
+            Class::Hdr => {
+                self.errors.sort_by(f32::total_cmp);
+                let at = |q: usize| self.errors.get((self.errors.len() * q / 100).min(self.errors.len().saturating_sub(1))).copied().unwrap_or(0.0) as f64;
+                Quality::Relative { median: at(50), p95: at(95) }
             }
             _ => {
                 let mse = self.squared / self.samples.max(1) as f64;
@@ -326,6 +384,50 @@ mod tests {
         assert_eq!(c.format, TextureFormat::Bc5Unorm);
         let Quality::Angle { mean, p99 } = c.quality else { panic!() };
         assert!(mean < 0.5 && p99 < 1.5, "mean {mean}°, p99 {p99}°");
+    }
+
+    /// A lightmap-like HDR level (a smooth gradient over four decades of nits, black outside a
+    /// disc as between charts; blocks on its edge mix black and bright, the worst case): BC6H
+    /// keeps the median relative error well under the cooker's
+    /// 3 % bar, black stays black, and the decoded texels are RGBA halves with alpha 1.
+    #[test]
+    fn hdr_relative_error_is_small_and_black_stays_black() {
+        let (w, h) = (64u32, 48u32);
+        let mut texels = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = (x as f32 / w as f32, y as f32 / h as f32);
+                let inside = (u - 0.5).powi(2) + (v - 0.5).powi(2) < 0.16;
+                let b = if inside { 10f32.powf(4.0 * u) * (0.5 + v) } else { 0.0 };
+                for c in [b, b * 0.8, b * 0.6, 1.0] {
+                    texels.push(half::f16::from_f32(c).to_bits());
+                }
+            }
+        }
+        let c = compress(Class::Hdr, w, h, &[Texels::Half(&texels)], Effort::Fast).unwrap();
+        assert_eq!(c.format, TextureFormat::Bc6hUfloat);
+        let Quality::Relative { median, p95 } = c.quality else { panic!() };
+        assert!(median < 0.03 && p95 < 0.2, "median {median}, p95 {p95}");
+        let d = bc::decode(c.format, w, h, &c.levels[0]).unwrap();
+        assert_eq!(&d[..8], &[0, 0, 0, 0, 0, 0, 0x00, 0x3c], "a black corner texel decodes to black, alpha 1");
+        // Only half floats are hdr.
+        let t8 = vec![0u8; 16 * 4];
+        assert!(compress(Class::Hdr, 4, 4, &[Texels::Rgba8(&t8)], Effort::Fast).is_err());
+    }
+
+    /// A direction texture keeps its alpha (the sun's visibility) through BC7.
+    #[test]
+    fn direction_alpha_survives() {
+        let (w, h) = (16u32, 16u32);
+        let texels: Vec<u8> = (0..w * h).flat_map(|i| [128, 200, 100, if i % w < 8 { 255 } else { 0 }]).collect();
+        let c = compress(Class::Direction, w, h, &[Texels::Rgba8(&texels)], Effort::Fast).unwrap();
+        assert_eq!(c.format, TextureFormat::Bc7Unorm);
+        let d = bc::decode(c.format, w, h, &c.levels[0]).unwrap();
+        for (i, px) in d.chunks_exact(4).enumerate() {
+            assert!(px[3].abs_diff(texels[i * 4 + 3]) <= 2, "texel {i}: alpha {} for {}", px[3], texels[i * 4 + 3]);
+        }
+        let Quality::Psnr { db } = c.quality else { panic!() };
+        assert!(db > 40.0, "{db} dB");
     }
 
     /// A constant occlusion value survives BC4 exactly; the wrong length is an error naming the level.

@@ -106,12 +106,14 @@ pub struct SceneIr {
     pub warnings: Vec<String>,
 }
 
-/// Baked reflection probes: the pack's `ReflectionProbes` with each probe's cube (half RGBA,
-/// `pack::ReflectionProbe::data`'s layout) held here instead of a range of the pack.
-#[derive(Debug, Clone, PartialEq, Default)]
+/// Baked reflection probes: the pack's `ReflectionProbes` with each probe's cube (half RGBA or
+/// BC6H, `pack::ReflectionProbe::data`'s layout) held here instead of a range of the pack.
+#[derive(Debug, Clone, PartialEq)]
 pub struct ReflectionProbesIr {
     pub face_size: u32,
     pub levels: u32,
+    /// `Rgba16Float` or `Bc6hUfloat` (`pack::ReflectionProbes::format`).
+    pub format: pack::TextureFormat,
     /// Each probe with a placeholder `data` range, and its cube's bytes.
     pub probes: Vec<(pack::ReflectionProbe, Vec<u8>)>,
 }

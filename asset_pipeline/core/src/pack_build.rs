@@ -41,7 +41,7 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
     }
     if let Some(rp) = &scene.reflection_probes {
         let probes = rp.probes.iter().map(|(p, bytes)| pack::ReflectionProbe { data: b.push_bytes(bytes), ..p.clone() }).collect();
-        b.manifest.reflection_probes = Some(pack::ReflectionProbes { face_size: rp.face_size, levels: rp.levels, probes });
+        b.manifest.reflection_probes = Some(pack::ReflectionProbes { face_size: rp.face_size, levels: rp.levels, format: rp.format, probes });
     }
     let pack = b.finish();
     // The pack crate's own consistency check, so a cooker bug is caught here and not at load.

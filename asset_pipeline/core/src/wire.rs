@@ -92,10 +92,17 @@ struct WireClip {
 struct WireReflectionProbes {
     face_size: u32,
     levels: u32,
+    /// Rgba16Float (each cube a float16 (T, 4) array) or Bc6hUfloat (a uint8 array of blocks).
+    #[serde(default = "half_float")]
+    format: TextureFormat,
     probes: Vec<WireReflectionProbe>,
 }
 
-/// `pack::ReflectionProbe` with `data` the index of its float16 (T, 4) cube array.
+fn half_float() -> TextureFormat {
+    TextureFormat::Rgba16Float
+}
+
+/// `pack::ReflectionProbe` with `data` the index of its cube array.
 #[derive(Serialize, Deserialize)]
 struct WireReflectionProbe {
     name: String,
@@ -312,13 +319,18 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             for (i, p) in rp.probes.iter().enumerate() {
                 let what = format!("reflection probe {i} '{}'", p.name);
                 let a = r.get(p.data, &what)?;
-                if a.dtype != "<f2" || a.shape.len() != 2 || a.shape[1] != 4 || a.bytes.len() != a.shape[0] * 8 {
-                    return Err(format!("{what}: expected a <f2(n, 4) cube, got {}{:?}", a.dtype, a.shape));
+                let ok = match rp.format {
+                    TextureFormat::Rgba16Float => a.dtype == "<f2" && a.shape.len() == 2 && a.shape[1] == 4 && a.bytes.len() == a.shape[0] * 8,
+                    TextureFormat::Bc6hUfloat => a.dtype == "|u1" && a.shape.len() == 1,
+                    f => return Err(format!("reflection probes: format {f:?} is not Rgba16Float or Bc6hUfloat")),
+                };
+                if !ok {
+                    return Err(format!("{what}: expected a {} cube, got {}{:?}", if rp.format == TextureFormat::Rgba16Float { "<f2(n, 4)" } else { "|u1(n) BC6H" }, a.dtype, a.shape));
                 }
                 let probe = pack::ReflectionProbe { name: p.name.clone(), position: p.position, box_min: p.box_min, box_max: p.box_max, blend_distance: p.blend_distance, data: Default::default() };
                 probes.push((probe, a.bytes.clone()));
             }
-            Some(ReflectionProbesIr { face_size: rp.face_size, levels: rp.levels, probes })
+            Some(ReflectionProbesIr { face_size: rp.face_size, levels: rp.levels, format: rp.format, probes })
         }
     };
     let mut skins = Vec::with_capacity(w.skins.len());
@@ -462,7 +474,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                 TextureFormat::Rgba16Unorm => ("<u2", 2),
                 TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => ("|u1", 1),
                 // Compressed levels cross as their blocks' bytes (one dimension).
-                TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc4Unorm => ("|u1", 1),
+                TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc4Unorm | TextureFormat::Bc6hUfloat => ("|u1", 1),
             };
             let mips = (0..t.mips.len())
                 .map(|l| {
@@ -487,6 +499,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
     let reflection_probes = scene.reflection_probes.as_ref().map(|rp| WireReflectionProbes {
         face_size: rp.face_size,
         levels: rp.levels,
+        format: rp.format,
         probes: rp
             .probes
             .iter()
@@ -496,7 +509,10 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
                 box_min: p.box_min,
                 box_max: p.box_max,
                 blend_distance: p.blend_distance,
-                data: w.push("<f2", vec![bytes.len() / 8, 4], bytes.clone()),
+                data: match rp.format {
+                    TextureFormat::Bc6hUfloat => w.push("|u1", vec![bytes.len()], bytes.clone()),
+                    _ => w.push("<f2", vec![bytes.len() / 8, 4], bytes.clone()),
+                },
             })
             .collect(),
     });

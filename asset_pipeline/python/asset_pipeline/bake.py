@@ -119,10 +119,12 @@ SCHEDULING = ("threads", "batch_texels", "tile_texels", "probe_tile")
 
 
 # What a lightmap texel holds, and its bytes in the pack (see `attach`):
-# - irradiance: B = H/pi (nits), the sun included; Rgba16Float, 8 bytes a texel.
-# - directional: b0 (nits, RGB) and the sun's visibility in one Rgba16Float, and the luminance's
-#   L1 direction t = b1_Y / (2 b0_Y) as bytes 128 + 127 t in one Rgba8Unorm ("MonoSH", shading.md
-#   section 4.2): 12 bytes a texel, 1.5x. The runtime evaluates b0 (1 + 2 t.n) for the shading
+# - irradiance: B = H/pi (nits), the sun included; Rgba16Float, 8 bytes a texel (BC6H once
+#   compressed: 1 byte).
+# - directional: b0 (nits, RGB) in one Rgba16Float, and the luminance's L1 direction
+#   t = b1_Y / (2 b0_Y) as bytes 128 + 127 t with the sun's visibility (alpha) in one
+#   Rgba8Unorm ("MonoSH", shading.md section 4.2): 12 bytes a texel, 1.5x (BC6H and BC7 once
+#   compressed: 2 bytes). The runtime evaluates b0 (1 + 2 t.n) for the shading
 #   normal and lights the texel with the sun itself, times its visibility. (Every channel's own
 #   direction would take three Rgba8Unorm, 20 bytes, 2.5x, and two lookups more per pixel;
 #   MonoSH loses only colour that differs by direction.)
@@ -659,8 +661,9 @@ def _fill_invalid(sh: np.ndarray, sun: np.ndarray, invalid: np.ndarray):
 
 def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
     """The scene with the baked pages as textures referenced by its lightmap layout (see
-    LIGHTMAP_MODES: B as Rgba16Float; or b0 and the sun's visibility as Rgba16Float and the
-    direction as Rgba8Unorm), the probes and the reflection probes' cubes."""
+    LIGHTMAP_MODES: B as Rgba16Float; or b0 as Rgba16Float and the direction and the sun's
+    visibility as Rgba8Unorm), the probes and the reflection probes' cubes. (The compress stage
+    makes them BC6H and BC7.)"""
     textures = list(scene.textures)
     ids, directions = [], []
     for page, img in enumerate(baked.pages):
@@ -685,9 +688,11 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
 def mono_sh(page: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A directional page (h, w, 13) as the pack holds it: (b0 rgb + sun visibility (h, w, 4)
-    float32, the luminance's direction t = b1_Y / (2 b0_Y), |t| <= 1, as bytes 128 + 127 t in
-    (h, w, 4) uint8, alpha 255). The same reduction as shading::sh::MonoSh::from_rgb."""
+    """A directional page (h, w, 13) as the pack holds it: (b0 rgb, alpha 1 (h, w, 4) float32;
+    the luminance's direction t = b1_Y / (2 b0_Y), |t| <= 1, as bytes 128 + 127 t and the sun's
+    visibility as byte 255 v in (h, w, 4) uint8). The same reduction as
+    shading::sh::MonoSh::from_rgb. (The visibility rides with the direction so the page is RGB,
+    which BC6H holds; 8 bits are the shadow masks' precision in other engines too.)"""
     h, w, _ = page.shape
     b0 = page[..., 0:3]
     b1 = page[..., 3:12].reshape(h, w, 3, 3)  # [channel, axis]
@@ -699,8 +704,8 @@ def mono_sh(page: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     direction = np.empty((h, w, 4), np.uint8)
     # 128 + 127 t: symmetric, so t = 0 is exactly 128 (the shader decodes (x - 128) / 127).
     direction[..., :3] = np.clip(128.0 + np.rint(127.0 * t), 1, 255).astype(np.uint8)
-    direction[..., 3] = 255
-    return np.concatenate([b0, page[..., 12:13]], axis=2).astype(np.float32), direction
+    direction[..., 3] = np.rint(255.0 * np.clip(page[..., 12], 0.0, 1.0)).astype(np.uint8)
+    return np.concatenate([b0, np.ones((h, w, 1), np.float32)], axis=2).astype(np.float32), direction
 
 
 class _NoBar:

@@ -40,7 +40,7 @@ ATTRIBUTES: dict[str, tuple[np.dtype, int]] = {
 # Texture usages and the format each is stored in.
 USAGE_OF_FORMAT = {"Rgba8Srgb": "color", "Rgba8Unorm": "data", "Rgba16Float": "hdr", "Rgba16Unorm": "normal",
                    # Block-compressed (the compress stage): levels are 1-D uint8 arrays of 4x4 blocks.
-                   "Bc7Srgb": "color", "Bc7Unorm": "data", "Bc4Unorm": "data", "Bc5Unorm": "normal"}
+                   "Bc7Srgb": "color", "Bc7Unorm": "data", "Bc4Unorm": "data", "Bc5Unorm": "normal", "Bc6hUfloat": "hdr"}
 
 
 class IrError(ValueError):
@@ -174,7 +174,7 @@ class Texture:
     name: str
     width: int
     height: int
-    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float | Rgba16Unorm | Bc7Srgb | Bc7Unorm | Bc5Unorm | Bc4Unorm
+    format: str  # Rgba8Srgb | Rgba8Unorm | Rgba16Float | Rgba16Unorm | Bc7Srgb | Bc7Unorm | Bc5Unorm | Bc4Unorm | Bc6hUfloat
     # Level 0 first; (h, w, 4) uint8, float16 for Rgba16Float, uint16 for Rgba16Unorm; for a
     # block-compressed format, 1-D uint8 arrays of the level's 4x4 blocks.
     mips: list[np.ndarray]
@@ -337,17 +337,24 @@ def cube_texels(face_size: int, levels: int) -> int:
     return sum(6 * (face_size >> k) ** 2 for k in range(levels))
 
 
+def cube_block_bytes(face_size: int, levels: int) -> int:
+    """Bytes of a BC6H reflection cube: every face of every level whole 4x4 blocks of 16 bytes."""
+    return sum(6 * 16 * (-(-max(1, face_size >> k) // 4)) ** 2 for k in range(levels))
+
+
 @dataclass
 class ReflectionCubes:
     """Baked reflection probes (the pack's `reflection_probes` with Scene.reflection_probes): per
     probe, in the same order, its radiance cube as float16 (cube_texels(face_size, levels), 4)
     RGBA (alpha 1), rows [level k][face +X, -X, +Y, -Y, +Z, -Z][row j, 0 = top][column i]; level k
     prefiltered for roughness k / (levels - 1), level 0 the mirror. Nits, linear, the sun's disc
-    left out."""
+    left out. Once the compress stage made them BC6H (`format` "Bc6hUfloat"), each cube is a 1-D
+    uint8 array of blocks in the same [level][face] order (cube_block_bytes long)."""
 
     face_size: int
     levels: int
     cubes: list[np.ndarray]
+    format: str = "Rgba16Float"
 
 
 @dataclass
@@ -381,7 +388,8 @@ class Scene:
 
     def baked_textures(self) -> set[int]:
         """Texture indices of the baked lightmap pages and their direction textures (one level,
-        half float / RGBA8: the textures and compress stages leave them as the bake made them)."""
+        half float / RGBA8: the textures stage leaves them as the bake made them; the compress
+        stage makes them BC6H / BC7)."""
         lm = self.lightmap
         return set(lm.textures) | set(lm.directions) if lm is not None else set()
 
@@ -427,10 +435,15 @@ class Scene:
                 raise IrError(f"reflection cubes: face size {rc.face_size} with {rc.levels} levels")
             if len(rc.cubes) != len(self.reflection_probes):
                 raise IrError(f"reflection cubes: {len(rc.cubes)} cubes for {len(self.reflection_probes)} probes")
-            t = cube_texels(rc.face_size, rc.levels)
+            if rc.format == "Bc6hUfloat":
+                dtype, shape = np.uint8, (cube_block_bytes(rc.face_size, rc.levels),)
+            elif rc.format == "Rgba16Float":
+                dtype, shape = np.float16, (cube_texels(rc.face_size, rc.levels), 4)
+            else:
+                raise IrError(f"reflection cubes: format {rc.format} is not Rgba16Float or Bc6hUfloat")
             for p, c in zip(self.reflection_probes, rc.cubes):
-                if c.dtype != np.float16 or c.shape != (t, 4):
-                    raise IrError(f"reflection probe '{p.name}': its cube is {c.dtype}{c.shape}, expected float16({t}, 4)")
+                if c.dtype != dtype or c.shape != shape:
+                    raise IrError(f"reflection probe '{p.name}': its cube is {c.dtype}{c.shape}, expected {np.dtype(dtype).name}{shape}")
 
 
 # ---- crossing to and from the Rust core -------------------------------------------------------
@@ -524,7 +537,8 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
         "authored_reflection_probes": [_probe_doc(p) for p in scene.reflection_probes],
         "reflection_probes": None if scene.reflection_cubes is None else {
             "face_size": int(scene.reflection_cubes.face_size), "levels": int(scene.reflection_cubes.levels),
-            "probes": [{**_probe_doc(p), "data": put(np.asarray(c, np.float16))}
+            "format": scene.reflection_cubes.format,
+            "probes": [{**_probe_doc(p), "data": put(np.asarray(c, np.uint8 if scene.reflection_cubes.format == "Bc6hUfloat" else np.float16))}
                        for p, c in zip(scene.reflection_probes, scene.reflection_cubes.cubes)],
         },
         "skins": [{"name": s.name, "joints": [int(j) for j in s.joints], "inverse_bind": put(np.asarray(s.inverse_bind, np.float32).reshape(-1, 16))} for s in scene.skins],
@@ -573,7 +587,8 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     authored = doc.get("authored_reflection_probes", rp["probes"] if rp else [])
     scene.reflection_probes = [_probe_from_doc(p) for p in authored]
     if rp:
-        scene.reflection_cubes = ReflectionCubes(int(rp["face_size"]), int(rp["levels"]), [arrays[p["data"]] for p in rp["probes"]])
+        scene.reflection_cubes = ReflectionCubes(int(rp["face_size"]), int(rp["levels"]), [arrays[p["data"]] for p in rp["probes"]],
+                                                 rp.get("format", "Rgba16Float"))
     if doc.get("probes"):
         pr = doc["probes"]
         scene.probes = ProbeGrid(tuple(pr["origin"]), tuple(pr["spacing"]), tuple(pr["counts"]),

@@ -262,7 +262,8 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         scene, rec = _textures_stage(scene, settings, cache, progress, executor)
         stages.append(rec)
     compress_stats: dict = {}
-    if settings.compress and scene.textures:
+    baked_scene = scene  # the lightmap EXRs are written from the pages as baked, uncompressed
+    if settings.compress and (scene.textures or scene.reflection_cubes is not None):
         scene, compress_stats, rec = _compress_stage(scene, settings, cache, progress)
         stages.append(rec)
 
@@ -272,7 +273,7 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     cache.remove_stale_temporaries()
     with progress.stage("write", 1) as bar:
         # Lightmap files first, then the pack: each is written whole and renamed into place.
-        exrs = _write_exrs(scene, out)
+        exrs = _write_exrs(baked_scene, out)
         summary = write_pack(scene, out)
         bar.advance()
     rec.seconds = time.perf_counter() - t0
@@ -343,9 +344,10 @@ def lightmap_paths(out: Path, pages: int) -> list[Path]:
 
 
 def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
-    """Each baked page as the pack holds it: B as RGB; a directional page's b0 as RGB (what
-    viewers show), the sun's visibility as "sun.Y" and the direction texture's bytes / 255,
-    (128 + 127 t) / 255, as "direction.X/Y/Z" (bake.LIGHTMAP_MODES)."""
+    """Each baked page as the bake made it (`scene` before the compress stage): B as RGB; a
+    directional page's b0 as RGB (what viewers show), the sun's visibility (the direction
+    texture's alpha / 255) as "sun.Y" and its bytes / 255, (128 + 127 t) / 255, as
+    "direction.X/Y/Z" (bake.LIGHTMAP_MODES)."""
     from asset_pipeline import _core
     from asset_pipeline.lightmap_post import write_exr
 
@@ -359,7 +361,7 @@ def _write_exrs(scene: ir.Scene, out: Path) -> list[Path]:
             write_exr(path, page[..., :3])
             continue
         direction = np.asarray(scene.textures[d].mips[0], np.float32) / 255.0
-        channels = [(c, np.ascontiguousarray(page[..., k])) for k, c in enumerate("RGB")] + [("sun.Y", np.ascontiguousarray(page[..., 3]))]
+        channels = [(c, np.ascontiguousarray(page[..., k])) for k, c in enumerate("RGB")] + [("sun.Y", np.ascontiguousarray(direction[..., 3]))]
         channels += [(f"direction.{a}", np.ascontiguousarray(direction[..., k])) for k, a in enumerate("XYZ")]
         _core.write_exr_channels(path, channels)
     return paths
@@ -605,24 +607,27 @@ def _check_compression_overrides(scene: ir.Scene, settings: CookSettings) -> Non
     bad = [m for m in overrides.values() if m not in compress.MODES]
     if bad:
         raise CookError(f"{scene.source}: texture compression mode '{bad[0]}' is not one of {', '.join(compress.MODES)}")
-    missing = compress.unmatched(scene, overrides)
+    missing = compress.unmatched(scene, overrides, baking=settings.baking and bool(scene.static_meshes()))
     if missing:
         names = ", ".join(f"'{t.name}'" for t in scene.textures[:8]) + (" ..." if len(scene.textures) > 8 else "")
         raise CookError(f"{scene.source}: texture compression override '{missing[0]}' matches no texture (textures: {names or 'none'})")
 
 
 def _compress_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progress: Progress):
-    """Block compression of every material texture's levels (compress.py's rules), one cache
-    entry per texture (its blocks and record); overrides were checked after the import."""
+    """Block compression of every texture's levels and every reflection probe's cube
+    (compress.py's rules), one cache entry per texture or cube (its blocks and record); overrides
+    were checked after the import."""
     from asset_pipeline import compress
 
     overrides = dict(settings.texture_compression or {})
     classes = compress.texture_classes(scene)
-    rec = StageRecord("compress", items=len(classes))
+    rc = scene.reflection_cubes if scene.reflection_cubes is not None and scene.reflection_cubes.format == "Rgba16Float" else None
+    cubes = [] if rc is None else list(zip(scene.reflection_probes, rc.cubes))
+    rec = StageRecord("compress", items=len(classes) + len(cubes))
     t0 = time.perf_counter()
     textures = list(scene.textures)
     records = []
-    with progress.stage("compress", len(classes)) as bar:
+    with progress.stage("compress", len(classes) + len(cubes)) as bar:
         for i, cls in classes.items():
             t = textures[i]
             mode = compress.mode_of(t.name, overrides)
@@ -642,6 +647,30 @@ def _compress_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
                 textures[i] = new
             records.append(record)
             bar.advance()
+        compress.keep_sets_whole(scene, textures, records, dict(zip(classes, range(len(records)))))
+        # The cubes are one cube-map array at run time: all BC6H, or all as baked.
+        packed = []
+        for probe, cube in cubes:
+            name = compress.cube_name(probe)
+            mode = compress.mode_of(name, overrides)
+            key = Hasher("compress cube").settings({"mode": mode, "face_size": rc.face_size, "levels": rc.levels}).array(cube).key()
+            hit = cache.load("compress", key)
+            if hit is not None:
+                record, data = hit[0], (hit[1][0] if hit[1] else None)
+                rec.cached += 1
+            else:
+                data, record = compress.compress_cube(rc, cube, name, mode)
+                cache.store("compress", key, record, [data] if data is not None else [])
+            packed.append(data)
+            records.append(record)
+            bar.advance()
+    if cubes and all(d is not None for d in packed):
+        scene = dataclasses.replace(scene, reflection_cubes=dataclasses.replace(rc, cubes=packed, format="Bc6hUfloat"))
+    elif cubes:
+        kept = next(r for r in records[-len(cubes):] if "kept" in r)
+        for r in records[-len(cubes):]:
+            if "kept" not in r:
+                r.update(format=rc.format, bytes_after=r["bytes_before"], kept=f"'{kept['name']}' of its set was kept ({kept['kept']})")
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, textures=textures), compress.summarise(records), rec
 

@@ -96,6 +96,14 @@ def _previews(out: Path, scene: ir.Scene) -> list[Path]:
     return list(render(scene, folder))
 
 
+def _quality(q: dict) -> str:
+    if "mean_deg" in q:
+        return f"{q['mean_deg']:.2f}° / {q['p99_deg']:.2f}°"
+    if "median_rel" in q:
+        return f"{100 * q['median_rel']:.2f}% / {100 * q['p95_rel']:.2f}%"
+    return f"{q['psnr_db']:.1f} dB"
+
+
 def _compress_section(c: dict) -> list[str]:
     """Every material texture's stored format, its quality against the uncompressed levels (all
     levels, texel-weighted) and bytes; why a texture was kept uncompressed."""
@@ -103,12 +111,13 @@ def _compress_section(c: dict) -> list[str]:
     lines = ["", "## Texture compression", "",
              f"{c['compressed']} of {c['textures']} textures block-compressed, {c['kept']} kept uncompressed; "
              f"{mb(c['bytes_before'])} MB -> {mb(c['bytes_after'])} MB. Quality: PSNR (colour in linear light) "
-             "or mean / 99th-percentile angular error (normal maps, z rebuilt), all levels.", "",
+             "or mean / 99th-percentile angular error (normal maps, z rebuilt), or median / 95th-percentile "
+             "relative error (lightmaps), all levels.", "",
              _row("texture", "class", "size", "format", "effort", "quality", "MB before", "MB after", "note"),
              _row("---", "---", "---", "---", "---", "---:", "---:", "---:", "---")]
     for r in c["per_texture"]:
         q = r.get("quality")
-        quality = "" if q is None else (f"{q['mean_deg']:.2f}° / {q['p99_deg']:.2f}°" if "mean_deg" in q else f"{q['psnr_db']:.1f} dB")
+        quality = "" if q is None else _quality(q)
         lines.append(_row(r["name"], r["class"], f"{r['size'][0]}x{r['size'][1]}", r["format"], r.get("effort", ""), quality,
                           mb(r["bytes_before"]), mb(r["bytes_after"]), r.get("kept", "")))
     return lines

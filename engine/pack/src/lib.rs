@@ -29,6 +29,9 @@
 //! LODs in vertex cache and fetch order (the cooker's mesh_opt stage).
 //! Version 8: block-compressed material textures (`TextureFormat::Bc7Srgb`, `Bc7Unorm`,
 //! `Bc5Unorm`, `Bc4Unorm`; levels are whole 4x4 blocks, `TextureFormat::level_bytes`).
+//! Version 9: baked light block-compressed: lightmap pages and reflection cubes may be
+//! `Bc6hUfloat` (`ReflectionProbes::format`), direction textures `Bc7Unorm`; a directional
+//! page's sun visibility moved from its alpha to the direction texture's.
 //!
 //! Small, structured things (meshes, materials, textures, nodes) are JSON so that a pack can be
 //! inspected with ordinary tools; big arrays (vertices, indices, texels) live in the data blob,
@@ -49,7 +52,7 @@ pub use write::{write_pack_atomic, PackBuilder};
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 8;
+pub const FORMAT_VERSION: u32 = 9;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

@@ -194,16 +194,18 @@ pub struct LightmapLayout {
     pub pages: Vec<[u32; 2]>,
     /// Texels kept free around every chart.
     pub padding: u32,
-    /// The baked lightmap of each page: a texture (`Rgba16Float`, the page's size, one level)
-    /// holding B = H/pi in nits, linear (runtime: `L_out = L_e + albedo * B`). Empty until baked.
+    /// The baked lightmap of each page: a texture (`Rgba16Float` or `Bc6hUfloat`, the page's
+    /// size, one level, every page in one format) holding B = H/pi in nits, linear (runtime:
+    /// `L_out = L_e + albedo * B`). Empty until baked.
     #[serde(default)]
     pub textures: Vec<u32>,
-    /// Directional lightmaps ("MonoSH", shading.md §4), one texture per page (`Rgba8Unorm`, the
-    /// page's size, one level) holding the luminance's L1 direction t = b1_Y / (2 b0_Y) as the
-    /// bytes 128 + 127 t (rgb). With them, `textures` hold b0 (rgb: B(n) = b0 (1 + 2 t·n), clamped
-    /// at 0, for the shading normal n) of all the light but the sun's direct light, and the
-    /// fraction of the sun the texel sees (a): the runtime lights it with the pack's first sun
-    /// itself. Empty: irradiance lightmaps, B with the sun in it.
+    /// Directional lightmaps ("MonoSH", shading.md §4), one texture per page (`Rgba8Unorm` or
+    /// `Bc7Unorm`, the page's size, one level, all in one format) holding the luminance's L1
+    /// direction t = b1_Y / (2 b0_Y) as the bytes 128 + 127 t (rgb) and the fraction of the sun
+    /// the texel sees (a): the runtime lights it with the pack's first sun itself. With them,
+    /// `textures` hold b0 (rgb: B(n) = b0 (1 + 2 t·n), clamped at 0, for the shading normal n)
+    /// of all the light but the sun's direct light. Empty: irradiance lightmaps, B with the sun
+    /// in it.
     #[serde(default)]
     pub directions: Vec<u32>,
 }
@@ -241,7 +243,15 @@ pub struct ReflectionProbes {
     pub face_size: u32,
     /// Mip levels, 1 ..= log2(face_size) + 1.
     pub levels: u32,
+    /// How every probe's `data` holds its texels: `Rgba16Float`, or `Bc6hUfloat` (each face of
+    /// each level whole 4x4 blocks, `TextureFormat::level_bytes`).
+    #[serde(default = "half_float")]
+    pub format: TextureFormat,
     pub probes: Vec<ReflectionProbe>,
+}
+
+fn half_float() -> TextureFormat {
+    TextureFormat::Rgba16Float
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -255,15 +265,22 @@ pub struct ReflectionProbe {
     pub box_min: [f32; 3],
     pub box_max: [f32; 3],
     pub blend_distance: f32,
-    /// Half-float RGBA (alpha 1), radiance in nits: [level][face +X, −X, +Y, −Y, +Z, −Z (Vulkan's
-    /// layer order)][row from the top][column], level k `face_size >> k` texels square.
+    /// Radiance in nits, as `ReflectionProbes::format` says (half-float RGBA, alpha 1; or BC6H
+    /// blocks): [level][face +X, −X, +Y, −Y, +Z, −Z (Vulkan's layer order)][row from the
+    /// top][column], level k `face_size >> k` texels square.
     pub data: BufferRange,
 }
 
 impl ReflectionProbes {
     /// Bytes of one probe's `data`.
     pub fn probe_bytes(&self) -> u64 {
-        (0..self.levels).map(|k| 6 * ((self.face_size as u64) >> k).max(1).pow(2) * 8).sum()
+        (0..self.levels).map(|k| 6 * self.face_bytes(k)).sum()
+    }
+
+    /// Bytes of one face of level `k`.
+    pub fn face_bytes(&self, k: u32) -> u64 {
+        let s = (self.face_size >> k).max(1);
+        self.format.level_bytes(s, s).unwrap_or(u64::MAX)
     }
 }
 
@@ -516,6 +533,8 @@ pub enum TextureFormat {
     Bc5Unorm,
     /// BC4, one linear channel in R (occlusion).
     Bc4Unorm,
+    /// BC6H, unsigned half-float RGB, linear HDR (lightmap pages, reflection cubes); alpha reads 1.
+    Bc6hUfloat,
 }
 
 impl TextureFormat {
@@ -524,7 +543,7 @@ impl TextureFormat {
         match self {
             TextureFormat::Rgba8Srgb | TextureFormat::Rgba8Unorm => Some(4),
             TextureFormat::Rgba16Float | TextureFormat::Rgba16Unorm => Some(8),
-            TextureFormat::Bc4Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm => None,
+            TextureFormat::Bc4Unorm | TextureFormat::Bc5Unorm | TextureFormat::Bc7Srgb | TextureFormat::Bc7Unorm | TextureFormat::Bc6hUfloat => None,
         }
     }
 }
@@ -781,13 +800,18 @@ impl Manifest {
             if !l.directions.is_empty() && (l.directions.len() != l.pages.len() || l.textures.len() != l.pages.len()) {
                 return bad(format!("lightmap: {} direction textures and {} baked textures for {} pages", l.directions.len(), l.textures.len(), l.pages.len()));
             }
-            let pages = l.textures.iter().map(|&t| (t, TextureFormat::Rgba16Float, "texture")).zip(&l.pages);
-            let directions = l.directions.iter().map(|&t| (t, TextureFormat::Rgba8Unorm, "direction texture")).zip(&l.pages);
-            for (p, ((t, format, what), size)) in pages.enumerate().chain(directions.enumerate()) {
-                match self.textures.get(t as usize) {
-                    Some(tex) if tex.format == format && [tex.width, tex.height] == *size => {}
-                    Some(tex) => return bad(format!("lightmap page {p}: {what} {t} '{}' is {}x{} {:?}, not {}x{} {format:?}", tex.name, tex.width, tex.height, tex.format, size[0], size[1])),
-                    None => return bad(format!("lightmap page {p}: {what} {t} does not exist")),
+            // Every page in one format, every direction texture in one (the runtime holds each
+            // set as one array texture): half float or BC6H; RGBA8 or BC7.
+            use TextureFormat::*;
+            let sets: [(&[u32], &[TextureFormat], &str); 2] = [(&l.textures, &[Rgba16Float, Bc6hUfloat], "texture"), (&l.directions, &[Rgba8Unorm, Bc7Unorm], "direction texture")];
+            for (ids, formats, what) in sets {
+                let first = ids.first().and_then(|&t| self.textures.get(t as usize)).map(|t| t.format);
+                for (p, (&t, size)) in ids.iter().zip(&l.pages).enumerate() {
+                    match self.textures.get(t as usize) {
+                        Some(tex) if formats.contains(&tex.format) && Some(tex.format) == first && [tex.width, tex.height] == *size && tex.mips.len() == 1 => {}
+                        Some(tex) => return bad(format!("lightmap page {p}: {what} {t} '{}' is {}x{} {:?} ({} levels), not {}x{} {} (one level, page 0's format)", tex.name, tex.width, tex.height, tex.format, tex.mips.len(), size[0], size[1], formats.iter().map(|f| format!("{f:?}")).collect::<Vec<_>>().join(" or "))),
+                        None => return bad(format!("lightmap page {p}: {what} {t} does not exist")),
+                    }
                 }
             }
         }
@@ -802,6 +826,9 @@ impl Manifest {
         if let Some(r) = &self.reflection_probes {
             if !r.face_size.is_power_of_two() || !(1..=2048).contains(&r.face_size) || !(1..=r.face_size.trailing_zeros() + 1).contains(&r.levels) {
                 return bad(format!("reflection probes: bad cube ({} texels a face, {} levels)", r.face_size, r.levels));
+            }
+            if !matches!(r.format, TextureFormat::Rgba16Float | TextureFormat::Bc6hUfloat) {
+                return bad(format!("reflection probes: format {:?} is not Rgba16Float or Bc6hUfloat", r.format));
             }
             for (i, p) in r.probes.iter().enumerate() {
                 if let Some(problem) = p.problem() {

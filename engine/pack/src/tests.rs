@@ -233,16 +233,26 @@ fn dangling_references_are_rejected_before_writing() {
     let mut p = sample();
     p.manifest.lightmap.as_mut().unwrap().textures = vec![0];
     let e = p.to_bytes().unwrap_err().to_string();
-    assert!(e.contains("lightmap page 0: texture 0 't' is 2x2 Rgba8Srgb, not 4x4 Rgba16Float"), "{e}");
+    assert!(e.contains("lightmap page 0: texture 0 't' is 2x2 Rgba8Srgb (2 levels), not 4x4 Rgba16Float or Bc6hUfloat (one level, page 0's format)"), "{e}");
     let mut p = sample();
     p.manifest.lightmap.as_mut().unwrap().textures = vec![1, 1];
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("2 baked textures for 1 pages"), "{e}");
-    // Directional pages: one Rgba8Unorm direction texture of the page's size per page.
+    // A BC6H page of the page's size is a page too (one 4x4 block).
+    let p = sample();
+    let mut b = PackBuilder::new("test", "test");
+    b.manifest = p.manifest.clone();
+    b.push_bytes(&p.data);
+    let blocks = b.push_bytes(&[0u8; 16]);
+    b.manifest.textures.push(Texture { name: "lightmap0 bc6h".into(), width: 4, height: 4, format: TextureFormat::Bc6hUfloat, mips: vec![blocks], sampler: Sampler::default() });
+    b.manifest.lightmap.as_mut().unwrap().textures = vec![2];
+    let q = Pack::from_bytes(&b.finish().to_bytes().unwrap()).unwrap();
+    assert_eq!(q.manifest.textures[2].format, TextureFormat::Bc6hUfloat);
+    // Directional pages: one Rgba8Unorm (or Bc7Unorm) direction texture of the page's size per page.
     let mut p = sample();
     p.manifest.lightmap.as_mut().unwrap().directions = vec![1];
     let e = p.to_bytes().unwrap_err().to_string();
-    assert!(e.contains("lightmap page 0: direction texture 1 'lightmap0' is 4x4 Rgba16Float, not 4x4 Rgba8Unorm"), "{e}");
+    assert!(e.contains("lightmap page 0: direction texture 1 'lightmap0' is 4x4 Rgba16Float (1 levels), not 4x4 Rgba8Unorm or Bc7Unorm (one level, page 0's format)"), "{e}");
     p.manifest.lightmap.as_mut().unwrap().directions = vec![1, 1];
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("2 direction textures and 1 baked textures for 1 pages"), "{e}");
@@ -512,7 +522,7 @@ fn with_reflection_probe() -> Pack {
     let texels = 6 * (16 + 4 + 1);
     let data = b.push_bytes(&vec![0x3cu8; texels * 8]);
     let probe = ReflectionProbe { name: "hall".into(), position: [0.0, 2.0, 0.0], box_min: [-5.0, 0.0, -5.0], box_max: [5.0, 4.0, 5.0], blend_distance: 1.0, data };
-    b.manifest.reflection_probes = Some(ReflectionProbes { face_size: 4, levels: 3, probes: vec![probe] });
+    b.manifest.reflection_probes = Some(ReflectionProbes { face_size: 4, levels: 3, format: TextureFormat::Rgba16Float, probes: vec![probe] });
     b.finish()
 }
 
@@ -530,6 +540,9 @@ fn reflection_probes_round_trip_and_bad_ones_are_rejected_by_name() {
         (|r| r.probes[0].box_max[0] = -5.0, "reflection probe 0 'hall': box [-5.0, 0.0, -5.0]..[-5.0, 4.0, 5.0] is empty"),
         (|r| r.probes[0].blend_distance = -1.0, "reflection probe 0 'hall': blend distance -1 is negative"),
         (|r| r.probes[0].box_min[2] = f32::NAN, "reflection probe 0 'hall': non-finite numbers"),
+        // BC6H faces are whole blocks: 16 bytes a face at every level of a 4-texel cube.
+        (|r| r.format = TextureFormat::Bc6hUfloat, "reflection probe 0 'hall': 1008 bytes stored but 288 expected"),
+        (|r| r.format = TextureFormat::Bc7Unorm, "reflection probes: format Bc7Unorm is not Rgba16Float or Bc6hUfloat"),
     ] {
         let mut p = with_reflection_probe();
         edit(p.manifest.reflection_probes.as_mut().unwrap());
@@ -580,6 +593,9 @@ fn compressed_levels_are_whole_blocks_and_decode_cropped_to_the_level() {
     let texels = bc::decode(TextureFormat::Bc5Unorm, 6, 2, &blocks).unwrap();
     assert_eq!(&texels[..12], &[10, 30, 10, 30, 10, 30, 10, 30, 50, 70, 50, 70]);
     assert_eq!(texels.len(), 6 * 2 * 2);
+    // BC6H: RGBA half floats, alpha 1.0 (an all-zero block is mode 1 with black endpoints).
+    let texels = bc::decode(TextureFormat::Bc6hUfloat, 5, 3, &[0u8; 32]).unwrap();
+    assert_eq!(texels, [0u8, 0, 0, 0, 0, 0, 0x00, 0x3c].repeat(15));
     // Wrong lengths and plain formats decode to nothing.
     assert_eq!(bc::decode(f, 5, 3, &blocks[..8]), None);
     assert_eq!(bc::decode(TextureFormat::Rgba8Unorm, 1, 1, &[0; 4]), None);

@@ -201,9 +201,10 @@ impl Image {
 
     /// Cube maps of `size`² texels a face and `levels` mips as one cube-map array (view
     /// CUBE_ARRAY, `imageCubeArray`), cube i uploaded from `cubes[i]`: [level][face +X, −X, +Y,
-    /// −Y, +Z, −Z][row][column], tightly packed, through `up`. In SHADER_READ_ONLY_OPTIMAL once
+    /// −Y, +Z, −Z][row][column], tightly packed (a face of level k `face_bytes(k)` long: texels,
+    /// or whole blocks of a compressed format), through `up`. In SHADER_READ_ONLY_OPTIMAL once
     /// `up` has flushed.
-    pub fn sampled_cubes(gpu: &Gpu, up: &mut Uploader, name: &str, format: vk::Format, size: u32, levels: u32, texel_bytes: usize, cubes: &[&[u8]]) -> Result<Image> {
+    pub fn sampled_cubes(gpu: &Gpu, up: &mut Uploader, name: &str, format: vk::Format, size: u32, levels: u32, face_bytes: impl Fn(u32) -> usize, cubes: &[&[u8]]) -> Result<Image> {
         anyhow::ensure!(gpu.caps.cube_arrays, "{name}: the device cannot sample cube-map arrays (imageCubeArray)");
         let info = vk::ImageCreateInfo::default()
             .flags(vk::ImageCreateFlags::CUBE_COMPATIBLE)
@@ -217,7 +218,7 @@ impl Image {
         for (c, bytes) in cubes.iter().enumerate() {
             let mut at = 0usize;
             for level in 0..levels {
-                let face = ((size >> level).max(1) as usize).pow(2) * texel_bytes;
+                let face = face_bytes(level);
                 for f in 0..6u32 {
                     let part = bytes.get(at..at + face).with_context(|| format!("{name}: cube {c} is shorter than {levels} levels of {size}-texel faces"))?;
                     parts.push((part, level, 6 * c as u32 + f));

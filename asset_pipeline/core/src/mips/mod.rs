@@ -39,28 +39,28 @@ impl Usage {
         match format {
             pack::TextureFormat::Rgba8Srgb | pack::TextureFormat::Bc7Srgb => Usage::Color,
             pack::TextureFormat::Rgba8Unorm | pack::TextureFormat::Bc7Unorm | pack::TextureFormat::Bc4Unorm => Usage::Data,
-            pack::TextureFormat::Rgba16Float => Usage::Hdr,
+            pack::TextureFormat::Rgba16Float | pack::TextureFormat::Bc6hUfloat => Usage::Hdr,
             pack::TextureFormat::Rgba16Unorm | pack::TextureFormat::Bc5Unorm => Usage::Normal,
         }
     }
 
     /// Colour is stored sRGB, data UNORM, normals UNORM (8-bit as authored, 16-bit once
     /// cooked), HDR as half floats; or block-compressed by the compress stage (colour BC7 sRGB,
-    /// data BC7 or BC4, normals BC5).
+    /// data BC7 or BC4, normals BC5, HDR BC6H).
     pub fn check_format(self, format: pack::TextureFormat) -> Result<(), String> {
         use pack::TextureFormat as F;
         let ok = match self {
             Usage::Color => matches!(format, F::Rgba8Srgb | F::Bc7Srgb),
             Usage::Data => matches!(format, F::Rgba8Unorm | F::Bc7Unorm | F::Bc4Unorm),
             Usage::Normal => matches!(format, F::Rgba8Unorm | F::Rgba16Unorm | F::Bc5Unorm),
-            Usage::Hdr => format == F::Rgba16Float,
+            Usage::Hdr => matches!(format, F::Rgba16Float | F::Bc6hUfloat),
         };
         if !ok {
             let want = match self {
                 Usage::Color => "Rgba8Srgb or Bc7Srgb",
                 Usage::Data => "Rgba8Unorm, Bc7Unorm or Bc4Unorm",
                 Usage::Normal => "Rgba8Unorm, Rgba16Unorm or Bc5Unorm",
-                Usage::Hdr => "Rgba16Float",
+                Usage::Hdr => "Rgba16Float or Bc6hUfloat",
             };
             return Err(format!("usage {} needs format {want}, not {format:?}", self.name()));
         }
