@@ -2,7 +2,9 @@
 """Pack size against source size (issue 24) for the demo level and every shared glTF sample:
 the source's bytes (the glTF or level file and every file its cook read: buffers, images,
 props), the pack's bytes split by what they hold (vertices, indices, textures by format,
-lightmaps, probes, animation, other), and the ratio.
+lightmaps, probes, animation, other), and the ratio; then the compress stage's quality for the
+baked light (lightmap pages: median / 95th-percentile relative error against the uncompressed
+page; direction textures: PSNR; reflection cubes: the worst face's median).
 
     .venv/bin/python tools/pack_sizes.py [--samples DIR] [--quality draft|medium|high]
 
@@ -52,6 +54,7 @@ def main() -> int:
     args = ap.parse_args()
     print("| source | source bytes | pack bytes | pack / source | vertices | indices | textures | lightmaps | reflection probes | other |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    baked_light = []
     with tempfile.TemporaryDirectory() as tmp:
         for src in sources(args.samples, "pack_sizes"):
             name = display_name(src, args.samples)
@@ -68,6 +71,18 @@ def main() -> int:
             other = pack_bytes - sum(parts.values())
             print(f"| {name} | {source_bytes} | {pack_bytes} | {pack_bytes / source_bytes:.2f}x | {parts['vertices']} | {parts['indices']} | {textures} "
                   f"| {parts['lightmaps']} | {parts['reflection probes']} | {other} |")
+            for rec in (r.compress or {}).get("per_texture", []):
+                if rec["class"] in ("hdr", "direction"):
+                    baked_light.append((name, rec))
+    print()
+    print("| source | baked texture | size | stored as | quality | bytes before | after | note |")
+    print("|---|---|---|---|---:|---:|---:|---|")
+    for name, rec in baked_light:
+        q = rec.get("quality") or {}
+        quality = (f"{100 * q['median_rel']:.2f}% / {100 * q['p95_rel']:.2f}%" if "median_rel" in q
+                   else f"{q['psnr_db']:.1f} dB" if "psnr_db" in q else "")
+        print(f"| {name} | {rec['name']} | {rec['size'][0]}x{rec['size'][1]} | {rec['format']} | {quality} | {rec['bytes_before']} "
+              f"| {rec['bytes_after']} | {rec.get('kept', '')} |")
     return 0
 
 
