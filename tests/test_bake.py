@@ -3,6 +3,7 @@ determinism across thread counts, Ctrl-C, and bad arguments."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import textwrap
 from pathlib import Path
@@ -341,6 +342,21 @@ def test_a_directional_bake_puts_b0_the_sun_and_the_direction_in_the_pack_and_th
     exact_dir = np.concatenate([direction, sun[..., None]], axis=-1) * 255.0
     assert np.median(np.abs(packed_dir - exact_dir)) <= 3.0
     print(f"BC6H lightmap: median relative error {100 * np.median(relative):.2f}%, p95 {100 * np.percentile(relative, 95):.2f}%")
+    # The exposure's log-average (textures.md eq. 21.1) was taken from the pages as baked, not
+    # from the compressed ones: recomputed here in numpy from the EXR's uncompressed channels
+    # (pack::exposure's estimate: b0 (1 + 2 |t|) + the visible sun's E cos / pi toward t).
+    manifest = json.loads(_core.read_pack_manifest(out))
+    sun_light = next(l for l in manifest["lights"] if l["kind"] == "sun")
+    toward = -np.asarray(sun_light["direction"], np.float64) / np.linalg.norm(sun_light["direction"])
+    lux = np.asarray(sun_light["color"], np.float64) * sun_light["intensity"]
+    y = np.array([0.2126, 0.7152, 0.0722])
+    b0_half = b0.astype(np.float16).astype(np.float64)
+    t = (np.rint(255.0 * direction) - 128.0) / 127.0
+    length = np.linalg.norm(t, axis=-1)
+    cos = np.where(length > 0, (t @ toward) / np.maximum(length, 1e-30), 0.0)
+    lum = (b0_half @ y) * (1 + 2 * np.minimum(length, 1.0)) + np.rint(255.0 * sun) / 255.0 * (lux @ y) * np.maximum(cos, 0.0) / np.pi
+    expected = np.exp(np.mean(np.log(1e-4 + 0.5 * lum[lum > 0])))
+    assert manifest["lightmap"]["log_average"] == pytest.approx(expected, rel=1e-4), (manifest["lightmap"]["log_average"], expected)
 
 
 def test_mono_sh_is_the_luminance_direction_over_twice_b0():

@@ -202,7 +202,27 @@ fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, numpy::P
     Ok(Array3::from_shape_vec((h, w, 3), rgb).expect("exr size").into_pyarray(py))
 }
 
+/// `lightmap_log_average(page, direction, sun_toward, sun_lux) -> (sum, count)`: one baked page's
+/// part of the scene's exposure (`pack::exposure::LogAverage`, the runtime's own sum): `page`
+/// (h, w, 4) float16 as the pack holds it, `direction` (h, w, 4) uint8 or None, the sun's unit
+/// direction toward it and its illuminance (zeros without a sun). The cooker adds the pages'
+/// sums and stores the log-average, exp(sum / count), in the pack.
+#[pyfunction]
+fn lightmap_log_average(page: Bound<'_, PyAny>, direction: Option<PyReadonlyArray3<'_, u8>>, sun_toward: [f32; 3], sun_lux: [f32; 3]) -> PyResult<(f64, u64)> {
+    let bits: PyReadonlyArray3<'_, u16> = page.call_method1("view", ("uint16",))?.extract()?;
+    let (h, w) = (bits.shape()[0], bits.shape()[1]);
+    if bits.shape()[2] != 4 || direction.as_ref().is_some_and(|d| d.shape() != [h, w, 4]) {
+        return Err(PyValueError::new_err("page and direction must be (h, w, 4) arrays of one size"));
+    }
+    let bytes: Vec<u8> = contiguous(&bits, "page")?.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let dir = direction.as_ref().map(|d| contiguous(d, "direction")).transpose()?;
+    let mut sum = pack::exposure::LogAverage::default();
+    sum.add_page(&bytes, dir, Some(pack::exposure::Sun { toward: sun_toward, lux: sun_lux }));
+    Ok((sum.sum, sum.count))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(lightmap_log_average, m)?)?;
     m.add_function(wrap_pyfunction!(dilate_lightmap, m)?)?;
     m.add_function(wrap_pyfunction!(find_uv_seams, m)?)?;
     m.add_function(wrap_pyfunction!(stitch_seams, m)?)?;

@@ -553,53 +553,41 @@ fn reflection_probe_bytes(pack: &Pack) -> Vec<u8> {
     bytemuck::cast_slice(&floats).to_vec()
 }
 
-/// Sun and exposure for a baked pack: exposure k / L with k = 0.18 and L the log-average
-/// luminance (textures.md eq. 21.1) of the lightmaps' covered texels times an albedo of 0.5.
-/// A directional texel's B is estimated toward its light's direction, which is near its
-/// surface's normal: b0 (1 + 2 |t|) plus the sun's E cos / pi times its visibility, the cosine
-/// taken to that direction (the pack does not hold the surface normal), times the sun's
-/// visibility (the direction texture's alpha). Read from the texels as the device got them,
-/// decoding a page the device samples block-compressed.
+/// Sun and exposure for a baked pack: exposure k / L (`pack::exposure`), L as the cooker
+/// stored it (`LightmapLayout::log_average`, from the pages as baked), or for a pack without it
+/// computed here from the texels as the device got them, decoding a page the device samples
+/// block-compressed.
 fn baked_lighting(pack: &Pack, texels: &[Texels]) -> Result<BakedLighting> {
     let m = &pack.manifest;
     let (sun_dir, sun_lux, sun_angular_radius) = match m.lights.iter().find(|l| l.kind == pack::LightKind::Sun) {
         Some(sun) => ((-Vec3::from(sun.direction)).normalize_or_zero(), Vec3::from(sun.color) * sun.intensity, sun.angular_radius),
         None => (Vec3::Y, Vec3::ZERO, 0.0),
     };
-    // Level 0 of texture t in its plain layout (RGBA16F pages, RGBA8 directions).
-    let plain = |t: u32| -> Result<std::borrow::Cow<[u8]>> {
-        let tex = &m.textures[t as usize];
-        let (format, mips) = &texels[t as usize];
-        Ok(if tex.format.is_compressed() && *format == vk_format(tex.format) {
-            std::borrow::Cow::Owned(pack::bc::decode(tex.format, tex.width, tex.height, &mips[0]).with_context(|| format!("texture '{}': blocks do not decode", tex.name))?)
-        } else {
-            std::borrow::Cow::Borrowed(mips[0].as_ref())
-        })
-    };
-    let luminance = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
-    let (mut sum, mut count) = (0.0f64, 0u64);
-    let (pages, directions) = m.lightmap.as_ref().map_or((&[][..], &[][..]), |l| (&l.textures[..], &l.directions[..]));
-    for (p, &t) in pages.iter().enumerate() {
-        let page = plain(t)?;
-        let dir_bytes = directions.get(p).map(|&d| plain(d)).transpose()?;
-        for (i, px) in page.chunks_exact(8).enumerate() {
-            let c: [f32; 3] = std::array::from_fn(|k| half::f16::from_le_bytes([px[2 * k], px[2 * k + 1]]).to_f32());
-            let mut lum = luminance(Vec3::from(c));
-            if let Some(d) = &dir_bytes {
-                let d = &d[4 * i..4 * i + 4];
-                let t = (Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32) - 128.0) / 127.0;
-                let visibility = d[3] as f32 / 255.0;
-                lum = lum * (1.0 + 2.0 * t.length().min(1.0)) + visibility * luminance(sun_lux) * t.normalize_or_zero().dot(sun_dir).max(0.0) / std::f32::consts::PI;
+    let log_average = match m.lightmap.as_ref().and_then(|l| l.log_average) {
+        Some(l) => l,
+        None => {
+            // Level 0 of texture t in its plain layout (RGBA16F pages, RGBA8 directions).
+            let plain = |t: u32| -> Result<std::borrow::Cow<[u8]>> {
+                let tex = &m.textures[t as usize];
+                let (format, mips) = &texels[t as usize];
+                Ok(if tex.format.is_compressed() && *format == vk_format(tex.format) {
+                    std::borrow::Cow::Owned(pack::bc::decode(tex.format, tex.width, tex.height, &mips[0]).with_context(|| format!("texture '{}': blocks do not decode", tex.name))?)
+                } else {
+                    std::borrow::Cow::Borrowed(mips[0].as_ref())
+                })
+            };
+            let sun = pack::exposure::Sun { toward: sun_dir.into(), lux: sun_lux.into() };
+            let (pages, directions) = m.lightmap.as_ref().map_or((&[][..], &[][..]), |l| (&l.textures[..], &l.directions[..]));
+            let mut sum = pack::exposure::LogAverage::default();
+            for (p, &t) in pages.iter().enumerate() {
+                let direction = directions.get(p).map(|&d| plain(d)).transpose()?;
+                sum.add_page(&plain(t)?, direction.as_deref(), Some(sun));
             }
-            if lum > 0.0 {
-                sum += (1e-4 + 0.5 * lum as f64).ln();
-                count += 1;
-            }
+            sum.value()
         }
-    }
-    let log_average = if count > 0 { (sum / count as f64).exp() as f32 } else { 1.0 };
+    };
     let sky = m.sky.map_or(Vec3::ZERO, |s| Vec3::from(s.color) * s.intensity);
-    Ok(BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: 0.18 / log_average })
+    Ok(BakedLighting { sun_dir, sun_lux, sun_angular_radius, sky, exposure: pack::exposure::KEY / log_average })
 }
 
 /// Mesh `mesh`'s full detail as a flock mesh (see `scene::FlockMesh`).

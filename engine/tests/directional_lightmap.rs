@@ -82,7 +82,7 @@ fn quad_pack(normal_ts: Vec3, b0: f32, t: Vec3, vis: f32) -> Pack {
     // The direction's bytes 128 + 127 t, and the sun's visibility as alpha.
     let dir: Vec<u8> = [t.x, t.y, t.z].map(|c| (128.0 + (127.0 * c).round()) as u8).into_iter().chain([(vis * 255.0).round() as u8]).collect::<Vec<u8>>().repeat(16);
     let direction = texture(&mut b, "lightmap0 direction", TextureFormat::Rgba8Unorm, [4, 4], &[&dir]);
-    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![lightmap], directions: vec![direction] });
+    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![lightmap], directions: vec![direction], log_average: None });
     b.manifest.lights.push(sun(SUN_LUX, to_quad(towards_sun()), 0.0));
     b.finish()
 }
@@ -122,5 +122,35 @@ fn a_normal_mapped_plane_under_a_baked_sun_shades_as_the_baker_lights_tilted_nor
             assert!(got[c] >= bytes(0.97 * want_b)[c] && got[c] <= bytes(1.03 * want_b)[c], "tilt {deg}: pixel {got:?} not within 3% of the baker's {want_b} nits ({:?}..{:?})", bytes(0.97 * want_b), bytes(1.03 * want_b));
         }
     }
+    assert_clean(&gpu);
+}
+
+/// The exposure (pack::exposure): from the log-average the cooker stored when the pack has one
+/// (taken before block compression), else computed at load from the pages, the sun's
+/// visibility read from the direction texture's alpha.
+#[test]
+fn the_exposure_comes_from_the_stored_log_average_or_the_pages() {
+    let gpu = gpu();
+    let (b0, t, vis) = (500.0, Vec3::new(0.0, 0.0, 0.5), 0.6);
+    let mut pack = quad_pack(Vec3::Z, b0, t, vis);
+    let exposure = |pack: &Pack| {
+        let mut rig = Rig::new(&gpu, pack, 4, 4);
+        let e = rig.scene.baked.unwrap().exposure;
+        rig.destroy(&gpu);
+        e
+    };
+    // Computed: every texel alike, B = b0 (1 + 2 |t|) + visibility E cos / pi toward t.
+    let towards = to_quad(towards_sun());
+    let q = |c: f32| ((128.0 + (127.0 * c).round()) - 128.0) / 127.0;
+    let t_stored = Vec3::new(q(t.x), q(t.y), q(t.z));
+    let v_stored = (vis * 255.0f32).round() / 255.0;
+    let b = b0 * (1.0 + 2.0 * t_stored.length()) + v_stored * SUN_LUX * towards.dot(t_stored.normalize()).max(0.0) / std::f32::consts::PI;
+    let computed = exposure(&pack);
+    let want = pack::exposure::KEY / (1e-4 + 0.5 * b);
+    assert!((computed / want - 1.0).abs() < 1e-3, "computed exposure {computed} vs {want}");
+    // Stored: taken as it is.
+    pack.manifest.lightmap.as_mut().unwrap().log_average = Some(1234.0);
+    let stored = exposure(&pack);
+    assert!((stored - pack::exposure::KEY / 1234.0).abs() < 1e-9, "{stored}");
     assert_clean(&gpu);
 }

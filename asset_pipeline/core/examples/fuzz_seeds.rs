@@ -137,6 +137,7 @@ fn rich_pack(base: Pack) -> Pack {
         padding: 1,
         textures: vec![1],
         directions: vec![],
+        log_average: None,
     });
     if let Some(sm) = b.manifest.meshes.first_mut().and_then(|m| m.lods[0].submeshes.first_mut()) {
         sm.lightmap_block = Some(0);

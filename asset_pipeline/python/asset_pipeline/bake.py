@@ -664,8 +664,12 @@ def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
     LIGHTMAP_MODES: B as Rgba16Float; or b0 as Rgba16Float and the direction and the sun's
     visibility as Rgba8Unorm), the probes and the reflection probes' cubes. (The compress stage
     makes them BC6H and BC7.)"""
+    from asset_pipeline import _core
+
     textures = list(scene.textures)
     ids, directions = [], []
+    sun_toward, sun_lux = _exposure_sun(scene)
+    log_sum, covered = 0.0, 0
     for page, img in enumerate(baked.pages):
         h, w, channels = img.shape
         if channels == DIRECTIONAL_CHANNELS:
@@ -674,13 +678,29 @@ def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
         else:
             rgba, direction = np.concatenate([img, np.ones((h, w, 1), np.float32)], axis=2), None
         ids.append(len(textures))
-        textures.append(ir.Texture(name=f"lightmap{page}", width=w, height=h, format="Rgba16Float",
-                                   mips=[np.ascontiguousarray(np.clip(rgba, 0.0, 65504.0).astype(np.float16))]))
+        half = np.ascontiguousarray(np.clip(rgba, 0.0, 65504.0).astype(np.float16))
+        textures.append(ir.Texture(name=f"lightmap{page}", width=w, height=h, format="Rgba16Float", mips=[half]))
         if direction is not None:
             textures.append(ir.Texture(name=f"lightmap{page} direction", width=w, height=h, format="Rgba8Unorm", mips=[direction]))
-    layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids, directions=directions)
+        # The exposure's sum, from the texels as baked (the compress stage changes them later).
+        s, n = _core.lightmap_log_average(half, direction, sun_toward, sun_lux)
+        log_sum, covered = log_sum + s, covered + n
+    log_average = float(np.exp(log_sum / covered)) if covered else 1.0
+    layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids, directions=directions,
+                                                                     log_average=log_average if baked.pages else None)
     cubes = baked.reflections if baked.reflections is not None and len(baked.reflections.cubes) == len(scene.reflection_probes) else None
     return dataclasses.replace(scene, textures=textures, lightmap=layout, probes=baked.probes, reflection_cubes=cubes)
+
+
+def _exposure_sun(scene: ir.Scene) -> tuple[list[float], list[float]]:
+    """The first sun as the runtime's exposure takes it (pack::exposure::Sun): the unit direction
+    toward it and colour times lux; (up, zeros) without one."""
+    sun = next((l for l in scene.lights if l.kind == "sun"), None)
+    if sun is None:
+        return [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]
+    toward = -np.asarray(sun.direction, np.float64)
+    n = np.linalg.norm(toward)
+    return (toward / n if n > 0 else toward).tolist(), (np.asarray(sun.color, np.float64) * sun.intensity).tolist()
 
 
 # Rec. 709 luminance weights (textures.md section 4.2; shading::sh::LUMINANCE).

@@ -296,9 +296,12 @@ class LightmapLayout:
     pages: list[tuple[int, int]]  # (width, height) in texels of each atlas page
     padding: int = 2  # texels between charts
     textures: list[int] = field(default_factory=list)  # baked page -> Rgba16Float texture index (empty: not baked)
-    # Directional lightmaps: page -> Rgba8Unorm direction texture (pack::LightmapLayout::directions;
-    # `textures` then hold b0 and the sun's visibility). Empty: irradiance lightmaps.
+    # Directional lightmaps: page -> Rgba8Unorm direction texture, the sun's visibility in its
+    # alpha (pack::LightmapLayout::directions; `textures` then hold b0). Empty: irradiance lightmaps.
     directions: list[int] = field(default_factory=list)
+    # The log-average luminance the runtime's exposure is made from (pack::exposure), of the
+    # pages as baked; None until baked.
+    log_average: float | None = None
 
 
 @dataclass
@@ -582,7 +585,7 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     if doc.get("lightmap"):
         lm = doc["lightmap"]
         scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])),
-                                        list(lm.get("directions", [])))
+                                        list(lm.get("directions", [])), lm.get("log_average"))
     rp = doc.get("reflection_probes")
     authored = doc.get("authored_reflection_probes", rp["probes"] if rp else [])
     scene.reflection_probes = [_probe_from_doc(p) for p in authored]

@@ -41,6 +41,7 @@
 mod anim;
 pub mod bc;
 mod error;
+pub mod exposure;
 mod manifest;
 mod write;
 

@@ -208,6 +208,11 @@ pub struct LightmapLayout {
     /// in it.
     #[serde(default)]
     pub directions: Vec<u32>,
+    /// The log-average luminance the runtime's exposure is made from (`exposure::LogAverage`),
+    /// computed by the cooker from the pages as baked (before block compression changes their
+    /// texels); `None`: the runtime computes it from the pages it loads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_average: Option<f32>,
 }
 
 /// Irradiance probes for dynamic objects on a regular grid: probe (i, j, k) sits at
