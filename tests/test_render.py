@@ -4,6 +4,7 @@ Every `demo` run here has the validation layer on; a validation error makes demo
 which fails the test that caused it.
 """
 
+import json
 import os
 import subprocess
 from pathlib import Path
@@ -139,6 +140,32 @@ def test_block_compressed_textures_render_like_uncompressed_ones_either_way_they
     assert np.abs(shots["native"] - shots["decode"]).max() <= 2 and native >= 50.0, native
     assert plain >= 40.0, plain
     assert not np.array_equal(shots["decode"], shots["plain"]), "the compressed pack should not be the uncompressed one"
+
+
+def test_block_compressed_baked_light_renders_alike_decoded_or_sampled_natively(tmp_path):
+    # The demo level's baked light block-compressed: lightmap page BC6H, direction and sun
+    # visibility BC7, and its reflection cubes forced to BC6H (the bar keeps them half float, their
+    # mirror level being noisy). Decoded at load (this CPU device's default) and sampled natively
+    # as array textures and a cube-map array: the same image, validation clean; and the forced
+    # cubes change the player's view next to nothing against the reference (cubes half float).
+    pack = tmp_path / "temple.pack"
+    cook_ok(REPO / "content" / "levels" / "temple.toml", pack, "-q", "--cache", str(REPO / "build" / ".cook-cache"),
+            "--texture-compression", "reflection *=force")
+    manifest = json.loads(asset_pipeline._core.read_pack_manifest(pack))
+    assert manifest["reflection_probes"]["format"] == "Bc6hUfloat"
+    lm = manifest["lightmap"]
+    assert {manifest["textures"][t]["format"] for t in lm["textures"]} == {"Bc6hUfloat"}
+    assert {manifest["textures"][t]["format"] for t in lm["directions"]} == {"Bc7Unorm"}
+    shots = {}
+    for bc in ("decode", "native"):
+        out = tmp_path / f"{bc}.png"
+        r = run_demo([str(pack), "--headless", "--validation", "--flight", "0", "--frames", "3", "--width", "320", "--height", "180",
+                      "--render-scale", "1", "--screenshot", str(out)], env={**REFERENCE_ENV, "ENGINE_BC": bc})
+        assert r.returncode == 0 and "validation errors: 0" in r.stdout, r.stdout + r.stderr
+        shots[bc] = load_rgb(out)
+    assert np.abs(shots["native"] - shots["decode"]).max() <= 3
+    beyond = (np.abs(shots["decode"] - load_rgb(REFERENCE_DIR / "temple_320x180.png")).max(-1) > 3).mean()
+    assert beyond <= 0.002, f"{beyond:.2%} of pixels beyond 3/255 of the reference"
 
 
 def test_box_textured_shows_the_texture(box_textured_pack, tmp_path):
