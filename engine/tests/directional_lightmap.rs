@@ -134,7 +134,7 @@ fn the_exposure_comes_from_the_stored_log_average_or_the_pages() {
     let (b0, t, vis) = (500.0, Vec3::new(0.0, 0.0, 0.5), 0.6);
     let mut pack = quad_pack(Vec3::Z, b0, t, vis);
     let exposure = |pack: &Pack| {
-        let mut rig = Rig::new(&gpu, pack, 4, 4);
+        let rig = Rig::new(&gpu, pack, 4, 4);
         let e = rig.scene.baked.unwrap().exposure;
         rig.destroy(&gpu);
         e
