@@ -2,14 +2,18 @@
 //! variant depth DEPTH_ONLY
 #include "frame.glsl"
 #include "mesh_draw.glsl"
+#include "octahedral.glsl"
 
+// The pack's quantised vertex (engine/pack/src/vertex.rs): the position as stored, normal and
+// tangent octahedral (the tangent's code carries the bitangent's sign), the texture
+// coordinates unorm16 over the LOD's ranges (`draw.uv_ranges`), the colour unorm8.
 layout(location = 0) in vec3 in_position;
-layout(location = 1) in vec3 in_normal;
-layout(location = 2) in vec4 in_tangent; // xyz, w = the bitangent's sign (glTF)
-layout(location = 3) in vec2 in_uv0;
-layout(location = 4) in vec2 in_uv1;
+layout(location = 1) in vec2 in_normal_oct;
+layout(location = 2) in ivec2 in_tangent_code;
+layout(location = 3) in vec2 in_uv0_q;
+layout(location = 4) in vec2 in_uv1_q;
 layout(location = 5) in vec4 in_color;
-layout(location = 13) in vec2 in_texcoord1;
+layout(location = 13) in vec2 in_texcoord1_q;
 
 // Per instance (binding 1, the renderer's instance stream; `InstanceData` in batches.rs): the
 // model matrix, the columns of its normal matrix (the inverse-transpose of the 3x3: non-uniform
@@ -59,27 +63,31 @@ layout(location = 10) out vec2 out_occlusion_uv;
 // A texture slot's coordinates (`MaterialConstants` rows). Per vertex rather than per fragment:
 // the transform is affine, so interpolating its result is the same as transforming the
 // interpolated coordinates.
-vec2 slot_uv(vec4 row0, vec4 row1) {
-    vec3 uv = vec3(row0.w > 0.5 ? in_texcoord1 : in_uv0, 1.0);
+vec2 slot_uv(vec4 row0, vec4 row1, vec2 uv0, vec2 texcoord1) {
+    vec3 uv = vec3(row0.w > 0.5 ? texcoord1 : uv0, 1.0);
     return vec2(dot(row0.xyz, uv), dot(row1.xyz, uv));
 }
 
 void main() {
     vec4 world = place_vertex();
-    out_normal = mat3(in_normal0.xyz, in_normal1, in_normal2) * in_normal;
+    out_normal = mat3(in_normal0.xyz, in_normal1, in_normal2) * oct_decode(in_normal_oct);
+    vec4 in_tangent = tangent_decode(in_tangent_code);
+    vec2 uv0 = in_uv0_q * draw.uv_ranges[0].xy + draw.uv_ranges[0].zw;
+    vec2 uv1 = in_uv1_q * draw.uv_ranges[1].xy + draw.uv_ranges[1].zw;
+    vec2 texcoord1 = in_texcoord1_q * draw.uv_ranges[2].xy + draw.uv_ranges[2].zw;
     uint m = uint(draw.material.y);
-    out_base_color_uv = slot_uv(materials[m].base_color_uv[0], materials[m].base_color_uv[1]);
-    out_emissive_uv = slot_uv(materials[m].emissive_uv[0], materials[m].emissive_uv[1]);
-    out_normal_uv = slot_uv(materials[m].normal_uv[0], materials[m].normal_uv[1]);
-    out_metallic_roughness_uv = slot_uv(materials[m].metallic_roughness_uv[0], materials[m].metallic_roughness_uv[1]);
-    out_occlusion_uv = slot_uv(materials[m].occlusion_uv[0], materials[m].occlusion_uv[1]);
+    out_base_color_uv = slot_uv(materials[m].base_color_uv[0], materials[m].base_color_uv[1], uv0, texcoord1);
+    out_emissive_uv = slot_uv(materials[m].emissive_uv[0], materials[m].emissive_uv[1], uv0, texcoord1);
+    out_normal_uv = slot_uv(materials[m].normal_uv[0], materials[m].normal_uv[1], uv0, texcoord1);
+    out_metallic_roughness_uv = slot_uv(materials[m].metallic_roughness_uv[0], materials[m].metallic_roughness_uv[1], uv0, texcoord1);
+    out_occlusion_uv = slot_uv(materials[m].occlusion_uv[0], materials[m].occlusion_uv[1], uv0, texcoord1);
     // A tangent is a direction in the surface: it moves with the model matrix itself. A
     // mirroring instance (negative determinant) flips the frame's handedness.
     mat3 model3 = mat3(in_model);
     out_tangent = vec4(model3 * in_tangent.xyz, determinant(model3) < 0.0 ? -in_tangent.w : in_tangent.w);
     out_color = in_color;
     out_world = world.xyz;
-    out_lightmap_uv = in_uv1 * in_lightmap.xy + in_lightmap.zw;
+    out_lightmap_uv = uv1 * in_lightmap.xy + in_lightmap.zw;
     out_lightmap_layer = in_normal0.w + draw.material.z;
 }
 #endif

@@ -5,6 +5,9 @@
 layout(push_constant) uniform Draw {
     vec4 material; // x: alpha-test cutoff (or -1), y: material index, z: the submesh's lightmap block
     vec4 base_color;
+    // The LOD's 16-bit texture coordinates' maps (pack::UvRanges): uv = q * xy + zw for uv0,
+    // uv1 (lightmap) and texcoord1.
+    vec4 uv_ranges[3];
 } draw;
 
 struct MaterialConstants {

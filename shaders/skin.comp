@@ -1,23 +1,25 @@
 #version 450
-// Skinning and morph targets, once per frame; the output has the pack's 80-byte vertex layout,
-// so every later pass binds it as its vertex buffer. Same maths as anim::skin_cpu (the tests
+// Skinning and morph targets, once per frame; the output has the pack's 36-byte quantised vertex
+// layout (engine/pack/src/vertex.rs), so every later pass binds it as its vertex buffer and
+// pushes the LOD's texture-coordinate ranges, which the copied codes still refer to. Same maths as anim::skin_cpu (the tests
 // compare the two): morph deltas first, then linear blend skinning; normals by the inverse
 // transpose of the blended matrix, tangents by the matrix itself (w kept).
 
 layout(local_size_x = 64) in;
 
-// Vertices as five uvec4 of raw words each (80 bytes): a struct with vec3 members would get
-// std430's 16-byte alignment and no longer match the packed layout, and whole-uvec4 loads and
-// stores are several times faster than single words on lavapipe, which runs 8 vertices per
-// SIMD lane group and turns each scalar access into a gather or scatter.
-layout(std430, set = 0, binding = 0) readonly buffer BindVertices { uvec4 bind[]; };
+#include "octahedral.glsl"
+
+// Vertices as nine raw words each (36 bytes): a struct with vec3 members would get std430's
+// 16-byte alignment and no longer match the packed layout.
+const uint WORDS = 9u;
+layout(std430, set = 0, binding = 0) readonly buffer BindVertices { uint bind[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Joints { uvec2 joints[]; };  // 4 x u16 per vertex
 layout(std430, set = 0, binding = 2) readonly buffer Weights { vec4 weights[]; };
 layout(std430, set = 0, binding = 3) readonly buffer MorphPositions { float morph_positions[]; };  // per job [target][vertex][3]
 layout(std430, set = 0, binding = 4) readonly buffer MorphNormals { float morph_normals[]; };
 layout(std430, set = 0, binding = 5) readonly buffer MorphWeights { float morph_weights[]; };
 layout(std430, set = 0, binding = 6) readonly buffer JointMatrices { mat4 joint_matrices[]; };
-layout(std430, set = 0, binding = 7) writeonly buffer Skinned { uvec4 skinned[]; };
+layout(std430, set = 0, binding = 7) writeonly buffer Skinned { uint skinned[]; };
 
 // One dispatch skins every (instance, LOD) the frame draws (anim::skin_gpu::SkinBatch): lavapipe
 // wakes its compute threads and waits for them at every dispatch, which cost more than the
@@ -57,16 +59,12 @@ void main() {
     if (v >= job.vertex_count) {
         return;
     }
-    // The five words of a pack::Vertex: [position, normal.x] [normal.yz, tangent.xy]
-    // [tangent.zw, uv0] [uv1, texcoord1] [colour, padding].
+    // The words of a stored vertex: position (3), normal, tangent, uv0, uv1, texcoord1, colour.
     uint iv = job.bind_base + v;
-    uint base = iv * 5u;
-    vec4 w0 = uintBitsToFloat(bind[base]);
-    vec4 w1 = uintBitsToFloat(bind[base + 1]);
-    vec4 w2 = uintBitsToFloat(bind[base + 2]);
-    vec3 p = w0.xyz;
-    vec3 n = vec3(w0.w, w1.xy);
-    vec4 t = vec4(w1.zw, w2.xy);
+    uint base = iv * WORDS;
+    vec3 p = uintBitsToFloat(uvec3(bind[base], bind[base + 1], bind[base + 2]));
+    vec3 n = oct_decode(unpackSnorm2x16(bind[base + 3]));
+    vec4 t = tangent_decode(unpack_i16x2(bind[base + 4]));
     for (uint k = 0; k < job.target_count; k++) {
         float w = morph_weights[job.weight_base + k];
         if (w != 0.0) {
@@ -102,11 +100,15 @@ void main() {
     vec3 sp = (m * vec4(p, 1.0)).xyz;
     sn = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
     st = dot(st, st) > 0.0 ? normalize(st) : vec3(0.0);
-    uint out_at = (job.out_base + v) * 5u;
-    skinned[out_at] = floatBitsToUint(vec4(sp, sn.x));
-    skinned[out_at + 1] = floatBitsToUint(vec4(sn.yz, st.xy));
-    skinned[out_at + 2] = floatBitsToUint(vec4(st.z, t.w, w2.zw));
-    // uv1, texcoord1, colour and padding pass through unchanged.
-    skinned[out_at + 3] = bind[base + 3];
-    skinned[out_at + 4] = bind[base + 4];
+    uint out_at = (job.out_base + v) * WORDS;
+    uvec3 ps = floatBitsToUint(sp);
+    skinned[out_at] = ps.x;
+    skinned[out_at + 1] = ps.y;
+    skinned[out_at + 2] = ps.z;
+    skinned[out_at + 3] = packSnorm2x16(oct_encode(sn));
+    skinned[out_at + 4] = pack_i16x2(tangent_encode(vec4(st, t.w)));
+    // The texture coordinates and the colour pass through unchanged.
+    for (uint k = 5u; k < WORDS; k++) {
+        skinned[out_at + k] = bind[base + k];
+    }
 }

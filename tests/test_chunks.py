@@ -36,7 +36,7 @@ TEMPLE_CHUNKS = {
 }
 WHOLE = ("ground", "altar", "braziers", "fountain")  # static but small (or few triangles): never split
 
-# pack::Vertex, 80 bytes.
+# pack::Vertex decoded (`_core.decode_vertices`), 80 bytes.
 VERTEX = np.dtype([("position", "<f4", 3), ("normal", "<f4", 3), ("tangent", "<f4", 4), ("uv0", "<f4", 2), ("uv1", "<f4", 2),
                    ("texcoord1", "<f4", 2), ("color", "u1", 4), ("pad", "<u4", 3)])
 assert VERTEX.itemsize == 80
@@ -65,7 +65,8 @@ class Pack:
         lightmap block (from its submesh)."""
         lod = self.doc["meshes"][mesh]["lods"][level]
         v, i = lod["vertices"], lod["indices"]
-        vertices = np.frombuffer(self.data, VERTEX, lod["vertex_count"], v["offset"])
+        stored = self.data[v["offset"]:v["offset"] + v["len"]]
+        vertices = np.frombuffer(_core.decode_vertices(stored, json.dumps(lod["uv_ranges"])), VERTEX)
         indices = np.frombuffer(self.data, {"u16": "<u2", "u32": "<u4"}[lod["index_format"]], lod["index_count"], i["offset"])
         materials = np.zeros(len(indices) // 3, np.int64)
         blocks = np.full(len(indices) // 3, -1, np.int64)

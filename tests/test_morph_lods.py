@@ -24,7 +24,7 @@ from asset_pipeline.lod import LodSettings, build_lods
 from conftest import REPO
 from test_lod import sampled_hausdorff
 
-VERTEX_STRIDE = 80  # pack::Vertex: position (3 f32) first
+VERTEX_STRIDE = _core.VERTEX_STRIDE  # the stored vertex: position (3 f32) first
 
 
 def read_pack(path):

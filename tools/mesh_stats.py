@@ -2,7 +2,9 @@
 """The mesh optimisation stage's numbers (issue 24) for the demo level and every shared glTF
 sample: vertex cache ACMR (16-entry FIFO) before and after over every LOD and LOD 0 alone,
 the bound no order can beat (each vertex transformed once: vertices / triangles), vertex
-counts and vertex bytes (the pack's vertex layout) before and after.
+counts before and after the stage, and vertex bytes: before (the stage's input in the 80-byte
+f32 layout packs used up to format 9) and after (its output in the 36-byte quantised layout,
+engine/pack/src/vertex.rs).
 
     .venv/bin/python tools/mesh_stats.py [--samples DIR]
 
@@ -19,10 +21,11 @@ from pathlib import Path
 
 from content_sources import display_name, samples_dir, sources
 
-VERTEX_BYTES = 80  # pack::Vertex
+F32_VERTEX_BYTES = 80  # pack::Vertex, stored as it was up to pack format 9
 
 
 def main() -> int:
+    from asset_pipeline import _core
     from asset_pipeline.pipeline import CookSettings, CookError, cook
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -43,7 +46,7 @@ def main() -> int:
                 print(f"| {name} | no meshes |")
                 continue
             print(f"| {name} | {s['triangles']} | {s['acmr_before']:.3f} | {s['acmr_after']:.3f} | {s['vertices_after'] / max(s['triangles'], 1):.3f} | {s['lod0_acmr_before']:.3f} | {s['lod0_acmr_after']:.3f} "
-                  f"| {s['vertices_before']} | {s['vertices_after']} | {s['vertices_before'] * VERTEX_BYTES} | {s['vertices_after'] * VERTEX_BYTES} |")
+                  f"| {s['vertices_before']} | {s['vertices_after']} | {s['vertices_before'] * F32_VERTEX_BYTES} | {s['vertices_after'] * _core.VERTEX_STRIDE} |")
     return 0
 
 

@@ -40,7 +40,23 @@ fn vertex_cache_stats(triangles: PyReadonlyArray2<'_, u32>, vertex_count: usize)
     Ok((s.acmr, s.atvr))
 }
 
+/// `decode_vertices(stored bytes, uv_ranges json)` -> bytes of the decoded 80-byte `pack::Vertex`
+/// records (position, normal, tangent, uv0, uv1, texcoord1 as f32, colour u8x4, padding): a
+/// LOD's vertices as the pack stores them (quantised, `pack::vertex`) and as the runtime's CPU
+/// code reads them. ValueError for a length not a whole number of vertices or bad ranges.
+#[pyfunction]
+fn decode_vertices<'py>(py: Python<'py>, stored: &[u8], uv_ranges: &str) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+    if stored.len() % pack::VERTEX_STRIDE != 0 {
+        return Err(PyValueError::new_err(format!("decode_vertices: {} bytes is not a whole number of {}-byte vertices", stored.len(), pack::VERTEX_STRIDE)));
+    }
+    let ranges: pack::UvRanges = serde_json::from_str(uv_ranges).map_err(|e| PyValueError::new_err(format!("decode_vertices: uv_ranges: {e}")))?;
+    let v = pack::decode_vertices(stored, &ranges);
+    Ok(pyo3::types::PyBytes::new(py, pack::Vertex::slice_as_bytes(&v)))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("VERTEX_STRIDE", pack::VERTEX_STRIDE)?;
+    m.add_function(wrap_pyfunction!(decode_vertices, m)?)?;
     m.add_function(wrap_pyfunction!(optimize_lod, m)?)?;
     m.add_function(wrap_pyfunction!(vertex_cache_stats, m)?)?;
     m.add("VERTEX_CACHE_SIZE", cook_core::mesh_opt::CACHE_SIZE)?;

@@ -229,6 +229,7 @@ impl GpuScene {
                     first_index,
                     index_type,
                     submeshes: lod.submeshes.clone(),
+                    uv_ranges: lod.uv_ranges,
                     error: lod.error,
                     triangles: lod.index_count / 3,
                     bounds,
@@ -448,11 +449,7 @@ impl GpuScene {
 /// A LOD's box in the mesh's space (the mesh's own where it has no vertices) and, for a LOD of
 /// up to `occlusion::MAX_OCCLUDER_TRIANGLES` triangles, its triangles for occlusion culling.
 fn lod_geometry(pack: &Pack, lod: &pack::MeshLod, mesh: &pack::Mesh) -> (LocalBounds, Option<Arc<OccluderMesh>>) {
-    let positions: Vec<Vec3> = pack
-        .bytes(lod.vertices)
-        .chunks_exact(pack::VERTEX_STRIDE)
-        .map(|v| Vec3::from(bytemuck::pod_read_unaligned::<[f32; 3]>(&v[..12])))
-        .collect();
+    let positions: Vec<Vec3> = pack::vertex::decode_positions(pack.bytes(lod.vertices)).into_iter().map(Vec3::from).collect();
     let bounds = match positions.iter().copied().reduce(Vec3::min).zip(positions.iter().copied().reduce(Vec3::max)) {
         Some((min, max)) => LocalBounds { min, max },
         None => LocalBounds { min: Vec3::from(mesh.bounds_min), max: Vec3::from(mesh.bounds_max) },
@@ -594,7 +591,7 @@ fn baked_lighting(pack: &Pack, texels: &[Texels]) -> Result<BakedLighting> {
 fn flock_mesh(gpu: &Gpu, up: &mut Uploader, pack: &Pack, mesh: u32) -> Result<FlockMesh> {
     let m = &pack.manifest;
     let lod = &m.meshes[mesh as usize].lods[0];
-    let vertices = pack::Vertex::read_all(pack.bytes(lod.vertices));
+    let vertices = pack::decode_vertices(pack.bytes(lod.vertices), &lod.uv_ranges);
     let indices = pack.indices(lod);
     let mut corners: Vec<[f32; 6]> = Vec::with_capacity(indices.len());
     let mut parts = Vec::new();

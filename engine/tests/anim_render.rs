@@ -50,8 +50,9 @@ fn baked(pack: &Pack, time: f32) -> Pack {
                 lo = lo.min(Vec3::from(p.position));
                 hi = hi.max(Vec3::from(p.position));
             }
-            let r = pack.manifest.meshes[mesh].lods[lod].vertices;
-            out.data[r.offset as usize..(r.offset + r.len) as usize].copy_from_slice(Vertex::slice_as_bytes(&v));
+            let l = &pack.manifest.meshes[mesh].lods[lod];
+            let r = l.vertices;
+            out.data[r.offset as usize..(r.offset + r.len) as usize].copy_from_slice(&pack::encode_vertices_with(&v, &l.uv_ranges));
         }
         out.manifest.meshes[mesh].bounds_min = lo.to_array();
         out.manifest.meshes[mesh].bounds_max = hi.to_array();
@@ -273,7 +274,7 @@ fn morph_lods_pack() -> Pack {
         let index_format = pack::IndexFormat::for_vertices(verts.len());
         let index_bytes = index_format.encode(&idx);
         lods.push(MeshLod {
-            vertices: b.push_bytes(Vertex::slice_as_bytes(&verts)),
+            vertices: b.push_vertices(&verts).0, uv_ranges: pack::UvRanges::fit(&verts),
             vertex_count: verts.len() as u32,
             indices: b.push_bytes(&index_bytes),
             index_count: idx.len() as u32,

@@ -39,6 +39,9 @@ pub struct MeshIr {
     pub lods: Vec<LodIr>,
     /// Default morph target weights (glTF `mesh.weights`, zeros when absent), one per target.
     pub morph_weights: Vec<f32>,
+    /// Bounds its texture coordinates are stored over, besides its own (`pack::UvBounds`): the
+    /// chunk stage gives each chunk its whole mesh's, so chunks store a shared vertex alike.
+    pub uv_bounds: Option<pack::UvBounds>,
 }
 
 /// A skeleton: joint node indices (into `SceneIr::nodes`) and inverse bind matrices (column-major).

@@ -86,7 +86,7 @@ pub(crate) fn cook_mesh(mesh: &gltf::Mesh, buffers: &[Vec<u8>], default_material
         morph_normals: deform.morph_normals,
         ..Default::default()
     };
-    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), lods: vec![lod], morph_weights })
+    Ok(MeshIr { name: mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string), lods: vec![lod], morph_weights, uv_bounds: None })
 }
 
 /// An upper bound on the vertices one import may produce (counting each morph target's deltas as

@@ -2,7 +2,7 @@
 //! store indices 16-bit where they fit, and lay out the data blob.
 
 use crate::ir::{LodIr, SceneIr};
-use pack::{IndexFormat, Mesh, MeshLod, Pack, PackBuilder, Submesh, Vertex};
+use pack::{IndexFormat, Mesh, MeshLod, Pack, PackBuilder, Submesh, UvBounds, UvRanges, Vertex};
 
 /// Build the pack for a scene. Errors name the object that is inconsistent.
 pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
@@ -15,11 +15,17 @@ pub fn build_pack(scene: &SceneIr, cooker: &str) -> Result<Pack, String> {
         let what = format!("mesh {i} '{}'", mesh.name);
         let Some(base) = mesh.lods.first() else { return Err(format!("{what}: no LODs")) };
         let (bounds_min, bounds_max) = bounds(&base.positions);
-        let mut lods = Vec::with_capacity(mesh.lods.len());
         for (l, lod) in mesh.lods.iter().enumerate() {
-            let what = format!("{what} LOD {l}");
-            lod.validate(&what)?;
-            lods.push(write_lod(lod, &mut b).map_err(|e| format!("{what}: {e}"))?);
+            lod.validate(&format!("{what} LOD {l}"))?;
+        }
+        // Every LOD's texture coordinates over one set of ranges (the mesh's, and its whole
+        // mesh's for a chunk): a vertex two LODs or two chunks share is stored alike.
+        let vertices: Vec<Vec<Vertex>> = mesh.lods.iter().map(lod_vertices).collect();
+        let bounds = vertices.iter().fold(mesh.uv_bounds.unwrap_or(UvBounds::EMPTY), |acc, v| acc.union(&UvBounds::of(v)));
+        let ranges = UvRanges::from_bounds(&bounds);
+        let mut lods = Vec::with_capacity(mesh.lods.len());
+        for (l, (lod, v)) in mesh.lods.iter().zip(&vertices).enumerate() {
+            lods.push(write_lod(lod, v, &ranges, &mut b).map_err(|e| format!("{what} LOD {l}: {e}"))?);
         }
         b.manifest.meshes.push(Mesh { name: mesh.name.clone(), lods, bounds_min, bounds_max });
         write_deform(i as u32, mesh, &mut b);
@@ -120,9 +126,10 @@ fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     (lo, hi)
 }
 
-fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
+/// A LOD's vertices, decoded form (absent attributes get their defaults).
+fn lod_vertices(lod: &LodIr) -> Vec<Vertex> {
     let n = lod.positions.len();
-    let vertices: Vec<Vertex> = (0..n)
+    (0..n)
         .map(|i| Vertex {
             position: lod.positions[i],
             normal: lod.normals.as_ref().map_or([0.0, 0.0, 1.0], |v| v[i]),
@@ -133,7 +140,11 @@ fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
             color: lod.colors.as_ref().map_or([255; 4], |v| v[i]),
             _pad: [0; 3],
         })
-        .collect();
+        .collect()
+}
+
+fn write_lod(lod: &LodIr, vertices: &[Vertex], ranges: &UvRanges, b: &mut PackBuilder) -> Result<MeshLod, String> {
+    let n = vertices.len();
     // One submesh per (material, lightmap block); a stable sort keeps the authored triangle order
     // within each, which keeps the output deterministic.
     let key = |t: usize| (lod.materials[t], lod.lightmap_blocks.as_ref().map(|p| p[t]));
@@ -154,7 +165,8 @@ fn write_lod(lod: &LodIr, b: &mut PackBuilder) -> Result<MeshLod, String> {
     let index_count = u32::try_from(indices.len()).map_err(|_| too_big())?;
     let index_format = IndexFormat::for_vertices(n);
     Ok(MeshLod {
-        vertices: b.push_bytes(Vertex::slice_as_bytes(&vertices)),
+        vertices: b.push_bytes(&pack::encode_vertices_with(vertices, ranges)),
+        uv_ranges: *ranges,
         vertex_count,
         indices: b.push_bytes(&index_format.encode(&indices)),
         index_count,

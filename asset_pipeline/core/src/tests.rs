@@ -110,23 +110,8 @@ fn cook_err(j: Value, bin: &[u8]) -> String {
 }
 
 fn vertices(p: &Pack, mesh: usize) -> Vec<pack::Vertex> {
-    let m = &p.manifest.meshes[mesh];
-    p.bytes(m.lods[0].vertices)
-        .chunks_exact(pack::VERTEX_STRIDE)
-        .map(|c| {
-            let f = |at: usize| f32::from_le_bytes(c[at..at + 4].try_into().unwrap());
-            pack::Vertex {
-                position: [f(0), f(4), f(8)],
-                normal: [f(12), f(16), f(20)],
-                tangent: [f(24), f(28), f(32), f(36)],
-                uv0: [f(40), f(44)],
-                uv1: [f(48), f(52)],
-                texcoord1: [f(56), f(60)],
-                color: c[64..68].try_into().unwrap(),
-                _pad: [0; 3],
-            }
-        })
-        .collect()
+    let lod = &p.manifest.meshes[mesh].lods[0];
+    pack::decode_vertices(p.bytes(lod.vertices), &lod.uv_ranges)
 }
 
 fn indices(p: &Pack, mesh: usize) -> Vec<u32> {

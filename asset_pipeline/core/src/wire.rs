@@ -130,6 +130,9 @@ struct WireMesh {
     lods: Vec<WireLod>,
     #[serde(default)]
     morph_weights: Vec<f32>,
+    /// `[[lo_u, lo_v, hi_u, hi_v]; 3]` of uv0, uv1, texcoord1 (`MeshIr::uv_bounds`).
+    #[serde(default)]
+    uv_bounds: Option<pack::UvBounds>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -284,7 +287,7 @@ pub fn from_wire(json: &str, arrays: &[RawArray]) -> Result<SceneIr, String> {
             }
             lods.push(lod);
         }
-        meshes.push(MeshIr { name: m.name.clone(), lods, morph_weights: m.morph_weights.clone() });
+        meshes.push(MeshIr { name: m.name.clone(), lods, morph_weights: m.morph_weights.clone(), uv_bounds: m.uv_bounds });
     }
     let mut textures = Vec::with_capacity(w.textures.len());
     for (i, t) in w.textures.iter().enumerate() {
@@ -421,6 +424,7 @@ pub fn to_wire(scene: &SceneIr) -> (String, Vec<RawArray>) {
         .iter()
         .map(|m| WireMesh {
             name: m.name.clone(),
+            uv_bounds: m.uv_bounds,
             lods: m
                 .lods
                 .iter()

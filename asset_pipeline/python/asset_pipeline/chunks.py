@@ -237,7 +237,11 @@ def split_chunks(scene: ir.Scene, settings: ChunkSettings | None = None, *, cach
             continue  # one piece: the mesh stays as it is
         pieces = cut(base, labels)
         index = [c.mesh] + list(range(len(meshes), len(meshes) + len(pieces) - 1))
-        chunk_meshes = [ir.Mesh(name=f"{mesh.name}#{k}", lods=[lod], texels_per_metre=mesh.texels_per_metre) for k, lod in enumerate(pieces)]
+        # Each chunk's coordinates are stored over the whole mesh's bounds: a vertex on a cut is
+        # stored alike in the chunks either side of it (pack::vertex; no lightmap seam).
+        bounds = ir.uv_bounds(base) if mesh.uv_bounds is None else mesh.uv_bounds
+        chunk_meshes = [ir.Mesh(name=f"{mesh.name}#{k}", lods=[lod], texels_per_metre=mesh.texels_per_metre, uv_bounds=bounds)
+                        for k, lod in enumerate(pieces)]
         meshes[c.mesh] = chunk_meshes[0]
         meshes += chunk_meshes[1:]
         children += [(k, index) for k in c.nodes]

@@ -163,21 +163,29 @@ def compress_cube(rc: ir.ReflectionCubes, cube: np.ndarray, name: str, mode: str
     return data, {**record, "format": "Bc6hUfloat", "bytes_after": int(data.nbytes)}
 
 
+def keep_set_whole(records: list[dict], formats: list[str]) -> list[int]:
+    """A set the runtime holds as one array (the lightmap pages, their direction textures, the
+    reflection cubes) is stored in one format. Where some of its members were kept uncompressed
+    (below the bar, or an override), the others are marked kept too: their records (in place)
+    get their uncompressed `formats` and sizes and say which member kept them. Returns the
+    positions of the members the caller must put back uncompressed (none when nothing changes)."""
+    kept = [r for r in records if "kept" in r]
+    if not kept or len(kept) == len(records):
+        return []
+    why = f"'{kept[0]['name']}' of its set was kept ({kept[0]['kept']})"
+    back = [k for k, r in enumerate(records) if "kept" not in r]
+    for k in back:
+        records[k].update(format=formats[k], bytes_after=records[k]["bytes_before"], kept=why)
+    return back
+
+
 def keep_sets_whole(scene: ir.Scene, textures: list[ir.Texture], records: list[dict], record_of: dict[int, int]) -> None:
-    """The lightmap pages are one array texture at run time, as are their direction textures:
-    each set is stored in one format. Where some of a set were kept uncompressed (below the bar,
-    or an override), the rest of it goes back to the uncompressed texels too (in place)."""
+    """`keep_set_whole` for the lightmap pages and for their direction textures: a member put
+    back gets the uncompressed texture again (in `textures`)."""
     lm = scene.lightmap
     for ids in ([] if lm is None else [lm.textures, lm.directions]):
-        kept = [i for i in ids if "kept" in records[record_of[i]]]
-        if not kept or len(kept) == len(ids):
-            continue
-        for i in ids:
-            r = records[record_of[i]]
-            if "kept" not in r:
-                textures[i] = scene.textures[i]
-                records[record_of[i]] = {**r, "format": scene.textures[i].format, "bytes_after": r["bytes_before"],
-                                         "kept": f"'{scene.textures[kept[0]].name}' of its set was kept ({records[record_of[kept[0]]]['kept']})"}
+        for k in keep_set_whole([records[record_of[i]] for i in ids], [scene.textures[i].format for i in ids]):
+            textures[ids[k]] = scene.textures[ids[k]]
 
 
 def _better(cls: str, a: dict, b: dict) -> bool:

@@ -101,10 +101,32 @@ class Mesh:
     # Per-object override of the scene's lightmap density for its static instances.
     texels_per_metre: float | None = None
     morph_weights: list[float] = field(default_factory=list)  # default weight per morph target
+    # Bounds its texture coordinates are stored over besides its own (pack::UvBounds: per set,
+    # uv0, uv1, texcoord1, [lo_u, lo_v, hi_u, hi_v]); the chunk stage gives each chunk its
+    # whole mesh's (`uv_bounds`), so the chunks store a vertex they share alike.
+    uv_bounds: list[list[float]] | None = None
 
     @property
     def base(self) -> Lod:
         return self.lods[0]
+
+
+def uv_bounds(lod: Lod) -> list[list[float]]:
+    """The bounds of a LOD's texture coordinates as `Mesh.uv_bounds` holds them (float32 values,
+    finite ones only; an absent or empty set as the zeros its vertices are stored with)."""
+    out = []
+    for name in ("uv0", "uv1", "texcoord1"):
+        a = lod.attributes.get(name)
+        if a is None or not len(a):
+            out.append([0.0, 0.0, 0.0, 0.0])
+            continue
+        lo, hi = [], []
+        for c in range(2):
+            f = a[:, c][np.isfinite(a[:, c])]
+            lo.append(float(f.min()) if len(f) else 0.0)
+            hi.append(float(f.max()) if len(f) else 0.0)
+        out.append(lo + hi)
+    return out
 
 
 @dataclass
@@ -519,7 +541,7 @@ def to_wire(scene: Scene) -> tuple[str, list[np.ndarray]]:
         "name": scene.name,
         "source": scene.source,
         "meshes": [{"name": m.name, "texels_per_metre": m.texels_per_metre, "morph_weights": [float(w) for w in m.morph_weights],
-                    "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
+                    "uv_bounds": m.uv_bounds, "lods": [lod(l) for l in m.lods]} for m in scene.meshes],
         "materials": [{**dataclasses.asdict(m), **{f"{slot}_uv": m.uv(slot) for slot in UV_SLOTS}} for m in scene.materials],
         "textures": [{"name": t.name, "width": t.width, "height": t.height, "format": t.format, "usage": t.usage, "sampler": t.sampling,
                       "mips": [put(m) for m in t.mips]} for t in scene.textures],
@@ -568,7 +590,7 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
         name=doc["name"],
         source=doc["source"],
         meshes=[Mesh(name=m["name"], texels_per_metre=m.get("texels_per_metre"), lods=[lod(l) for l in m["lods"]],
-                     morph_weights=list(m.get("morph_weights", []))) for m in doc["meshes"]],
+                     morph_weights=list(m.get("morph_weights", [])), uv_bounds=m.get("uv_bounds")) for m in doc["meshes"]],
         materials=[tup(m, Material) for m in doc["materials"]],
         textures=[Texture(t["name"], t["width"], t["height"], t["format"], [arrays[i] for i in t["mips"]], t.get("usage"),
                           None if t.get("sampler") in (None, DEFAULT_SAMPLER) else t["sampler"]) for t in doc["textures"]],

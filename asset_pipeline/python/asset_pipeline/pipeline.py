@@ -667,10 +667,8 @@ def _compress_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, 
     if cubes and all(d is not None for d in packed):
         scene = dataclasses.replace(scene, reflection_cubes=dataclasses.replace(rc, cubes=packed, format="Bc6hUfloat"))
     elif cubes:
-        kept = next(r for r in records[-len(cubes):] if "kept" in r)
-        for r in records[-len(cubes):]:
-            if "kept" not in r:
-                r.update(format=rc.format, bytes_after=r["bytes_before"], kept=f"'{kept['name']}' of its set was kept ({kept['kept']})")
+        # The cubes stay as baked (`packed` is dropped): their records say so.
+        compress.keep_set_whole(records[-len(cubes):], [rc.format] * len(cubes))
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, textures=textures), compress.summarise(records), rec
 

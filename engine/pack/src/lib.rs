@@ -43,17 +43,19 @@ pub mod bc;
 mod error;
 pub mod exposure;
 mod manifest;
+pub mod vertex;
 mod write;
 
 pub use anim::*;
 pub use error::PackError;
 pub use manifest::*;
+pub use vertex::{decode_vertices, encode_vertices, encode_vertices_with, AttributeFormat, UvBounds, UvRanges, VERTEX_ATTRIBUTES, VERTEX_STRIDE};
 pub use write::{write_pack_atomic, PackBuilder};
 
 /// The first eight bytes of every pack.
 pub const MAGIC: [u8; 8] = *b"GAMEPACK";
 /// The version this build writes and reads. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 9;
+pub const FORMAT_VERSION: u32 = 10;
 /// Size of the fixed header in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Every buffer in the data blob starts at a multiple of this (vertex, index and texel uploads

@@ -10,9 +10,9 @@ pub struct BufferRange {
     pub len: u64,
 }
 
-/// The static vertex as stored in a pack and read by the vertex shader, interleaved, 80 bytes
-/// (five 16-byte words, which the skinning shader moves whole). The runtime's vertex input state
-/// is derived from these offsets (see `VERTEX_ATTRIBUTES`).
+/// A vertex as the cooker makes it and the runtime's CPU code reads it, decoded (all f32).
+/// A pack stores it quantised (36 bytes: `crate::vertex`); `_pad` keeps it 80 bytes of plain
+/// numbers for bytemuck.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Vertex {
@@ -34,39 +34,10 @@ pub struct Vertex {
     pub _pad: [u32; 3],
 }
 
-pub const VERTEX_STRIDE: usize = std::mem::size_of::<Vertex>();
-const _: () = assert!(VERTEX_STRIDE == 80);
-
-/// What kind of data a vertex attribute holds, so the runtime can pick a Vulkan format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum AttributeFormat {
-    F32x2,
-    F32x3,
-    F32x4,
-    Unorm8x4,
-}
-
-/// (shader location, byte offset, format) of every attribute of `Vertex`.
-pub const VERTEX_ATTRIBUTES: [(u32, u32, AttributeFormat); 7] = [
-    (0, 0, AttributeFormat::F32x3),
-    (1, 12, AttributeFormat::F32x3),
-    (2, 24, AttributeFormat::F32x4),
-    (3, 40, AttributeFormat::F32x2),
-    (4, 48, AttributeFormat::F32x2),
-    (5, 64, AttributeFormat::Unorm8x4),
-    (13, 56, AttributeFormat::F32x2),
-];
-
 impl Vertex {
-    /// Raw bytes of a vertex slice, for writing into the data blob.
+    /// The raw bytes of decoded vertices (80 each), for tools that read them as records.
     pub fn slice_as_bytes(v: &[Vertex]) -> &[u8] {
-        // Pod: repr(C), 80 bytes of plain numbers, no padding holes (`_pad` fills the tail).
         bytemuck::cast_slice(v)
-    }
-
-    /// The vertices of `bytes` (`VERTEX_STRIDE` each, at any alignment).
-    pub fn read_all(bytes: &[u8]) -> Vec<Vertex> {
-        bytes.chunks_exact(VERTEX_STRIDE).map(bytemuck::pod_read_unaligned).collect()
     }
 }
 
@@ -320,9 +291,11 @@ pub struct Mesh {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MeshLod {
-    /// `Vertex` array, `vertex_count * VERTEX_STRIDE` bytes.
+    /// Stored vertices (`crate::vertex`), `vertex_count * VERTEX_STRIDE` bytes.
     pub vertices: BufferRange,
     pub vertex_count: u32,
+    /// What the vertices' 16-bit texture coordinates map onto.
+    pub uv_ranges: crate::UvRanges,
     /// Triangle list indices into this LOD's vertices, `index_format` wide.
     pub indices: BufferRange,
     pub index_count: u32,
@@ -735,7 +708,10 @@ impl Manifest {
             let mut last_error = 0.0f32;
             for (l, lod) in m.lods.iter().enumerate() {
                 let what = format!("mesh {i} '{}' LOD {l}", m.name);
-                in_data(&format!("{what} vertices"), lod.vertices, lod.vertex_count as u64 * VERTEX_STRIDE as u64)?;
+                in_data(&format!("{what} vertices"), lod.vertices, lod.vertex_count as u64 * crate::VERTEX_STRIDE as u64)?;
+                if !lod.uv_ranges.all().iter().flatten().all(|x| x.is_finite()) {
+                    return bad(format!("{what}: a texture coordinate range is not finite"));
+                }
                 in_data(&format!("{what} indices"), lod.indices, lod.index_count as u64 * lod.index_format.size() as u64)?;
                 if !(lod.error >= last_error) || !lod.error.is_finite() {
                     return bad(format!("{what}: error {} is not finite and non-decreasing (previous {last_error})", lod.error));

@@ -15,7 +15,7 @@ fn sample() -> Pack {
         })
         .collect();
     let idx: Vec<u8> = [0u32, 1, 2, 2, 1, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let (vertices, uv_ranges) = b.push_vertices(&verts);
     let indices = b.push_bytes(&idx);
     let mip0 = b.push_bytes(&[7u8; 2 * 2 * 4]);
     let mip1 = b.push_bytes(&[9u8; 4]);
@@ -36,6 +36,7 @@ fn sample() -> Pack {
             MeshLod {
                 vertices,
                 vertex_count: 4,
+                uv_ranges,
                 indices,
                 index_count: 6,
                 index_format: IndexFormat::U32,
@@ -45,6 +46,7 @@ fn sample() -> Pack {
             MeshLod {
                 vertices,
                 vertex_count: 4,
+                uv_ranges,
                 indices: lod1,
                 index_count: 3,
                 index_format: IndexFormat::U16,
@@ -100,13 +102,17 @@ fn round_trip_is_exact() {
     assert_eq!(q.to_bytes().unwrap(), bytes, "encoding is deterministic");
     assert_eq!(Pack::from_vec(bytes.clone()).unwrap(), q, "a file read whole keeps its data in place, the same pack");
     assert!(matches!(Pack::from_vec(bytes[..bytes.len() - 1].to_vec()), Err(PackError::Truncated { .. })));
-    let v = &q.bytes(q.manifest.meshes[0].lods[0].vertices)[..VERTEX_STRIDE];
+    let lod = &q.manifest.meshes[0].lods[0];
+    let v = &q.bytes(lod.vertices)[..VERTEX_STRIDE];
     assert_eq!(&v[0..4], &0.0f32.to_le_bytes());
-    assert_eq!(&v[56..60], &0.25f32.to_le_bytes(), "texcoord1.u");
-    assert_eq!(&v[64..68], &[255, 128, 0, 255], "colour");
-    // The offsets the runtime binds are the struct's.
+    assert_eq!(lod.uv_ranges.texcoord1, [0.0, 0.0, 0.25, 0.75], "texcoord1: constant");
+    assert_eq!(&v[32..36], &[255, 128, 0, 255], "colour");
+    let decoded = decode_vertices(q.bytes(lod.vertices), &lod.uv_ranges);
+    assert_eq!(decoded[3].uv0, [1.0, 1.0]);
+    assert_eq!(decoded[3].texcoord1, [0.25, 0.75]);
+    // The offsets the runtime binds are the codec's.
     let at = |loc: u32| VERTEX_ATTRIBUTES.iter().find(|a| a.0 == loc).unwrap().1 as usize;
-    assert_eq!((at(13), at(5)), (56, 64));
+    assert_eq!((at(13), at(5)), (28, 32));
 }
 
 #[test]
@@ -410,7 +416,7 @@ fn animated_lods() -> Pack {
     let mut p = animated();
     let f32s = |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
     let verts: Vec<Vertex> = (0..3).map(|i| Vertex { position: [i as f32, 0.5, 0.0], normal: [0.0, 0.0, 1.0], ..Default::default() }).collect();
-    let vertices = push(&mut p, Vertex::slice_as_bytes(&verts));
+    let vertices = push(&mut p, &encode_vertices(&verts).0);
     let indices = push(&mut p, &[0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
     let lod1 = &mut p.manifest.meshes[0].lods[1];
     (lod1.vertices, lod1.vertex_count, lod1.indices, lod1.index_count, lod1.index_format) = (vertices, 3, indices, 3, IndexFormat::U32);

@@ -31,6 +31,13 @@ impl PackBuilder {
         BufferRange { offset: offset as u64, len: bytes.len() as u64 }
     }
 
+    /// Append `vertices` quantised (`crate::vertex`): where they went and the ranges their
+    /// texture coordinates are stored over (both go into the LOD).
+    pub fn push_vertices(&mut self, vertices: &[crate::Vertex]) -> (BufferRange, crate::UvRanges) {
+        let (bytes, ranges) = crate::encode_vertices(vertices);
+        (self.push_bytes(&bytes), ranges)
+    }
+
     pub fn finish(self) -> Pack {
         Pack { manifest: self.manifest, data: self.data }
     }

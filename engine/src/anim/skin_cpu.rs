@@ -7,7 +7,11 @@ use pack::{Pack, Vertex};
 
 /// One mesh LOD ready to deform: bind-pose vertices, joints/weights and morph deltas.
 pub struct DeformData {
+    /// Decoded (the pack stores them quantised).
     pub vertices: Vec<Vertex>,
+    /// The LOD's texture-coordinate ranges: the GPU pass re-encodes `vertices` over them, so
+    /// its output's codes mean what the LOD's draws push.
+    pub uv_ranges: pack::UvRanges,
     /// `None`: not skinned; every vertex follows joint matrix 0 (the node's own world matrix).
     pub joints: Option<Vec<[u16; 4]>>,
     pub weights: Option<Vec<[f32; 4]>>,
@@ -35,12 +39,13 @@ impl DeformData {
         let m = &pack.manifest.meshes[mesh].lods[lod];
         let bytes = pack.bytes(m.vertices);
         // The range was validated to hold vertex_count vertices.
-        let vertices = Vertex::read_all(bytes);
+        let vertices = pack::decode_vertices(bytes, &m.uv_ranges);
         let deform = pack.manifest.animation.deform(mesh as u32);
         let d = deform.map(|d| d.lods[lod]).unwrap_or_default();
         let skin = d.skin;
         DeformData {
             vertices,
+            uv_ranges: m.uv_ranges,
             joints: skin.map(|s| {
                 pack.bytes(s.joints)
                     .chunks_exact(8)
@@ -111,6 +116,7 @@ mod tests {
 
     fn data(vertices: Vec<Vertex>, joints: Vec<[u16; 4]>, weights: Vec<[f32; 4]>) -> DeformData {
         DeformData {
+            uv_ranges: pack::UvRanges::fit(&vertices),
             vertices,
             joints: Some(joints),
             weights: Some(weights),

@@ -108,7 +108,7 @@ struct Slot {
     /// This frame's jobs (`JobParams`) and, per workgroup, its job.
     jobs: Buffer,
     group_jobs: Buffer,
-    /// Skinned vertices (pack `Vertex` layout), every job's range: bind as a vertex buffer
+    /// Skinned vertices (the pack's stored vertex layout), every job's range: bind as a vertex buffer
     /// after the dispatch.
     output: Buffer,
     set: vk::DescriptorSet,
@@ -117,6 +117,8 @@ struct Slot {
 pub struct SkinBatch {
     /// Per job, its parameters (`first_group` set per frame).
     jobs: Vec<JobParams>,
+    /// Per job, its source's texture-coordinate ranges (what its output's codes refer to).
+    job_ranges: Vec<pack::UvRanges>,
     /// Per owner, its first joint matrix and morph weight, and how many of each.
     owners: Vec<(u32, u32, Owner)>,
     inputs: Vec<Buffer>,
@@ -147,7 +149,7 @@ impl SkinBatch {
     /// (the renderer's frames in flight).
     pub fn new(gpu: &Gpu, pipe: &SkinPipeline, sources: &[&DeformData], owners: &[Owner], jobs: &[JobSpec], slots: usize) -> Result<SkinBatch> {
         // Inputs: the sources one after another; per source its first vertex and first floats.
-        let (mut vertices, mut joints, mut weights, mut morph_p, mut morph_n) = (Vec::new(), Vec::<[u16; 4]>::new(), Vec::<[f32; 4]>::new(), Vec::new(), Vec::new());
+        let (mut vertices, mut joints, mut weights, mut morph_p, mut morph_n) = (Vec::<u8>::new(), Vec::<[u16; 4]>::new(), Vec::<[f32; 4]>::new(), Vec::new(), Vec::new());
         let mut bases = Vec::with_capacity(sources.len());
         for data in sources {
             let n = data.vertices.len();
@@ -155,8 +157,8 @@ impl SkinBatch {
                 bail!("a deforming mesh needs at least one vertex");
             }
             let normals = if data.morph_normals.is_empty() { u32::MAX } else { offset(morph_n.len(), "morph normals")? };
-            bases.push((offset(vertices.len(), "vertices")?, offset(morph_p.len(), "morph deltas")?, normals));
-            vertices.extend_from_slice(&data.vertices);
+            bases.push((offset(vertices.len() / pack::VERTEX_STRIDE, "vertices")?, offset(morph_p.len(), "morph deltas")?, normals));
+            vertices.extend(pack::encode_vertices_with(&data.vertices, &data.uv_ranges));
             // Joints and weights run beside the vertices (zeros for an unskinned source).
             joints.extend(data.joints.as_deref().map_or(vec![[0; 4]; n], |j| j.to_vec()));
             weights.extend(data.weights.as_deref().map_or(vec![[0.0; 4]; n], |w| w.to_vec()));
@@ -172,6 +174,7 @@ impl SkinBatch {
             weight_total += o.targets;
         }
         let mut params = Vec::with_capacity(jobs.len());
+        let mut job_ranges = Vec::with_capacity(jobs.len());
         let mut out_total = 0usize;
         for j in jobs {
             let (Some(data), Some(&(bind_base, morph_base, morph_normal_base)), Some(&(joint_base, weight_base, owner))) = (sources.get(j.source), bases.get(j.source), owner_bases.get(j.owner)) else {
@@ -193,13 +196,14 @@ impl SkinBatch {
                 first_group: 0,
                 pad: 0,
             });
+            job_ranges.push(data.uv_ranges);
             out_total += data.vertices.len();
         }
         let groups: usize = params.iter().map(|p| p.vertex_count.div_ceil(GROUP) as usize).sum();
         let slots = slots.max(1);
         // Owned until the batch is whole: an error frees what was made before it.
         let mut inputs = gpu.own(Vec::with_capacity(5));
-        inputs.push(input(gpu, "skin bind vertices", Vertex::slice_as_bytes(&vertices))?);
+        inputs.push(input(gpu, "skin bind vertices", &vertices)?);
         inputs.push(input(gpu, "skin joints", bytemuck::cast_slice::<_, u8>(&joints))?);
         inputs.push(input(gpu, "skin weights", bytemuck::cast_slice::<_, u8>(&weights))?);
         inputs.push(input(gpu, "morph positions", bytemuck::cast_slice::<_, u8>(&morph_p))?);
@@ -207,7 +211,7 @@ impl SkinBatch {
         let d = &gpu.device;
         let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: BINDINGS * slots as u32 }];
         let pool = gpu.own(unsafe { d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(slots as u32).pool_sizes(&sizes), None)? });
-        let mut batch = gpu.own(SkinBatch { jobs: params, owners: owner_bases, inputs: inputs.keep(), slots: Vec::with_capacity(slots), pool: pool.keep() });
+        let mut batch = gpu.own(SkinBatch { jobs: params, job_ranges, owners: owner_bases, inputs: inputs.keep(), slots: Vec::with_capacity(slots), pool: pool.keep() });
         for _ in 0..slots {
             let slot = batch.slot(gpu, pipe, joint_total, weight_total, groups, out_total)?;
             batch.slots.push(slot);
@@ -343,9 +347,10 @@ impl SkinBatch {
             let bytes = readback.mapped_ref();
             self.jobs
                 .iter()
-                .map(|p| {
+                .zip(&self.job_ranges)
+                .map(|(p, ranges)| {
                     let at = p.out_base as usize * pack::VERTEX_STRIDE;
-                    Vertex::read_all(&bytes[at..at + p.vertex_count as usize * pack::VERTEX_STRIDE])
+                    pack::decode_vertices(&bytes[at..at + p.vertex_count as usize * pack::VERTEX_STRIDE], ranges)
                 })
                 .collect()
         });

@@ -96,12 +96,12 @@ fn boxes_builder(placements: impl Iterator<Item = Mat4>) -> PackBuilder {
             idx.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
         }
     }
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let (vertices, uv_ranges) = b.push_vertices(&verts);
     let indices = b.push_bytes(&IndexFormat::U16.encode(&idx));
     b.manifest.materials.push(Material::default());
     b.manifest.meshes.push(Mesh {
         name: "cube".into(),
-        lods: vec![MeshLod { vertices, vertex_count: 24, indices, index_count: 36, index_format: IndexFormat::U16, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_block: None }], error: 0.0 }],
+        lods: vec![MeshLod { vertices, uv_ranges, vertex_count: 24, indices, index_count: 36, index_format: IndexFormat::U16, submeshes: vec![Submesh { first_index: 0, index_count: 36, material: 0, lightmap_block: None }], error: 0.0 }],
         bounds_min: [-0.5; 3],
         bounds_max: [0.5; 3],
     });

@@ -24,8 +24,10 @@ struct DrawPush {
     /// lightmap block (added to the instance's page).
     material: Vec4,
     base_color: Vec4,
+    /// The LOD's texture-coordinate ranges (uv0, uv1, texcoord1: `pack::UvRanges`).
+    uv_ranges: [Vec4; 3],
 }
-const _: () = assert!(std::mem::size_of::<DrawPush>() == 32);
+const _: () = assert!(std::mem::size_of::<DrawPush>() == 80);
 
 /// The stages that read the mesh passes' push constants and material constants: the vertex
 /// shader transforms the texture coordinates and picks the lightmap layer.
@@ -315,6 +317,7 @@ impl MeshKit {
                 let push = DrawPush {
                     material: Vec4::new(mat.alpha_cutoff, it.material as f32, sm.lightmap_block.unwrap_or(0) as f32, 0.0),
                     base_color: Vec4::from(mat.base_color),
+                    uv_ranges: lod.uv_ranges.all().map(Vec4::from),
                 };
                 if bound_push != Some(push) {
                     d.cmd_push_constants(cb, self.pipeline_layout, MESH_STAGES, 0, bytemuck::bytes_of(&push));
@@ -372,9 +375,10 @@ pub struct DrawSetup<'a> {
 
 fn attribute_format(f: pack::AttributeFormat) -> vk::Format {
     match f {
-        pack::AttributeFormat::F32x2 => vk::Format::R32G32_SFLOAT,
         pack::AttributeFormat::F32x3 => vk::Format::R32G32B32_SFLOAT,
-        pack::AttributeFormat::F32x4 => vk::Format::R32G32B32A32_SFLOAT,
+        pack::AttributeFormat::Snorm16x2 => vk::Format::R16G16_SNORM,
+        pack::AttributeFormat::Sint16x2 => vk::Format::R16G16_SINT,
+        pack::AttributeFormat::Unorm16x2 => vk::Format::R16G16_UNORM,
         pack::AttributeFormat::Unorm8x4 => vk::Format::R8G8B8A8_UNORM,
     }
 }

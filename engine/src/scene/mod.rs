@@ -31,6 +31,9 @@ pub struct GpuLod {
     pub first_index: u32,
     pub index_type: vk::IndexType,
     pub submeshes: Vec<pack::Submesh>,
+    /// What its vertices' 16-bit texture coordinates map onto (`pack::vertex`); the draws push
+    /// them for the vertex shader.
+    pub uv_ranges: pack::UvRanges,
     /// Geometric error to LOD 0, metres in object space (0 for LOD 0).
     pub error: f32,
     pub triangles: u32,

@@ -297,11 +297,11 @@ mod tests {
         let mut b = pack::PackBuilder::new("generated", "test");
         let tris = floor(Vec2::new(-2.0, -2.0), Vec2::new(2.0, 2.0), 0.0);
         let verts: Vec<pack::Vertex> = tris.iter().flatten().map(|p| pack::Vertex { position: p.to_array(), ..Default::default() }).collect();
-        let vertices = b.push_bytes(pack::Vertex::slice_as_bytes(&verts));
+        let (vertices, uv_ranges) = b.push_vertices(&verts);
         let indices = b.push_bytes(&(0u32..6).flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
         b.manifest.meshes.push(pack::Mesh {
             name: "floor".into(),
-            lods: vec![pack::MeshLod { vertices, vertex_count: 6, indices, index_count: 6, index_format: pack::IndexFormat::U32, submeshes: vec![], error: 0.0 }],
+            lods: vec![pack::MeshLod { vertices, uv_ranges, vertex_count: 6, indices, index_count: 6, index_format: pack::IndexFormat::U32, submeshes: vec![], error: 0.0 }],
             bounds_min: [-2.0, 0.0, -2.0],
             bounds_max: [2.0, 0.0, 2.0],
         });

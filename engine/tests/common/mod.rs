@@ -55,12 +55,13 @@ pub fn square_pack(name: &str, half: f32, z: f32, material: pack::Material) -> P
         .map(|&(x, y)| Vertex { position: [x, y, 0.0], normal: [0.0, 0.0, 1.0], tangent: [1.0, 0.0, 0.0, 1.0], color: [255; 4], ..Default::default() })
         .collect();
     let idx: Vec<u32> = vec![0, 1, 2, 0, 2, 3];
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let (vertices, uv_ranges) = b.push_vertices(&verts);
     let indices = b.push_bytes(&idx.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
     b.manifest.meshes.push(Mesh {
         name: name.into(),
         lods: vec![MeshLod {
             vertices,
+            uv_ranges,
             vertex_count: 4,
             indices,
             index_count: 6,

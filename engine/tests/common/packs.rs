@@ -7,14 +7,14 @@ use pack::{LightmapRegion, Mesh, MeshLod, Node, PackBuilder, Submesh, Texture, T
 /// Append a one-LOD mesh of `verts` and `idx` (one submesh, material 0, in `lightmap_block`)
 /// with bounds from its vertices; returns its mesh index.
 pub fn push_mesh(b: &mut PackBuilder, name: &str, verts: &[Vertex], idx: &[u32], lightmap_block: Option<u32>) -> u32 {
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(verts));
+    let (vertices, uv_ranges) = b.push_vertices(verts);
     let index_format = pack::IndexFormat::for_vertices(verts.len());
     let indices = b.push_bytes(&index_format.encode(idx));
     let (lo, hi) = verts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| (lo.min(Vec3::from(v.position)), hi.max(Vec3::from(v.position))));
     let count = idx.len() as u32;
     b.manifest.meshes.push(Mesh {
         name: name.into(),
-        lods: vec![MeshLod { vertices, vertex_count: verts.len() as u32, indices, index_count: count, index_format, submeshes: vec![Submesh { first_index: 0, index_count: count, material: 0, lightmap_block }], error: 0.0 }],
+        lods: vec![MeshLod { vertices, uv_ranges, vertex_count: verts.len() as u32, indices, index_count: count, index_format, submeshes: vec![Submesh { first_index: 0, index_count: count, material: 0, lightmap_block }], error: 0.0 }],
         bounds_min: lo.to_array(),
         bounds_max: hi.to_array(),
     });

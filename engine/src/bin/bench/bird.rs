@@ -30,14 +30,14 @@ pub fn push_bird(b: &mut PackBuilder) -> u32 {
     }
     let count = verts.len() as u32;
     let idx: Vec<u32> = (0..count).collect();
-    let vertices = b.push_bytes(Vertex::slice_as_bytes(&verts));
+    let (vertices, uv_ranges) = b.push_vertices(&verts);
     let index_format = pack::IndexFormat::for_vertices(verts.len());
     let indices = b.push_bytes(&index_format.encode(&idx));
     let material = b.manifest.materials.len() as u32;
     b.manifest.materials.push(Material { name: "dove feathers".into(), base_color: [0.85, 0.85, 0.82, 1.0], double_sided: true, ..Default::default() });
     b.manifest.meshes.push(Mesh {
         name: "dove".into(),
-        lods: vec![MeshLod { vertices, vertex_count: count, indices, index_count: count, index_format, submeshes: vec![Submesh { first_index: 0, index_count: count, material, lightmap_block: None }], error: 0.0 }],
+        lods: vec![MeshLod { vertices, uv_ranges, vertex_count: count, indices, index_count: count, index_format, submeshes: vec![Submesh { first_index: 0, index_count: count, material, lightmap_block: None }], error: 0.0 }],
         bounds_min: lo.to_array(),
         bounds_max: hi.to_array(),
     });
