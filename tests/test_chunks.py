@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -50,10 +49,8 @@ class Pack:
 
     def __init__(self, path: Path):
         self.path = path
-        self.doc = json.loads(_core.read_pack_manifest(path))
-        b = path.read_bytes()
-        offset, length = struct.unpack_from("<QQ", b, 40)
-        self.data = b[offset:offset + length]
+        doc, self.data = _core.read_pack(path)
+        self.doc = json.loads(doc)
         self.world = _world(self.doc["nodes"])
 
     def mesh(self, name: str) -> int:

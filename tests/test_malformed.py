@@ -633,14 +633,26 @@ def crc_fixed(b: bytes) -> bytes:
 
 
 def split_pack(b: bytes) -> tuple[dict, bytes]:
+    """(manifest, data blob decoded): a cooked pack stores its blob zstd-compressed (header
+    word 60 = 1), which the pack crate decodes."""
+    import tempfile
+
+    from asset_pipeline import _core
+
     meta_off, meta_len, data_off, data_len = struct.unpack_from("<4Q", b, 24)
-    return json.loads(b[meta_off:meta_off + meta_len]), b[data_off:data_off + data_len]
+    if struct.unpack_from("<I", b, 60)[0] == 0:
+        return json.loads(b[meta_off:meta_off + meta_len]), b[data_off:data_off + data_len]
+    with tempfile.TemporaryDirectory() as t:
+        (Path(t) / "p.pack").write_bytes(b)
+        _, data = _core.read_pack(Path(t) / "p.pack")
+    return json.loads(b[meta_off:meta_off + meta_len]), data
 
 
 def forge(b: bytes, manifest: Callable[[dict], object] = lambda m: None, data: Callable[[bytearray, dict], object] = lambda d, m: None,
           raw_meta: bytes | None = None) -> bytes:
-    """A pack with an edited manifest and/or data blob, re-laid out and with a valid checksum, so
-    only the reader's consistency checks stand between it and the GPU."""
+    """A pack with an edited manifest and/or data blob, re-laid out (the blob stored as it is)
+    and with a valid checksum, so only the reader's consistency checks stand between it and
+    the GPU."""
     m, d = split_pack(b)
     d = bytearray(d)
     manifest(m)
@@ -649,6 +661,7 @@ def forge(b: bytes, manifest: Callable[[dict], object] = lambda m: None, data: C
     data_off = -(-(HEADER_LEN + len(meta)) // 16) * 16
     out = bytearray(b[:HEADER_LEN]) + meta + b"\0" * (data_off - HEADER_LEN - len(meta)) + d
     struct.pack_into("<5Q", out, 16, len(out), HEADER_LEN, len(meta), data_off, len(d))
+    struct.pack_into("<I", out, 60, 0)
     return crc_fixed(bytes(out))
 
 
@@ -670,7 +683,9 @@ PACK_CASES = {
     "truncated-body": (lambda p: p[:-100], "truncated pack: the header says"),
     "future-version": (lambda p: patch(p, 8, "<I", 99), "pack format version 99 is not supported"),
     # A pack from the build before 16-bit indices (format 6): the message says what to do.
-    "old-version": (lambda p: patch(p, 8, "<I", 6), "pack format version 6 is not supported (this build reads version 9); re-cook the content"),
+    "old-version": (lambda p: patch(p, 8, "<I", 6), "pack format version 6 is not supported (this build reads version 11); re-cook the content"),
+    "data-encoding-unknown": (lambda p: crc_fixed(patch(p, 60, "<I", 7)), "data encoding 7 is unknown"),
+    "data-not-zstd": (lambda p: crc_fixed(patch(forge(p), 60, "<I", 1)), "data: not a zstd frame"),
     "index-format-unknown": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u8")), "malformed pack: metadata"),
     "index-format-too-wide": (lambda p: forge(p, lambda m: m["meshes"][0]["lods"][0].update(index_format="u32")), "bytes stored but"),
     "flipped-data-byte": (lambda p: flip(p, len(p) - 7), "checksum mismatch"),

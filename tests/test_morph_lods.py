@@ -10,7 +10,6 @@ random area-weighted samples with exact closest points (test_lod's `sampled_haus
 from __future__ import annotations
 
 import json
-import struct
 import subprocess
 import sys
 
@@ -29,10 +28,8 @@ VERTEX_STRIDE = _core.VERTEX_STRIDE  # the stored vertex: position (3 f32) first
 
 def read_pack(path):
     """(manifest, data blob) of a pack, validated by the pack crate."""
-    manifest = json.loads(_core.read_pack_manifest(path))
-    b = path.read_bytes()
-    data_off, data_len = struct.unpack_from("<QQ", b, 40)
-    return manifest, b[data_off:data_off + data_len]
+    doc, data = _core.read_pack(path)
+    return json.loads(doc), data
 
 
 def _array(data: bytes, r: dict, dtype, shape) -> np.ndarray:

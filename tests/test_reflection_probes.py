@@ -297,10 +297,9 @@ def test_the_report_line_counts_the_probes():
 
 def manifest_and_data(pack: Path) -> tuple[int, dict, bytes]:
     """(format version, manifest, data blob) of a pack (engine/pack/src/lib.rs's header)."""
-    b = pack.read_bytes()
-    version = struct.unpack_from("<I", b, 8)[0]
-    data_off, data_len = struct.unpack_from("<QQ", b, 40)
-    return version, json.loads(_core.read_pack_manifest(pack)), b[data_off:data_off + data_len]
+    version = struct.unpack_from("<I", pack.read_bytes(), 8)[0]
+    doc, data = _core.read_pack(pack)
+    return version, json.loads(doc), data
 
 
 @pytest.fixture(scope="module")

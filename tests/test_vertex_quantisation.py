@@ -10,7 +10,6 @@ held to half a 16-bit step of its range, which the codec's own test pins."""
 from __future__ import annotations
 
 import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -55,10 +54,8 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _pack(path: Path) -> tuple[dict, bytes]:
-    doc = json.loads(_core.read_pack_manifest(path))
-    b = path.read_bytes()
-    offset, length = struct.unpack_from("<QQ", b, 40)
-    return doc, b[offset:offset + length]
+    doc, data = _core.read_pack(path)
+    return json.loads(doc), data
 
 
 @pytest.mark.parametrize("source", SOURCES, ids=lambda p: p.stem)

@@ -50,6 +50,15 @@ fn read_pack_summary(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyDict>> {
     summary(py, &cook_core::Summary::of(&pack, bytes))
 }
 
+/// `read_pack(path) -> (manifest JSON, data bytes)`: a pack read and validated once, its data
+/// blob decoded (stored zstd-compressed) as the runtime holds it; `BufferRange`s index it.
+#[pyfunction]
+fn read_pack<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(String, Bound<'py, pyo3::types::PyBytes>)> {
+    let pack = py.detach(|| cook_core::read_pack(&path)).map_err(raise)?;
+    let doc = serde_json::to_string(&pack.manifest).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+    Ok((doc, pyo3::types::PyBytes::new(py, &pack.data)))
+}
+
 /// Read and fully validate a pack; return its manifest (meshes, materials, textures, nodes,
 /// lights, ...; no bulk data) as JSON text. For tests and tools that inspect what was cooked.
 #[pyfunction]
@@ -96,6 +105,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cook_gltf, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_summary, m)?)?;
     m.add_function(wrap_pyfunction!(read_pack_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(read_pack, m)?)?;
     scene::register(m)?;
     uv_raster::register(m)?;
     measure::register(m)?;

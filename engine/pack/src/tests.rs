@@ -310,7 +310,7 @@ fn an_index_past_the_vertices_is_rejected_on_write_and_on_read() {
     let e = p.to_bytes().unwrap_err().to_string();
     assert!(e.contains("mesh 0 'quad' LOD 0: index 2 is 4, but the LOD has 4 vertices"), "{e}");
     // A pack written without the check (as by an older or foreign writer) is refused on read.
-    let mut bytes = sample().to_bytes().unwrap();
+    let mut bytes = sample().to_bytes_with(DataEncoding::Raw).unwrap();
     let data_off = u64_at(&bytes, 40) as usize;
     bytes[data_off + at..data_off + at + 4].copy_from_slice(&4u32.to_le_bytes());
     bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&[0; 4]);
@@ -318,6 +318,48 @@ fn an_index_past_the_vertices_is_rejected_on_write_and_on_read() {
     bytes[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
     let e = Pack::from_bytes(&bytes).unwrap_err().to_string();
     assert!(e.starts_with("malformed pack: mesh 0 'quad' LOD 0: index 2 is 4"), "{e}");
+}
+
+#[test]
+fn the_data_blob_is_stored_zstd_compressed_and_read_back_exactly() {
+    let p = sample();
+    let raw = p.to_bytes_with(DataEncoding::Raw).unwrap();
+    let z = p.to_bytes().unwrap();
+    assert_eq!(u32_at(&raw, 60), 0);
+    assert_eq!(u32_at(&z, 60), 1, "the cooker's packs are compressed");
+    assert_eq!(Pack::from_bytes(&raw).unwrap(), p);
+    assert_eq!(Pack::from_bytes(&z).unwrap(), p);
+    assert_eq!(Pack::from_vec(z.clone()).unwrap(), p);
+    // A blob that compresses (a repeated vertex) is smaller stored.
+    let mut big = sample();
+    big.data.extend(std::iter::repeat_n([1u8, 2, 3, 4], 4096).flatten());
+    assert!(big.to_bytes().unwrap().len() < big.to_bytes_with(DataEncoding::Raw).unwrap().len() - 15_000);
+}
+
+#[test]
+fn a_bad_data_encoding_or_frame_is_malformed_not_a_panic() {
+    // Rewrite the stored blob and the encoding word, with a valid checksum (a foreign writer).
+    let forge = |encoding: u32, blob: &[u8]| {
+        let mut b = sample().to_bytes_with(DataEncoding::Raw).unwrap();
+        let data_off = u64_at(&b, 40) as usize;
+        b.truncate(data_off);
+        b.extend_from_slice(blob);
+        let len = b.len() as u64;
+        b[16..24].copy_from_slice(&len.to_le_bytes());
+        b[48..56].copy_from_slice(&(blob.len() as u64).to_le_bytes());
+        b[60..64].copy_from_slice(&encoding.to_le_bytes());
+        b[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&[0; 4]);
+        let crc = checksum(&b);
+        b[CHECKSUM_AT..CHECKSUM_AT + 4].copy_from_slice(&crc.to_le_bytes());
+        Pack::from_bytes(&b).unwrap_err().to_string()
+    };
+    let data = sample().data;
+    assert!(forge(7, &data).contains("data encoding 7 is unknown"));
+    assert!(forge(1, &data).contains("data: not a zstd frame"));
+    let frame = zstd::bulk::compress(&data, 3).unwrap();
+    assert!(forge(1, &frame[..frame.len() - 3]).starts_with("malformed pack: data:"), "a frame cut short");
+    let short = zstd::bulk::compress(&data[..data.len() - 16], 3).unwrap();
+    assert!(forge(1, &short).starts_with("malformed pack:"), "a frame of fewer bytes than the ranges need");
 }
 
 #[test]
