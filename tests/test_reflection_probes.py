@@ -319,7 +319,7 @@ def test_a_cooked_level_carries_its_probes_per_the_contract(cooked_room):
     # The cooker hands the cubes to the Rust core in the wire form (ir.to_wire); the core writes the pack.
     assert rp is not None, ("the pack has no reflection_probes: the Rust pack writer (cook_core wire.rs, pack_build.rs) does not "
                             "write the wire's 'reflection_probes' yet (/work/notes_tmp/reflection_wire.md)")
-    assert version == 9
+    assert version == 11
     assert (rp["face_size"], rp["levels"]) == (64, 5)  # draft
     # Compressed by default (issue 24): BC6H blocks, each face of each level whole 4x4 blocks.
     assert rp["format"] == "Bc6hUfloat"

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Pack size against source size (issue 24) for the demo level and every shared glTF sample:
 the source's bytes (the glTF or level file and every file its cook read: buffers, images,
-props), the pack's bytes split by what they hold (vertices, indices, textures by format,
-lightmaps, probes, animation, other), and the ratio; then the compress stage's quality for the
+props), the pack file's bytes and the ratio, and what its data blob holds once decoded (the
+pack stores it zstd-compressed): vertices, indices, textures, lightmaps, reflection probes and
+the rest (animation, probe grids, the manifest); then the compress stage's quality for the
 baked light (lightmap pages: median / 95th-percentile relative error against the uncompressed
 page; direction textures: PSNR; reflection cubes: the worst face's median).
 
@@ -52,8 +53,8 @@ def main() -> int:
     ap.add_argument("--samples", type=Path, default=samples_dir())
     ap.add_argument("--quality", choices=["draft", "medium", "high"], default="draft")
     args = ap.parse_args()
-    print("| source | source bytes | pack bytes | pack / source | vertices | indices | textures | lightmaps | reflection probes | other |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| source | source bytes | pack bytes | pack / source | decoded | vertices | indices | textures | lightmaps | reflection probes | other |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     baked_light = []
     with tempfile.TemporaryDirectory() as tmp:
         for src in sources(args.samples, "pack_sizes"):
@@ -66,10 +67,12 @@ def main() -> int:
                 continue
             source_bytes = sum(Path(f).stat().st_size for f in {os.fspath(f) for f in (r.scene.files or [src])})
             pack_bytes = out.stat().st_size
-            parts = breakdown(json.loads(_core.read_pack_manifest(out)))
+            doc, data = _core.read_pack(out)
+            parts = breakdown(json.loads(doc))
             textures = sum(v for k, v in parts.items() if k.startswith("textures"))
-            other = pack_bytes - sum(parts.values())
-            print(f"| {name} | {source_bytes} | {pack_bytes} | {pack_bytes / source_bytes:.2f}x | {parts['vertices']} | {parts['indices']} | {textures} "
+            decoded = len(data) + len(doc)
+            other = decoded - sum(parts.values())
+            print(f"| {name} | {source_bytes} | {pack_bytes} | {pack_bytes / source_bytes:.2f}x | {decoded} | {parts['vertices']} | {parts['indices']} | {textures} "
                   f"| {parts['lightmaps']} | {parts['reflection probes']} | {other} |")
             for rec in (r.compress or {}).get("per_texture", []):
                 if rec["class"] in ("hdr", "direction"):
