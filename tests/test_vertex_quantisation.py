@@ -115,3 +115,34 @@ def test_every_stored_attribute_is_within_its_bound(source: Path, tmp_path: Path
     print(f"{source.name}: {lods} LODs; worst position {worst['position']:.2e} of the size, normal {worst['normal']:.4f}°, "
           f"tangent {worst['tangent']:.4f}°, uv0 {worst['uv0']:.4f} / texcoord1 {worst['texcoord1']:.4f} texels of their textures, "
           f"uv1 {worst['uv1']:.4f} texels of the {page}² page")
+
+
+def test_coordinates_too_wide_for_16_bits_are_a_warning_naming_mesh_and_texture(tmp_path: Path):
+    """A quad tiled 0..200 times over a 256² texture: 16 bits over 200 units are off by up to
+    200 / 131070 * 256 = 0.39 texels, more than a quarter: the cook says so (and still cooks);
+    tiled 0..100 times (0.20 texels) it does not."""
+    import sys
+
+    import numpy as np
+
+    sys.path.insert(0, str(REPO / "content"))
+    from gltf_writer import GltfWriter
+
+    def quad(tiles: float) -> Path:
+        w = GltfWriter("test_vertex_quantisation")
+        pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+        nrm = np.tile(np.array([0, 0, 1], np.float32), (4, 1))
+        uv = np.array([[0, tiles], [tiles, tiles], [tiles, 0], [0, 0]], np.float32)
+        tex = w.texture("tiles", np.random.default_rng(1).integers(0, 255, (256, 256, 4), dtype=np.uint8))
+        w.node("floor", mesh=w.mesh("Floor", pos, nrm, uv, np.array([0, 1, 2, 0, 2, 3], np.uint32), w.material("m", texture=tex)))
+        path = tmp_path / f"quad{tiles:g}.gltf"
+        w.write(path)
+        return path
+
+    settings = CookSettings(baking=False, compress=False, report=False, lods=False)
+    wide = cook_detailed(quad(200), tmp_path / "wide.pack", progress=False, settings=settings)
+    [warning] = [w for w in wide.scene.warnings if "16-bit" in w]
+    assert "mesh 'Floor'" in warning and "uv0 spans 200.0 units" in warning and "0.39 texels" in warning and "'tiles'" in warning, warning
+    assert (tmp_path / "wide.pack").exists()
+    narrow = cook_detailed(quad(100), tmp_path / "narrow.pack", progress=False, settings=settings)
+    assert not [w for w in narrow.scene.warnings if "16-bit" in w], narrow.scene.warnings

@@ -30,6 +30,7 @@ import numpy as np
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
 from asset_pipeline.cache import Hasher, StageCache, library_version, process_running, write_atomic
+from asset_pipeline.vertex_format import uv_precision_warnings
 from asset_pipeline.gltf_import import import_gltf_scene, write_pack
 from asset_pipeline.progress import Progress
 from asset_pipeline.report import write_report
@@ -266,6 +267,14 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     if settings.compress and (scene.textures or scene.reflection_cubes is not None):
         scene, compress_stats, rec = _compress_stage(scene, settings, cache, progress)
         stages.append(rec)
+
+    # What the pack's 16-bit texture coordinates cannot hold within a quarter texel: said, and
+    # kept with the scene's other warnings.
+    precision = uv_precision_warnings(scene)
+    for w in precision:
+        progress.warning(w)
+    if precision:
+        scene = dataclasses.replace(scene, warnings=[*scene.warnings, *precision])
 
     rec = StageRecord("write", items=1)
     t0 = time.perf_counter()
