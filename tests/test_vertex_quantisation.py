@@ -97,9 +97,9 @@ def test_every_stored_attribute_is_within_its_bound(source: Path, tmp_path: Path
             for k, name in enumerate(("uv0", "texcoord1")):
                 if name in a:
                     d = float(np.max(np.abs(got[name].astype(np.float64) - a[name]), initial=0.0))
-                    r = stored["uv_ranges"][name]
+                    rng = stored["uv_ranges"][name]
                     # Half a 16-bit step of the range, plus float32 rounding of the affine map.
-                    tol = 0.5 * max(r[:2]) / 65535 + 4 * float(np.finfo(np.float32).eps) * (max(abs(r[2]), abs(r[3])) + max(r[:2]))
+                    tol = 0.5 * max(rng[:2]) / 65535 + 4 * float(np.finfo(np.float32).eps) * (max(abs(rng[2]), abs(rng[3])) + max(rng[:2]))
                     assert d <= tol, f"{what}: {name} off by {d}, more than half a step of its range"
                     texels = d * density[k]
                     assert texels <= 0.25, f"{what}: {name} off by {texels} texels of its largest texture ({density[k]} texels a unit)"
@@ -112,6 +112,8 @@ def test_every_stored_attribute_is_within_its_bound(source: Path, tmp_path: Path
             if "color" in a:
                 assert np.array_equal(got["color"], a["color"]), f"{what}: colour changed"
     assert lods > 0
+    # Every coordinate set here fits 16 bits within a quarter texel: no precision warning.
+    assert not [w for w in r.scene.warnings if "16-bit" in w], r.scene.warnings
     print(f"{source.name}: {lods} LODs; worst position {worst['position']:.2e} of the size, normal {worst['normal']:.4f}°, "
           f"tangent {worst['tangent']:.4f}°, uv0 {worst['uv0']:.4f} / texcoord1 {worst['texcoord1']:.4f} texels of their textures, "
           f"uv1 {worst['uv1']:.4f} texels of the {page}² page")
