@@ -3,7 +3,14 @@ Embree (PyPI ``embreex``) on the same incoherent rays, in the same run.
 
     .venv/bin/python tools/bench_bvh.py [--rays N] [--threads T] [--repeat R]
     .venv/bin/python tools/bench_bvh.py --raw scene.bin        # trace a raw scene + rays
+    .venv/bin/python tools/bench_bvh.py --raw build/anchor.raw --embree build/embree_rays
     .venv/bin/python tools/bench_bvh.py --write-raw scene.bin  # dump the demo rays as raw
+
+With `--embree BIN` (the anchor's raw Embree 3 program, ../shared/bench/embree_rays.c, built as
+its README says) and `--raw`, that program traces the same file in the same run, alternating
+with ours round by round (ours, Embree, ours, Embree ...) at 1 thread and at T threads, and the
+ratios printed are thread for thread (ours on 1 thread against Embree on 1, T against T), as are
+the BVH build times (ours is single-threaded; Embree's build uses its thread pool).
 
 Scene: the demo level (content/levels/temple.toml) built by the CSG stage, LOD 0 of every mesh
 concatenated. Rays: points uniform by area on the surfaces, directions cosine-distributed around
@@ -18,6 +25,8 @@ f32 ray origins [nr][3]; f32 unit ray directions [nr][3].
 from __future__ import annotations
 
 import argparse
+import re
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -98,6 +107,44 @@ def best_of(repeat: int, f):
     return best, out
 
 
+EMBREE_LINE = re.compile(r"build (?P<build>[0-9.]+)s\s+(?P<threads>\d+) threads\s+(?P<rate>[0-9.]+) Mrays/s\s+hit (?P<hit>[0-9.]+)")
+
+
+def embree_run(binary: Path, raw: Path, threads: int) -> tuple[float, float, float]:
+    """One run of the anchor's Embree program: (best Mrays/s of its passes, its build seconds,
+    hit fraction)."""
+    r = subprocess.run([str(binary), str(raw), str(threads)], capture_output=True, text=True, check=True)
+    runs = [m.groupdict() for m in EMBREE_LINE.finditer(r.stdout)]
+    if not runs:
+        sys.exit(f"{binary}: no 'Mrays/s' line in its output:\n{r.stdout}{r.stderr}")
+    return max(float(x["rate"]) for x in runs), min(float(x["build"]) for x in runs), float(runs[0]["hit"])
+
+
+def compare_with_embree(binary: Path, raw: Path, pos, tri, o, d, threads: int, rounds: int) -> None:
+    """Ours and the anchor's Embree alternately, `rounds` rounds per thread count; best of each."""
+    n = len(o)
+    print(f"{'':30s} {'threads':>7s} {'Mrays/s (best)':>15s} {'per round':>22s} {'hit fraction':>13s}")
+    for th in sorted({1, threads}):
+        ours, theirs, builds, hit = [], [], [], 0.0
+        for _ in range(rounds):
+            t0 = time.perf_counter()
+            _core.trace_rays(pos, tri, o[:1], d[:1], threads=1)
+            build = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            tt, tid = _core.trace_rays(pos, tri, o, d, threads=th)
+            ours.append(n / max(time.perf_counter() - t0 - build, 1e-9) / 1e6)
+            rate, ebuild, hit = embree_run(binary, raw, th)
+            theirs.append(rate)
+            builds.append((build, ebuild))
+        ours_hit = float((tid != 0xFFFFFFFF).mean())
+        print(f"{'ours':30s} {th:7d} {max(ours):15.2f} {', '.join(f'{x:.2f}' for x in ours):>22s} {ours_hit:13.4f}")
+        print(f"{'Embree 3 (anchor, C)':30s} {th:7d} {max(theirs):15.2f} {', '.join(f'{x:.2f}' for x in theirs):>22s} {hit:13.4f}")
+        print(f"ours / Embree, {th} thread(s): {max(ours) / max(theirs):.2f}x (best of {rounds} each; per round "
+              f"{', '.join(f'{a / b:.2f}' for a, b in zip(ours, theirs))})")
+    ob, eb = min(b for b, _ in builds), min(e for _, e in builds)
+    print(f"BVH build: ours {ob * 1e3:.1f} ms (1 thread), Embree {eb * 1e3:.1f} ms: ours / Embree {ob / eb:.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rays", type=int, default=2_000_000)
@@ -105,7 +152,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--raw", type=Path, help="trace this raw scene + rays instead of the demo")
     ap.add_argument("--write-raw", type=Path, help="write the demo scene and rays here and stop")
+    ap.add_argument("--embree", type=Path, help="the anchor's Embree 3 program (../shared/bench/embree_rays.c, built); needs --raw")
     args = ap.parse_args()
+    if args.embree is not None and args.raw is None:
+        ap.error("--embree traces a raw file: give --raw too")
+    if args.embree is not None and not args.embree.exists():
+        ap.error(f"{args.embree} does not exist: build it as ../shared/bench/README.md says")
 
     if args.raw:
         pos, tri, o, d = read_raw(args.raw)
@@ -119,6 +171,9 @@ def main() -> None:
             print(f"wrote {args.write_raw}: {len(pos)} vertices, {len(tri)} triangles, {len(o)} rays")
             return
     print(f"{src}: {len(tri)} triangles, {len(o)} rays (closest hit, t in (0, inf))")
+    if args.embree is not None:
+        compare_with_embree(args.embree, args.raw, pos, tri, o, d, args.threads, args.repeat)
+        return
     n = len(o)
     # The build is timed on a tiny ray set; tracing time = total - build.
     build, _ = best_of(args.repeat, lambda: _core.trace_rays(pos, tri, o[:1], d[:1], threads=1))
@@ -150,7 +205,8 @@ def main() -> None:
         agree = np.isclose(tt[both], te[both], rtol=1e-4, atol=1e-5).mean() if both.any() else 1.0
         print(f"hits agree (same t within 1e-4) on {agree:.4%} of rays both hit; "
               f"hit/miss differs on {(np.isfinite(tt) != np.isfinite(te)).mean():.4%}")
-        print(f"ours ({args.threads} threads) / embreex: {ours[1] / emb[1]:.2f}x")
+        # Thread for thread: embreex traces on one thread, so it is compared with ours on one.
+        print(f"ours (1 thread) / embreex (1 thread): {rows[0][1] / emb[1]:.2f}x")
 
 
 if __name__ == "__main__":
