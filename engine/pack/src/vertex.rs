@@ -181,12 +181,14 @@ pub fn encode_vertices_with(vertices: &[Vertex], ranges: &UvRanges) -> Vec<u8> {
             out.extend_from_slice(&c.to_le_bytes());
         }
         let n = oct_encode(v.normal);
-        let mut words: Vec<[u8; 2]> = vec![snorm16(n[0]).to_le_bytes(), snorm16(n[1]).to_le_bytes()];
-        words.extend(tangent_code(v.tangent).map(i16::to_le_bytes));
-        for (uv, r) in [(v.uv0, ranges.uv0), (v.uv1, ranges.uv1), (v.texcoord1, ranges.texcoord1)] {
-            words.extend((0..2).map(|c| unorm16(uv[c], r[c], r[2 + c]).to_le_bytes()));
+        for q in [snorm16(n[0]), snorm16(n[1])].into_iter().chain(tangent_code(v.tangent)) {
+            out.extend_from_slice(&q.to_le_bytes());
         }
-        out.extend(words.iter().flatten());
+        for (uv, r) in [(v.uv0, ranges.uv0), (v.uv1, ranges.uv1), (v.texcoord1, ranges.texcoord1)] {
+            for c in 0..2 {
+                out.extend_from_slice(&unorm16(uv[c], r[c], r[2 + c]).to_le_bytes());
+            }
+        }
         out.extend_from_slice(&v.color);
     }
     out
