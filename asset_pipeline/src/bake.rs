@@ -256,8 +256,8 @@ fn trace_rays<'py>(
     }
     let (t, id) = py
         .detach(|| {
-            let bvh = Bvh::build(&pos, &tri);
-            with_threads(threads, || bvh.closest_many(&org, &dir))
+            // The build runs on the same pool as the rays (it is parallel too).
+            with_threads(threads, || Bvh::build(&pos, &tri).closest_many(&org, &dir))
         })
         .map_err(PyValueError::new_err)?;
     Ok((PyArray1::from_vec(py, t), PyArray1::from_vec(py, id)))

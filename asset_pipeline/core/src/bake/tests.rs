@@ -30,11 +30,8 @@ fn check_against_brute(pos: &[V3], tris: &[[u32; 3]], rays: &[Ray]) {
             (None, None) => {}
             (Some(a), Some(b)) => {
                 hits += 1;
-                assert_eq!(a.t, b.t, "ray {i}: {ray:?}");
-                if a.prim != b.prim {
-                    let tri = tris[a.prim as usize].map(|v| pos[v as usize]);
-                    assert_eq!(intersect_triangle(&Ray { tmax: f32::INFINITY, ..*ray }, &tri), Some(a.t), "ray {i}: tie");
-                }
+                // Ties go to the highest triangle index in both, so the hits are the same.
+                assert_eq!(a, b, "ray {i}: {ray:?}");
             }
             _ => panic!("ray {i}: bvh {a:?} brute {b:?} ({ray:?})"),
         }

@@ -262,6 +262,19 @@ fn walk<L: Lanes, const CLOSEST: bool, F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: 
             let n = unsafe { bvh.nodes.get_unchecked(cur as usize) };
             stats::add(WIDTH as u64, 0);
             let (mut hit, tn) = br.enter(n, tcull);
+            // Fetch every child the ray enters at once: a walk is a chain of dependent loads,
+            // and the blocks (most of the memory) mostly come from beyond L2; issuing them
+            // together overlaps their latencies instead of paying them one after the other.
+            let mut m = hit;
+            while m != 0 {
+                let c = n.child[m.trailing_zeros() as usize];
+                m &= m - 1;
+                if c & child::LEAF != 0 {
+                    prefetch(unsafe { bvh.blocks.as_ptr().add(child::block(c)) });
+                } else {
+                    prefetch(unsafe { bvh.nodes.as_ptr().add(c as usize) });
+                }
+            }
             if hit != 0 {
                 let i = hit.trailing_zeros() as usize;
                 hit &= hit - 1;
@@ -302,50 +315,10 @@ fn walk<L: Lanes, const CLOSEST: bool, F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: 
                 continue;
             }
         } else {
-            let blk = child::block(cur);
-            let b = unsafe { bvh.blocks.get_unchecked(blk) };
-            stats::add(0, BLOCK as u64);
-            let (mut hit, redo, t) = tr.block(b, tmax);
-            if hit | redo != 0 {
-                let mut ts = [0f32; 8];
-                t.store(&mut ts);
-                let mut r = redo;
-                while r != 0 {
-                    let lane = r.trailing_zeros() as usize;
-                    r &= r - 1;
-                    if let Some(th) = intersect(&tr.scalar, &b.triangle(lane), ray.tmin, tmax) {
-                        ts[lane] = th;
-                        hit |= 1 << lane;
-                    }
-                }
-                // Lanes whose hits the filter decides (none unless F filters and the leaf is marked).
-                let flagged = if F::ACTIVE && cur & child::FILTER != 0 { unsafe { *bvh.filter_lanes.get_unchecked(blk) as u32 } } else { 0 };
-                if !CLOSEST {
-                    let mut m = hit & flagged;
-                    while m != 0 {
-                        let lane = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        if !filter.keep(b.id[lane], ts[lane]) {
-                            hit &= !(1 << lane);
-                        }
-                    }
-                    if hit != 0 {
-                        let lane = hit.trailing_zeros() as usize;
-                        return Some(Hit { t: ts[lane], prim: b.id[lane] });
-                    }
-                }
-                // Lowest t, the lowest lane on a tie (all were tested against the same tmax). A
-                // flagged lane is asked only when it would be the closest so far.
-                while hit != 0 {
-                    let lane = hit.trailing_zeros() as usize;
-                    hit &= hit - 1;
-                    if ts[lane] < tmax && (flagged >> lane & 1 == 0 || filter.keep(b.id[lane], ts[lane])) {
-                        tmax = ts[lane];
-                        tcull = tmax * CULL_SLACK;
-                        best = b.id[lane];
-                    }
-                }
+            if leaf::<_, CLOSEST, F>(&tr, ray, bvh, cur, filter, &mut tmax, &mut best) {
+                return Some(Hit { t: tmax, prim: best });
             }
+            tcull = tmax * CULL_SLACK;
         }
         // Pop the next subtree still in front of the closest hit so far.
         while sp > 0 {
@@ -359,4 +332,82 @@ fn walk<L: Lanes, const CLOSEST: bool, F: AnyHit>(bvh: &Bvh, ray: &Ray, filter: 
         break;
     }
     (best != u32::MAX).then_some(Hit { t: tmax, prim: best })
+}
+
+/// Tests the leaf block `cur`. CLOSEST: lowers `tmax` to the closest hit kept and sets `best`
+/// to its triangle; of hits at the same distance, the highest triangle index wins, so the hit
+/// is a function of the geometry alone, not of the tree or the order of the walk (coplanar
+/// faces, such as a box standing on a floor, give exact ties). Otherwise: true if a hit is kept
+/// (its t and triangle then in `tmax` and `best`), and the walk can stop.
+#[inline(always)]
+fn leaf<T: Lanes, const CLOSEST: bool, F: AnyHit>(tr: &TriRay<T>, ray: &Ray, bvh: &Bvh, cur: u32, filter: &F, tmax: &mut f32, best: &mut u32) -> bool {
+    let blk = child::block(cur);
+    // SAFETY: the build makes every leaf reference a valid block index.
+    let b = unsafe { bvh.blocks.get_unchecked(blk) };
+    stats::add(0, BLOCK as u64);
+    // Closest: up to and including tmax, for the ties (`next_up`: the tests' bound is strict).
+    let bound = if CLOSEST { tmax.next_up() } else { *tmax };
+    let (mut hit, redo, t) = tr.block(b, bound);
+    if hit | redo == 0 {
+        return false;
+    }
+    let mut ts = [0f32; 8];
+    t.store(&mut ts);
+    let mut r = redo;
+    while r != 0 {
+        let lane = r.trailing_zeros() as usize;
+        r &= r - 1;
+        if let Some(th) = intersect(&tr.scalar, &b.triangle(lane), ray.tmin, bound) {
+            ts[lane] = th;
+            hit |= 1 << lane;
+        }
+    }
+    // Lanes whose hits the filter decides (none unless F filters and the leaf is marked).
+    let flagged = if F::ACTIVE && cur & child::FILTER != 0 { unsafe { *bvh.filter_lanes.get_unchecked(blk) as u32 } } else { 0 };
+    if !CLOSEST {
+        let mut m = hit & flagged;
+        while m != 0 {
+            let lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if !filter.keep(b.id[lane], ts[lane]) {
+                hit &= !(1 << lane);
+            }
+        }
+        if hit != 0 {
+            let lane = hit.trailing_zeros() as usize;
+            (*tmax, *best) = (ts[lane], b.id[lane]);
+            return true;
+        }
+        return false;
+    }
+    // Lowest t, the highest triangle index on a tie (never the ray's own tmax: best is u32::MAX
+    // until a hit is kept). A flagged lane is asked only when it would be the closest so far.
+    while hit != 0 {
+        let lane = hit.trailing_zeros() as usize;
+        hit &= hit - 1;
+        let id = b.id[lane];
+        if (ts[lane] < *tmax || ts[lane] == *tmax && id > *best) && (flagged >> lane & 1 == 0 || filter.keep(id, ts[lane])) {
+            *tmax = ts[lane];
+            *best = id;
+        }
+    }
+    false
+}
+
+/// Asks for every cache line of `*p` (no effect on results; a no-op off x86_64).
+#[inline(always)]
+fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let bytes = p.cast::<i8>();
+        let mut at = 0;
+        while at < std::mem::size_of::<T>() {
+            // SAFETY: prefetching never faults, whatever the address.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(bytes.wrapping_add(at)) };
+            at += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
 }

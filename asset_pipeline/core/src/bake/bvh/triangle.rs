@@ -72,7 +72,8 @@ pub(super) fn intersect(r: &Prepared, tri: &[[f32; 3]; 3], tmin: f32, tmax: f32)
     (t > tmin && t < tmax).then_some(t)
 }
 
-/// Brute-force closest hit over every triangle (the BVH's test oracle and tiny-scene path).
+/// Brute-force closest hit over every triangle (the BVH's test oracle and tiny-scene path); of
+/// hits at the same distance, the highest triangle index wins, as in the BVH.
 pub fn closest_brute(positions: &[[f32; 3]], triangles: &[[u32; 3]], ray: &Ray) -> Option<Hit> {
     let r = Prepared::new(ray);
     let mut best = None;
@@ -82,7 +83,9 @@ pub fn closest_brute(positions: &[[f32; 3]], triangles: &[[u32; 3]], ray: &Ray) 
         if tri.iter().flat_map(|p| p.iter()).any(|x| !x.is_finite()) {
             continue;
         }
-        if let Some(th) = intersect(&r, &tri, ray.tmin, tmax) {
+        // Once a hit is found, a later triangle at the same t replaces it.
+        let bound = if best.is_some() { tmax.next_up() } else { tmax };
+        if let Some(th) = intersect(&r, &tri, ray.tmin, bound) {
             tmax = th;
             best = Some(Hit { t: th, prim: i as u32 });
         }
@@ -94,4 +97,3 @@ pub fn closest_brute(positions: &[[f32; 3]], triangles: &[[u32; 3]], ray: &Ray) 
 pub fn intersect_triangle(ray: &Ray, tri: &[[f32; 3]; 3]) -> Option<f32> {
     intersect(&Prepared::new(ray), tri, ray.tmin, ray.tmax)
 }
-

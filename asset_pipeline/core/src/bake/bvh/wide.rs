@@ -53,10 +53,11 @@ pub(super) mod child {
     }
 }
 
-/// A leaf's triangles; a leaf of fewer than 8 repeats its last triangle (the repeat gives the same hit
-/// at the same t, and ties keep the lowest lane, so it never changes a result).
+/// A leaf's triangles; a leaf of fewer than 8 repeats its last triangle (the repeat gives the
+/// same hit at the same t, and ties keep the lowest lane, so it never changes a result).
+/// Cache-line aligned: 5 lines, which a walk asks for at once.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(32))]
+#[repr(C, align(64))]
 pub(super) struct Tris {
     /// Corner coordinates, `[corner][axis][lane]`.
     pub(super) v: [[[f32; BLOCK]; 3]; 3],
@@ -87,30 +88,123 @@ pub(super) struct Soup<'a> {
     pub(super) flagged: Option<&'a [bool]>,
 }
 
+/// SAH costs of the wide tree's parts, in units of one 8-box visit: a leaf block's 8-triangle
+/// test (on the anchor scene of `tools/bench_bvh.py`, block costs from 0.5 to 2 changed the
+/// tree little and the speed within noise).
+const C_NODE: f32 = 1.0;
+const C_BLOCK: f32 = 1.0;
+
+/// The wide tree of least SAH cost that the binary tree can be cut into (Ylitie, Karras and
+/// Laine 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", §3.1):
+/// each binary subtree is costed as one leaf block (if it holds at most 8 references), one wide
+/// node, or spread over up to 8 slots of its parent's wide node, bottom up; then the choices are
+/// followed from the root. Greedy collapsing (opening the largest child until 8) leaves the
+/// bottom nodes half empty; this fills them where it pays.
 pub(super) fn collapse(bin: &Binary, soup: &Soup) -> Collapsed {
+    let plan = Plan::new(bin);
     let mut out = Collapsed { nodes: Vec::new(), blocks: Vec::new(), stack: 0, filter_lanes: Vec::new() };
-    out.stack = node(bin, 0, soup, &mut out);
+    if plan.choice[0][0] == LEAF_CHOICE {
+        out.nodes.push(Wide::EMPTY);
+        let r = &bin.nodes[0];
+        for a in 0..3 {
+            out.nodes[0].planes[2 * a][0] = r.min[a];
+            out.nodes[0].planes[2 * a + 1][0] = r.max[a];
+        }
+        out.nodes[0].child[0] = leaf(&bin.ids[r.first as usize..][..r.count as usize], soup, &mut out);
+    } else {
+        out.stack = node(bin, &plan, 0, soup, &mut out);
+    }
     if soup.flagged.is_none() {
         out.filter_lanes = Vec::new();
     }
     out
 }
 
-/// Makes the wide node for the binary subtree at `at` (its children are the up-to-8 subtrees
-/// found by opening the largest interior node first, which keeps the boxes tested per visit
-/// the likeliest to be hit); returns the stack entries the subtree can need.
-fn node(bin: &Binary, at: usize, soup: &Soup, out: &mut Collapsed) -> usize {
-    let mut kids = vec![at];
-    while kids.len() < WIDTH {
-        let open = kids
-            .iter()
-            .enumerate()
-            .filter(|(_, &k)| bin.nodes[k].count == 0)
-            .max_by(|a, b| bin.nodes[*a.1].area().total_cmp(&bin.nodes[*b.1].area()));
-        let Some((i, &k)) = open else { break };
-        kids[i] = k + 1;
-        kids.push(bin.nodes[k].offset as usize);
+/// `choice[k][0]` for binary node k as one slot: `LEAF_CHOICE`, or a wide node whose 8 slots
+/// its left child gets that many of. `choice[k][i - 1]` for i >= 2 slots: 0, as i - 1 slots;
+/// else that many to the left child, the rest to the right.
+struct Plan {
+    choice: Vec<[u8; WIDTH]>,
+}
+
+const LEAF_CHOICE: u8 = 0;
+
+fn children(bin: &Binary, k: usize) -> (usize, usize) {
+    (k + 1, k + 2 * bin.nodes[k + 1].count as usize)
+}
+
+impl Plan {
+    fn new(bin: &Binary) -> Plan {
+        let n = bin.nodes.len();
+
+        // cost[k][i - 1]: least cost of binary subtree k in at most i slots.
+        let mut cost = vec![[0f32; WIDTH]; n];
+        let mut choice = vec![[0u8; WIDTH]; n];
+        for k in (0..n).rev() {
+            let node = &bin.nodes[k];
+            let area = node.area();
+            if node.count == 1 {
+                cost[k] = [area * C_BLOCK; WIDTH];
+                continue;
+            }
+            let (l, r) = children(bin, k);
+            // dist[j - 1]: the children spread over j slots (j >= 2).
+            let mut dist = [f32::INFINITY; WIDTH];
+            let mut split = [1u8; WIDTH];
+            for j in 2..=WIDTH {
+                for m in 1..j {
+                    let c = cost[l][m - 1] + cost[r][j - m - 1];
+                    if c < dist[j - 1] {
+                        dist[j - 1] = c;
+                        split[j - 1] = m as u8;
+                    }
+                }
+            }
+            let internal = area * C_NODE + dist[WIDTH - 1];
+            let leaf = if node.count as usize <= BLOCK { area * C_BLOCK } else { f32::INFINITY };
+            // Ties and NaN (overflowed areas) go to the wide node, which any subtree can be.
+            let (c1, ch1) = if leaf <= internal { (leaf, LEAF_CHOICE) } else { (internal, split[WIDTH - 1]) };
+            cost[k][0] = c1;
+            choice[k][0] = ch1;
+            for i in 2..=WIDTH {
+                if dist[i - 1] < cost[k][i - 2] {
+                    cost[k][i - 1] = dist[i - 1];
+                    choice[k][i - 1] = split[i - 1];
+                } else {
+                    cost[k][i - 1] = cost[k][i - 2];
+                }
+            }
+        }
+        Plan { choice }
     }
+
+    /// The binary subtrees that fill `i` slots for subtree k.
+    fn slots(&self, bin: &Binary, mut k: usize, mut i: usize, out: &mut Vec<usize>) {
+        loop {
+            while i >= 2 && self.choice[k][i - 1] == 0 {
+                i -= 1;
+            }
+            if i == 1 {
+                out.push(k);
+                return;
+            }
+            let m = self.choice[k][i - 1] as usize;
+            let (l, r) = children(bin, k);
+            self.slots(bin, l, m, out);
+            (k, i) = (r, i - m);
+        }
+    }
+}
+
+/// Makes the wide node for binary node `at` (which the plan makes a wide node); returns the
+/// stack entries the subtree can need.
+fn node(bin: &Binary, plan: &Plan, at: usize, soup: &Soup, out: &mut Collapsed) -> usize {
+    let mut kids = Vec::with_capacity(WIDTH);
+    let m = plan.choice[at][0] as usize;
+    let (l, r) = children(bin, at);
+    plan.slots(bin, l, m, &mut kids);
+    plan.slots(bin, r, WIDTH - m, &mut kids);
+    debug_assert!(kids.len() <= WIDTH);
     let me = out.nodes.len();
     out.nodes.push(Wide::EMPTY);
     // A visit pushes every hit child but the one it goes on with.
@@ -121,20 +215,31 @@ fn node(bin: &Binary, at: usize, soup: &Soup, out: &mut Collapsed) -> usize {
             out.nodes[me].planes[2 * a][slot] = n.min[a];
             out.nodes[me].planes[2 * a + 1][slot] = n.max[a];
         }
-        out.nodes[me].child[slot] = if n.count == 0 {
+        out.nodes[me].child[slot] = if plan.choice[k][0] != LEAF_CHOICE {
             let c = out.nodes.len() as u32;
-            deepest = deepest.max(node(bin, k, soup, out));
+            deepest = deepest.max(node(bin, plan, k, soup, out));
             c
         } else {
-            leaf(&bin.ids[n.offset as usize..][..n.count as usize], soup, out)
+            leaf(&bin.ids[n.first as usize..][..n.count as usize], soup, out)
         };
     }
     kids.len() - 1 + deepest
 }
 
-fn leaf(ids: &[u32], soup: &Soup, out: &mut Collapsed) -> u32 {
-    assert!((1..=BLOCK).contains(&ids.len()), "the build makes leaves of one block");
+/// One block of the triangles of `refs` (a triangle pre-split into several references that
+/// landed in the same leaf is stored once).
+fn leaf(refs: &[u32], soup: &Soup, out: &mut Collapsed) -> u32 {
+    assert!((1..=BLOCK).contains(&refs.len()), "the plan makes leaves of one block");
     const { assert!(BLOCK <= 8, "lane masks are bytes") };
+    let mut ids = [0u32; BLOCK];
+    let mut n = 0;
+    for &id in refs {
+        if !ids[..n].contains(&id) {
+            ids[n] = id;
+            n += 1;
+        }
+    }
+    let ids = &ids[..n];
     let mut b = Tris { v: [[[0.0; BLOCK]; 3]; 3], id: [0; BLOCK] };
     let mut flagged = 0u8;
     for lane in 0..BLOCK {
