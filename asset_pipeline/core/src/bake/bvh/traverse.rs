@@ -222,12 +222,16 @@ impl<T: Lanes> TriRay<T> {
         // Negating both when det < 0 is flipping their sign bits by det's.
         let sign = det.and(T::splat(-0.0));
         let (ts, d) = (t_scaled.xor(sign), det.xor(sign));
-        let t = ts.div(d);
-        // `intersect`'s early outs (det == 0, ts <= tmin d, ts > tmax d ROBUST) and its final
-        // strict interval, as one mask.
+        // `intersect`'s early outs (det == 0, ts <= tmin d, ts > tmax d ROBUST), then its final
+        // strict interval, as one mask. Most tests of a block find nothing: those return before
+        // the division.
         let inside = ts.gt(self.tmin.mul(d)).and(ts.le(T::splat(tmax).mul(d).mul(self.robust)));
-        let inside = inside.and(t.gt(self.tmin)).and(t.lt(T::splat(tmax))).and_not(det.eq(zero));
-        let hit = inside.and_not(outside).and_not(redo);
+        let maybe = inside.and_not(outside).and_not(redo).and_not(det.eq(zero));
+        if maybe.bits() | redo.bits() == 0 {
+            return (0, 0, zero);
+        }
+        let t = ts.div(d);
+        let hit = maybe.and(t.gt(self.tmin)).and(t.lt(T::splat(tmax)));
         (hit.bits(), redo.bits(), t)
     }
 }

@@ -112,7 +112,8 @@ pub(super) fn collapse(bin: &Binary, soup: &Soup) -> Collapsed {
         }
         out.nodes[0].child[0] = leaf(&bin.ids[r.first as usize..][..r.count as usize], soup, &mut out);
     } else {
-        out.stack = node(bin, &plan, 0, soup, &mut out);
+        out.nodes.push(Wide::EMPTY);
+        out.stack = node(bin, &plan, 0, 0, soup, &mut out);
     }
     if soup.flagged.is_none() {
         out.filter_lanes = Vec::new();
@@ -196,19 +197,17 @@ impl Plan {
     }
 }
 
-/// Makes the wide node for binary node `at` (which the plan makes a wide node); returns the
-/// stack entries the subtree can need.
-fn node(bin: &Binary, plan: &Plan, at: usize, soup: &Soup, out: &mut Collapsed) -> usize {
+/// Fills wide node `me` (already allocated) for binary node `at`, which the plan makes a wide
+/// node; returns the stack entries the subtree can need. A node's interior children are
+/// allocated side by side, and its leaf blocks likewise, before any grandchild: the children a
+/// visit prefetches together lie together.
+fn node(bin: &Binary, plan: &Plan, at: usize, me: usize, soup: &Soup, out: &mut Collapsed) -> usize {
     let mut kids = Vec::with_capacity(WIDTH);
     let m = plan.choice[at][0] as usize;
     let (l, r) = children(bin, at);
     plan.slots(bin, l, m, &mut kids);
     plan.slots(bin, r, WIDTH - m, &mut kids);
     debug_assert!(kids.len() <= WIDTH);
-    let me = out.nodes.len();
-    out.nodes.push(Wide::EMPTY);
-    // A visit pushes every hit child but the one it goes on with.
-    let mut deepest = 0;
     for (slot, &k) in kids.iter().enumerate() {
         let n = &bin.nodes[k];
         for a in 0..3 {
@@ -216,12 +215,19 @@ fn node(bin: &Binary, plan: &Plan, at: usize, soup: &Soup, out: &mut Collapsed) 
             out.nodes[me].planes[2 * a + 1][slot] = n.max[a];
         }
         out.nodes[me].child[slot] = if plan.choice[k][0] != LEAF_CHOICE {
-            let c = out.nodes.len() as u32;
-            deepest = deepest.max(node(bin, plan, k, soup, out));
-            c
+            out.nodes.push(Wide::EMPTY);
+            (out.nodes.len() - 1) as u32
         } else {
             leaf(&bin.ids[n.first as usize..][..n.count as usize], soup, out)
         };
+    }
+    // A visit pushes every hit child but the one it goes on with.
+    let mut deepest = 0;
+    for (slot, &k) in kids.iter().enumerate() {
+        let c = out.nodes[me].child[slot];
+        if c & child::LEAF == 0 {
+            deepest = deepest.max(node(bin, plan, k, c as usize, soup, out));
+        }
     }
     kids.len() - 1 + deepest
 }
