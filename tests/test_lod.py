@@ -305,6 +305,23 @@ def test_deterministic():
             np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
 
 
+def test_serial_turns_give_the_same_chain(monkeypatch):
+    """lod.SERIAL (the benchmark's one-thread-at-a-time mode: the caller waits for each level's
+    carrying and measuring) changes when work runs, never what comes out."""
+    from asset_pipeline import lod as lod_module
+
+    lod0 = textured_sphere(30, 60)
+    a = build_lods(lod0)
+    monkeypatch.setattr(lod_module, "SERIAL", True)
+    b = build_lods(lod0)
+    assert len(a) == len(b) >= 3
+    for x, y in zip(a, b):
+        assert x.error == y.error
+        np.testing.assert_array_equal(x.triangles, y.triangles)
+        for k in x.attributes:
+            np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
+
+
 def test_stop_rules():
     lod0 = textured_sphere(30, 60)
     m = lod0.triangle_count

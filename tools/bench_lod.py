@@ -2,6 +2,13 @@
 
     .venv/bin/python tools/bench_lod.py [--subdiv N] [--repeat R]
 
+It prints two timing tables, thread for thread. fast_simplification.simplify is single-threaded.
+The stage is not: it simplifies on the calling thread while a Rust thread carries attributes and
+measures errors (with a rayon pool beside it), so its first table is the stage on all of the
+machine's threads against the raw call on one. The second table comes from a child process run
+with RAYON_NUM_THREADS=1 and ``lod.SERIAL = True`` (the caller waits for each level to be carried
+and measured before it simplifies the next): one thread at a time against the raw call's one.
+
 On a ~1M-triangle displaced cube-sphere with uv0 (one UV chart per cube face: seams on a smooth
 surface), normals, tangents and colours:
 
@@ -22,8 +29,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import os
+import subprocess
 import sys
 import time
 
@@ -178,7 +187,13 @@ def main() -> int:
     ap.add_argument("--subdiv", type=int, default=289, help="quads per cube-face edge (12 n^2 triangles; 289 -> 1.0M)")
     ap.add_argument("--repeat", type=int, default=5, help="timed rounds (each: the stage, the stage without measurement, the raw chain)")
     ap.add_argument("--max-lods", type=int, default=LodDefaults.max_lods)
+    ap.add_argument("--one-thread", action="store_true", help="(the child run) time the stage on one thread at a time: needs RAYON_NUM_THREADS=1")
     args = ap.parse_args()
+    if args.one_thread:
+        if os.environ.get("RAYON_NUM_THREADS") != "1":
+            ap.error("--one-thread needs RAYON_NUM_THREADS=1 in the environment (rayon reads it when its pool starts)")
+        lod.SERIAL = True
+    threads = "1 thread at a time (RAYON_NUM_THREADS=1, lod.SERIAL)" if args.one_thread else f"all {os.cpu_count()} threads"
 
     lod0 = cube_sphere(args.subdiv)
     settings = lod.LodSettings(max_lods=args.max_lods)
@@ -216,16 +231,33 @@ def main() -> int:
     stage_ratio = float(np.median(np.array(stage_times) / np.array(raw_times)))
     carry_ratio = float(np.median(np.array(carry_times) / np.array(raw_times)))
     print()
-    print("time (best of %d)                          seconds   vs raw" % args.repeat)
+    print(f"time (best of {args.repeat}); the stage on {threads}, fast_simplification on 1")
+    print("                                           seconds   vs raw")
     print(f"  fast_simplification.simplify alone     {raw_best:8.3f}    1.00x")
     print(f"  build_lods                             {stage:8.3f}   {stage / raw_best:5.2f}x")
-    print("    on the calling thread (carrying and measuring run on a Rust thread meanwhile):")
+    if args.one_thread:
+        print("    on the calling thread (which then waits for each level's carrying and measuring):")
+    else:
+        print("    on the calling thread (carrying and measuring run on a Rust thread meanwhile):")
     for k, name in Phases.names.items():
         print(f"    {name:<36} {ph[k]:8.3f}")
     print(f"  build_lods without error measurement   {carry:8.3f}   {carry / raw_best:5.2f}x   <- attribute carrying vs the raw call (goal <= 1.20x)")
     print(f"  median of the per-round ratios: build_lods {stage_ratio:.2f}x, without error measurement {carry_ratio:.2f}x")
     print(f"  (all runs: build_lods {', '.join(f'{t:.2f}' for t in stage_times)} s; without measurement "
           f"{', '.join(f'{t:.2f}' for t in carry_times)} s; raw {', '.join(f'{t:.2f}' for t in raw_times)} s)")
+    if args.one_thread:
+        print(json.dumps({"stage_ratio": stage_ratio, "carry_ratio": carry_ratio}))
+        return 0
+    # The same rounds one thread at a time, in a child process (rayon's pool size is fixed when
+    # it starts): the comparison with the single-threaded raw call, thread for thread.
+    child = subprocess.run(
+        [sys.executable, os.path.abspath(__file__), "--one-thread", "--subdiv", str(args.subdiv), "--repeat", str(args.repeat), "--max-lods", str(args.max_lods)],
+        env={**os.environ, "RAYON_NUM_THREADS": "1"}, capture_output=True, text=True, check=True,
+    )
+    lines = child.stdout.strip().splitlines()
+    one = json.loads(lines[-1])
+    print()
+    print("\n".join(lines[lines.index("") + 1 : -1]))  # the child's timing table
 
     # Error at equal triangle counts: the stage, raw fast-simplification, meshoptimizer.
     bvh0 = MeshBvh(lod0.attributes["position"], lod0.triangles)
@@ -248,8 +280,11 @@ def main() -> int:
         print(row)
     print()
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
-    print(f"ratio 1 (time, median of {args.repeat} rounds): build_lods / fast_simplification alone = {stage_ratio:.2f}x; "
+    print(f"ratio 1 (time, median of {args.repeat} rounds; fast_simplification alone is 1 thread):")
+    print(f"  stage on all {os.cpu_count()} threads:   build_lods / fast_simplification alone = {stage_ratio:.2f}x; "
           f"without the error measurement = {carry_ratio:.2f}x")
+    print(f"  stage on 1 thread at a time: build_lods / fast_simplification alone = {one['stage_ratio']:.2f}x; "
+          f"without the error measurement = {one['carry_ratio']:.2f}x")
     if have_meshopt:
         gm = math.exp(np.mean(np.log(ratios)))
         print(f"ratio 2 (error): stage / meshoptimizer at equal triangle count = {gm:.2f}x (geometric mean over {len(ratios)} LODs)")

@@ -164,6 +164,13 @@ impl PyLodChain {
         Ok(())
     }
 
+    /// Block (without the GIL) until every level submitted so far is carried and measured.
+    fn wait(&self, py: Python<'_>) {
+        if let Some(chain) = self.chain.as_ref() {
+            py.detach(|| chain.wait());
+        }
+    }
+
     /// Errors of the levels finished so far, in order.
     fn errors(&self) -> Vec<f64> {
         self.chain.as_ref().map(|c| c.errors()).unwrap_or_default()

@@ -16,8 +16,8 @@
 
 use crate::measure::{self, Bvh, FxMap, CHUNK};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{mpsc, Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 
 /// LOD 0 welded by position (step 1), as simplification starts from it.
@@ -598,7 +598,9 @@ pub struct ErrorSettings {
 pub struct Chain {
     jobs: Option<mpsc::Sender<Job>>,
     worker: Option<JoinHandle<Vec<Carried>>>,
-    errors: Arc<Mutex<Vec<f64>>>,
+    /// Errors of the levels finished so far, and a signal for each one finished.
+    errors: Arc<(Mutex<Vec<f64>>, Condvar)>,
+    submitted: AtomicUsize,
     caller_done: Arc<AtomicBool>,
 }
 
@@ -606,15 +608,16 @@ impl Chain {
     /// `near0`: per vertex of LOD 0's welded level, a LOD 0 face around it.
     pub fn start(lod0: Lod0Data, near0: Vec<u32>, measure: Option<ErrorSettings>) -> Chain {
         let (tx, rx) = mpsc::channel::<Job>();
-        let errors = Arc::new(Mutex::new(Vec::new()));
+        let errors = Arc::new((Mutex::new(Vec::new()), Condvar::new()));
         let report = errors.clone();
         let caller_done = Arc::new(AtomicBool::new(false));
         let done = caller_done.clone();
         let worker = std::thread::spawn(move || {
             // While the caller is still simplifying (one core, busy), leave it a core: levels
             // carried meanwhile use one thread fewer than the machine has; once it waits in
-            // `finish`, the rest use them all.
-            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            // `finish`, the rest use them all. Rayon's own count, so RAYON_NUM_THREADS=1 limits
+            // this pool too (with `wait`, the benchmark's one-thread comparison).
+            let cores = rayon::current_num_threads();
             let beside = rayon::ThreadPoolBuilder::new().num_threads(cores.saturating_sub(1).max(1)).build().ok();
             let in_pool = |f: &mut (dyn FnMut() + Send)| match (&beside, done.load(Ordering::Acquire)) {
                 (Some(pool), false) => pool.install(f),
@@ -658,25 +661,38 @@ impl Chain {
                         }
                         _ => 0.0,
                     };
-                    report.lock().unwrap().push(error);
+                    report.0.lock().unwrap().push(error);
+                    report.1.notify_all();
                     near = sp.near;
                     out.push(Carried { positions: sp.positions, triangles: sp.triangles, attributes, morphs, error });
                 });
             }
             out
         });
-        Chain { jobs: Some(tx), worker: Some(worker), errors, caller_done }
+        Chain { jobs: Some(tx), worker: Some(worker), errors, submitted: AtomicUsize::new(0), caller_done }
     }
 
     /// Queue the next level (its survivors refer to the level queued before).
     pub fn submit(&self, job: Job) {
         // A send fails only when the worker has died; `finish` reports that.
+        self.submitted.fetch_add(1, Ordering::Relaxed);
         let _ = self.jobs.as_ref().map(|tx| tx.send(job));
+    }
+
+    /// Block until every level submitted so far is carried and measured (or the worker died):
+    /// with it, the caller and the worker take turns, one thread at a time.
+    pub fn wait(&self) {
+        let want = self.submitted.load(Ordering::Relaxed);
+        let (lock, done) = &*self.errors;
+        let mut errors = lock.lock().unwrap();
+        while errors.len() < want && !self.worker.as_ref().is_none_or(|w| w.is_finished()) {
+            errors = done.wait_timeout(errors, std::time::Duration::from_millis(50)).unwrap().0;
+        }
     }
 
     /// Errors of the levels finished so far, in order.
     pub fn errors(&self) -> Vec<f64> {
-        self.errors.lock().map(|e| e.clone()).unwrap_or_default()
+        self.errors.0.lock().map(|e| e.clone()).unwrap_or_default()
     }
 
     /// Wait for every queued level.

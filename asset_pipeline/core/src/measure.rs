@@ -588,9 +588,15 @@ impl Bvh {
                     let ti = c * (CHUNK / 4) + j;
                     let by = t.map(|i| settled_by[i as usize]);
                     let (a, b, cc) = corners(t);
+                    // A grid of one cell is its corners, all done above.
+                    if subdiv(s, longest[ti]) == 1 {
+                        continue;
+                    }
+                    // A corner settled by `slot` is within the threshold of it (the very test
+                    // repeated here would say so again): only the others are tested.
                     let covers = |slot: u32| {
                         let tr = &self.tris[slot as usize];
-                        [a, b, cc].iter().all(|&p| closest_on_triangle(p, tr[0], tr[1], tr[2]).0 <= threshold)
+                        [a, b, cc].iter().zip(by).all(|(&p, settler)| settler == slot || closest_on_triangle(p, tr[0], tr[1], tr[2]).0 <= threshold)
                     };
                     if by.iter().enumerate().any(|(n, &slot)| slot != NO_FACE && !by[..n].contains(&slot) && covers(slot)) {
                         continue;

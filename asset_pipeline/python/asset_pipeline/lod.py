@@ -107,6 +107,10 @@ class LodSettings:
 # Benchmarks switch this off to time the stage without its error measurement (every level then
 # measures 0, so the error stop rule never applies).
 MEASURE_ERRORS = True
+# Benchmarks set this (with RAYON_NUM_THREADS=1) to compare thread for thread with the
+# single-threaded simplifier: the caller then waits for each level to be carried and measured
+# before it simplifies the next, so one thread works at a time. Same result either way.
+SERIAL = False
 
 
 def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.Lod]:
@@ -153,6 +157,8 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
             break
         level = new
         chain.submit(level.points.astype(np.float32), level.faces.view(np.uint32), level.face_origin.astype(np.uint32), level.seamy, level.survivor)
+        if SERIAL:
+            chain.wait()
         origins.append(level.face_origin)
 
     lods: list[ir.Lod] = []
