@@ -46,8 +46,8 @@ How a level is made
    material and lightmap page. (Rust: ``cook_core::lod``.)
 5. **Measure the error**: the symmetric Hausdorff distance between the level and LOD 0, estimated
    by sampling both ways in Rust (``cook_core::lod::level_error``): each triangle on a barycentric
-   grid (corners included; LOD 0's with at least 2 and the level's with at least
-   ``min_subdivisions`` subdivisions per edge, and no coarser than ``sample_spacing`` LOD 0 mean
+   grid (corners included; the level's with at least ``min_subdivisions`` subdivisions per edge,
+   LOD 0's small ones at their corners, and none coarser than ``sample_spacing`` LOD 0 mean
    edge lengths), each sample's exact distance to the other mesh, then a local search around the
    largest samples (a grid misses sharp maxima, such as where a simplified edge cuts a crease).
    A mesh with morph targets is measured in several poses, at rest and with each target at
