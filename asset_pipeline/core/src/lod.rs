@@ -640,6 +640,17 @@ impl Chain {
                 }
                 spacing = measure.map_or(0.0, |m| m.sample_spacing * mean_edge(&lod0.positions, &lod0.triangles));
             });
+            // LOD 0 is the source of every level's LOD 0 -> level measure (at rest, and with each
+            // target at weight 1): prepared once here, not once per level.
+            let mut sources0: Vec<Option<measure::Source>> = Vec::new();
+            in_pool(&mut || {
+                if let Some(m) = measure {
+                    sources0 = std::iter::once(&lod0.positions)
+                        .chain(morphed0.iter().map(|(p, _)| p))
+                        .map(|p| measure::Source::new(p, &lod0.triangles, spacing, 1, m.max_samples).ok())
+                        .collect();
+                }
+            });
             let view = Lod0 { positions: &lod0.positions, triangles: &lod0.triangles, adjacency: &adjacency };
             let (mut near, mut out) = (near0, Vec::new());
             for job in rx {
@@ -654,9 +665,9 @@ impl Chain {
                         (Some(m), Some(bvh0)) => {
                             // At rest, then with each morph target at weight 1 (LOD 0 and the
                             // level each moved by its own deltas): the largest bounds them all.
-                            let rest = level_error(&lod0.positions, &lod0.triangles, bvh0, &sp.positions, &sp, spacing, m);
-                            morphed0.iter().enumerate().fold(rest, |e, (t, (p0, b0))| {
-                                e.max(b0.as_ref().map_or(f64::INFINITY, |b0| level_error(p0, &lod0.triangles, b0, &morphs.morphed(&sp.positions, t), &sp, spacing, m)))
+                            let rest = level_error(sources0[0].as_ref(), bvh0, &sp.positions, &sp, spacing, m);
+                            morphed0.iter().enumerate().fold(rest, |e, (t, (_, b0))| {
+                                e.max(b0.as_ref().map_or(f64::INFINITY, |b0| level_error(sources0[t + 1].as_ref(), b0, &morphs.morphed(&sp.positions, t), &sp, spacing, m)))
                             })
                         }
                         _ => 0.0,
@@ -704,12 +715,13 @@ impl Chain {
 }
 
 /// Sampled symmetric Hausdorff distance between a split level and LOD 0 (see
-/// `Bvh::directed_hausdorff`), both in one pose: LOD 0 at `positions0` (`bvh0` built over them),
+/// `Bvh::directed_hausdorff`), both in one pose: LOD 0 prepared as `source0` (None: it could
+/// not be, and the error is infinite) at the positions `bvh0` is built over,
 /// the level at `positions` (its own at rest, or moved by its morph deltas). LOD 0 is sampled
 /// against the level at `spacing` (its small triangles at their corners only), the level's big
 /// triangles at `min_subdiv` or more cells per edge against LOD 0 (its vertices' LOD 0 faces as
 /// hints); each side's best samples are then refined by local search.
-pub fn level_error(positions0: &[[f32; 3]], triangles0: &[[u32; 3]], bvh0: &Bvh, positions: &[[f32; 3]], level: &Split, spacing: f64, m: ErrorSettings) -> f64 {
+pub fn level_error(source0: Option<&measure::Source>, bvh0: &Bvh, positions: &[[f32; 3]], level: &Split, spacing: f64, m: ErrorSettings) -> f64 {
     let Ok(bvh) = Bvh::build(positions, &level.triangles) else { return f64::INFINITY };
     // LOD 0's triangles shorter than the spacing get no edge midpoints (they used to: 2M samples
     // a level at 1M triangles against 0.5M corners; half of this direction's time). Why that
@@ -719,7 +731,7 @@ pub fn level_error(positions0: &[[f32; 3]], triangles0: &[[u32; 3]], bvh0: &Bvh,
     // search (pass 3, from the best corners into every triangle around them) climbs to such
     // peaks. Measured: the same maxima on every level of bench_lod's 1M-triangle mesh, and the
     // tests' independent 60k-sample Hausdorff stays under the stored errors.
-    let a = bvh.directed_hausdorff(positions0, triangles0, spacing, 1, m.max_samples, None).map_or(f64::INFINITY, |d| d.max);
+    let a = source0.map_or(f64::INFINITY, |s0| bvh.directed_hausdorff_from(s0, None).map_or(f64::INFINITY, |d| d.max));
     let b = bvh0.directed_hausdorff(positions, &level.triangles, spacing, m.min_subdiv, m.max_samples, Some(&level.source)).map_or(f64::INFINITY, |d| d.max);
     a.max(b)
 }
