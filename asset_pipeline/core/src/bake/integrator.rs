@@ -7,7 +7,8 @@
 //! sky of radiance L, B = L exactly.
 //!
 //! Per sample path, at the point and at every bounce vertex:
-//! - next-event estimation for each analytic light (sun cone, point, spot, rect) and for one
+//! - next-event estimation for the sun and each rect light, for one of the point and spot lights
+//!   in range picked in proportion to its unoccluded irradiance (`direct_each`), and for one
 //!   emissive triangle picked in proportion to area x emitted luminance (its emissive texture's
 //!   mean over the triangle), at a uniform point whose real emission is then evaluated (area
 //!   sampling moved to solid angle, notes §7.2), with a shadow ray;
@@ -31,6 +32,8 @@
 //! light sampling picks points on it from either side.
 
 use super::bvh::{offset_ray, Ray};
+use super::light_set::{light_numbers, LightSet};
+use super::lights::{Light, LightSample};
 use super::sampling::*;
 use super::scene::BakeScene;
 use rayon::prelude::*;
@@ -139,7 +142,7 @@ pub fn bake_points_directional(
     cancel: &AtomicBool,
 ) -> Result<BakedDirectional, Cancelled> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
-    let sun = scene.lights.iter().position(|l| matches!(l, super::lights::Light::Sun { .. }));
+    let sun = scene.lights.all().iter().position(|l| matches!(l, Light::Sun { .. }));
     let (texels, rays) = par_bake(points.len(), CHUNK, ids, progress, cancel, |i, id, cast| bake_texel(scene, points[i], normals[i], id, sun, settings, cast))?;
     Ok(BakedDirectional { texels, rays })
 }
@@ -261,7 +264,7 @@ fn trace(scene: &BakeScene, acc: V3, x: V3, n: V3, w: V3, pdf: f32, bounces: u32
         *rays += 1;
         let hit = scene.closest(&Ray { origin: o, dir: w, tmin: 0.0, tmax: f32::INFINITY });
         let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
-        for l in &scene.lights {
+        for l in scene.lights.rects() {
             if let Some((t, le, pdf_light)) = l.hit_rect(o, w) {
                 if t < t_hit {
                     b = add(b, scale(mul(thr, le), power_heuristic(pdf_bsdf, pdf_light)));
@@ -301,6 +304,20 @@ fn trace(scene: &BakeScene, acc: V3, x: V3, n: V3, w: V3, pdf: f32, bounces: u32
     b
 }
 
+/// `light_numbers` index of the number that picks a delta light (past any light's index).
+const PICK: usize = usize::MAX;
+
+/// Point and spot lights: one direction, their irradiance at a point known without sampling.
+fn is_delta(l: &Light) -> bool {
+    matches!(l, Light::Point { .. } | Light::Spot { .. })
+}
+
+/// How much a delta light's sample weighs in the pick: its irradiance summed over channels,
+/// positive whenever it lights the point.
+fn pick_weight(h: V3) -> f32 {
+    h[0] + h[1] + h[2]
+}
+
 /// Where a next-event sample's light came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Source {
@@ -310,7 +327,8 @@ pub(super) enum Source {
     Emitter,
 }
 
-/// Next-event estimate of the irradiance H at (x, n) from every analytic light and one emissive
+/// Next-event estimate of the irradiance H at (x, n) from the analytic lights that reach x (the
+/// sun and rects each, one point or spot light picked, see `direct_each`) and one emissive
 /// triangle, area lights MIS-weighted against cosine sampling. Always draws the same number of
 /// random numbers, so later dimensions of a path stay aligned whatever is hit.
 pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64) -> V3 {
@@ -324,15 +342,49 @@ pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut 
 /// MIS-weighted against continuation rays drawn with density `bsdf_pdf(cos)`.
 pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut u64, bsdf_pdf: impl Fn(f32) -> f32, mut each: impl FnMut(Source, V3, V3, f32)) {
     let o = offset_ray(x, n);
-    for (i, l) in scene.lights.iter().enumerate() {
-        let (u1, u2) = (rng.next_f32(), rng.next_f32());
-        let Some(s) = l.sample(x, n, u1, u2) else { continue };
+    let key = LightSet::key(rng);
+    let mut shadow = |i: usize, s: LightSample, weight: f32, rays: &mut u64| {
         let cos = dot(n, s.dir);
         let w = s.pdf.map_or(1.0, |pl| power_heuristic(pl, bsdf_pdf(cos)));
         *rays += 1;
         let tmax = if s.dist.is_finite() { s.dist * (1.0 - SHADOW_SHORTEN) } else { f32::INFINITY };
         if !scene.occluded(&Ray { origin: o, dir: s.dir, tmin: 0.0, tmax }) {
-            each(Source::Light(i), s.dir, scale(s.h, w), cos);
+            each(Source::Light(i), s.dir, scale(s.h, w * weight), cos);
+        }
+    };
+    // The sun and rect lights: one sample each. Point and spot lights: their unoccluded
+    // irradiance is known exactly (a delta light has one direction), so one of them is picked in
+    // proportion to it and its sample divided by that probability: one shadow ray instead of one
+    // per light, and no noise from the choice when they are all in view.
+    let mut delta_total = 0.0f32;
+    scene.lights.near(x, |i, l| {
+        if is_delta(l) {
+            delta_total += l.sample(x, n, 0.0, 0.0).map_or(0.0, |s| pick_weight(s.h));
+        } else {
+            let (u1, u2) = light_numbers(key, i);
+            if let Some(s) = l.sample(x, n, u1, u2) {
+                shadow(i, s, 1.0, rays);
+            }
+        }
+    });
+    if delta_total > 0.0 {
+        let mut target = light_numbers(key, PICK).0 * delta_total;
+        let mut picked = None;
+        scene.lights.near(x, |i, l| {
+            if !is_delta(l) || target < 0.0 {
+                return;
+            }
+            if let Some(s) = l.sample(x, n, 0.0, 0.0) {
+                let w = pick_weight(s.h);
+                if w > 0.0 {
+                    // The last light with weight takes what rounding leaves past the end.
+                    picked = Some((i, s, w));
+                    target -= w;
+                }
+            }
+        });
+        if let Some((i, s, w)) = picked {
+            shadow(i, s, delta_total / w, rays);
         }
     }
     if scene.has_emitters() {

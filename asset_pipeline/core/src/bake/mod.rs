@@ -6,6 +6,7 @@
 
 pub mod bvh;
 pub mod integrator;
+pub mod light_set;
 pub mod lights;
 pub mod material;
 pub mod probes;

@@ -22,6 +22,7 @@
 
 use super::bvh::{Hit, Ray};
 use super::integrator::{direct, par_bake, sample_path, BakeSettings, Cancelled};
+use super::light_set::{light_numbers, LightSet};
 use super::lights::Light;
 use super::sampling::*;
 use super::scene::BakeScene;
@@ -102,14 +103,15 @@ fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u6
     for k in 0..n {
         let mut rng = Rng::for_sample(s.seed, id, k as u64);
         // Analytic lights: one sample each, a delta of its irradiance at normal incidence.
-        for light in &scene.lights {
-            let (u1, u2) = (rng.next_f32(), rng.next_f32());
+        let key = LightSet::key(&mut rng);
+        scene.lights.near(x, |i, light| {
+            let (u1, u2) = light_numbers(key, i);
             let toward = match *light {
                 Light::Sun { dir, .. } => scale(dir, -1.0),
                 Light::Point { pos, .. } | Light::Spot { pos, .. } => normalize(sub(pos, x)),
                 Light::Rect { c, .. } => normalize(sub(c, x)),
             };
-            let Some(ls) = light.sample(x, toward, u1, u2) else { continue };
+            let Some(ls) = light.sample(x, toward, u1, u2) else { return };
             let tmax = if ls.dist.is_finite() { ls.dist * (1.0 - SHADOW_SHORTEN) } else { f32::INFINITY };
             *rays += 1;
             let visible = !scene.occluded(&Ray { origin: x, dir: ls.dir, tmin: 0.0, tmax });
@@ -120,7 +122,7 @@ fn bake_probe(scene: &BakeScene, x: V3, id: u64, s: &BakeSettings, rays: &mut u6
                 // sample() scaled the light's irradiance by cos(toward, dir): undo it.
                 add_delta(&mut sh, ls.dir, ls.h, 1.0 / dot(toward, ls.dir) / n as f32);
             }
-        }
+        });
         // One uniform sphere ray: the radiance coming back along it (Monte Carlo weight 4 pi / N).
         let w = uniform_cone(rng.next_f32(), rng.next_f32(), -1.0);
         let (l, back) = incoming(scene, x, w, s.bounces, &mut rng, rays);

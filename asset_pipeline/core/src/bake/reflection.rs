@@ -146,7 +146,7 @@ fn radiance(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: 
     let t_hit = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
     // Rect lights are not geometry: their emitting face shows where the ray crosses it first.
     let mut l = [0.0; 3];
-    for light in &scene.lights {
+    for light in scene.lights.rects() {
         if let Some((t, lum, _)) = light.hit_rect(x, w) {
             if t < t_hit {
                 l = add(l, lum);

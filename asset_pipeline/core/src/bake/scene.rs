@@ -4,6 +4,7 @@
 //! (points an alpha test cuts out are passed through, in the BVH walk itself).
 
 use super::bvh::{Bvh, Hit, Ray};
+use super::light_set::LightSet;
 use super::lights::Light;
 use super::material::{Material, Surfaces, VertexAttributes};
 use super::sampling::*;
@@ -33,7 +34,7 @@ pub struct BakeScene {
     /// Per triangle: probability of picking it / its area (the area pdf of emitter sampling);
     /// 0 for triangles that are not emitters.
     emitter_pdf: Vec<f32>,
-    pub(super) lights: Vec<Light>,
+    pub(super) lights: LightSet,
     pub(super) sky: Option<V3>,
     /// Some triangle may let rays through: queries go through the hit filter.
     filtered: bool,
@@ -112,7 +113,7 @@ impl BakeScene {
             emitters,
             emitter_cdf,
             emitter_pdf,
-            lights,
+            lights: LightSet::new(lights),
             sky,
             filtered,
         })
