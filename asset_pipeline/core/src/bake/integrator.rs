@@ -304,9 +304,6 @@ fn trace(scene: &BakeScene, acc: V3, x: V3, n: V3, w: V3, pdf: f32, bounces: u32
     b
 }
 
-/// `light_numbers` index of the number that picks a delta light (past any light's index).
-const PICK: usize = usize::MAX;
-
 /// Point and spot lights: one direction, their irradiance at a point known without sampling.
 fn is_delta(l: &Light) -> bool {
     matches!(l, Light::Point { .. } | Light::Spot { .. })
@@ -354,38 +351,28 @@ pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: 
     };
     // The sun and rect lights: one sample each. Point and spot lights: their unoccluded
     // irradiance is known exactly (a delta light has one direction), so one of them is picked in
-    // proportion to it and its sample divided by that probability: one shadow ray instead of one
-    // per light, and no noise from the choice when they are all in view.
-    let mut delta_total = 0.0f32;
+    // proportion to it, in one pass (weighted reservoir sampling: the light seen with running
+    // total T replaces the pick with probability w / T, its own number deciding), and its sample
+    // divided by that probability: one shadow ray instead of one per light, and no noise from the
+    // choice when they are all in view.
+    let (mut total, mut picked) = (0.0f32, None);
     scene.lights.near(x, |i, l| {
-        if is_delta(l) {
-            delta_total += l.sample(x, n, 0.0, 0.0).map_or(0.0, |s| pick_weight(s.h));
-        } else {
-            let (u1, u2) = light_numbers(key, i);
-            if let Some(s) = l.sample(x, n, u1, u2) {
-                shadow(i, s, 1.0, rays);
+        let (u1, u2) = light_numbers(key, i);
+        let Some(s) = l.sample(x, n, u1, u2) else { return };
+        if !is_delta(l) {
+            shadow(i, s, 1.0, rays);
+            return;
+        }
+        let w = pick_weight(s.h);
+        if w > 0.0 {
+            total += w;
+            if u1 * total < w {
+                picked = Some((i, s, w));
             }
         }
     });
-    if delta_total > 0.0 {
-        let mut target = light_numbers(key, PICK).0 * delta_total;
-        let mut picked = None;
-        scene.lights.near(x, |i, l| {
-            if !is_delta(l) || target < 0.0 {
-                return;
-            }
-            if let Some(s) = l.sample(x, n, 0.0, 0.0) {
-                let w = pick_weight(s.h);
-                if w > 0.0 {
-                    // The last light with weight takes what rounding leaves past the end.
-                    picked = Some((i, s, w));
-                    target -= w;
-                }
-            }
-        });
-        if let Some((i, s, w)) = picked {
-            shadow(i, s, delta_total / w, rays);
-        }
+    if let Some((i, s, w)) = picked {
+        shadow(i, s, total / w, rays);
     }
     if scene.has_emitters() {
         let (u0, u1, u2) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
