@@ -6,6 +6,7 @@
 //! units of the page (endpoint k of side A is the same 3D point as endpoint k of side B).
 
 use cook_core::exr_io;
+use cook_core::lightmap_mosaic::{self, Mosaic};
 use cook_core::lightmap_post::{self, Seam, SeamMesh, SeamOptions, StitchOptions};
 use numpy::ndarray::{Array2, Array3, Array4};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyUntypedArrayMethods};
@@ -118,33 +119,35 @@ fn seams_from_array(a: &PyReadonlyArray4<'_, f64>) -> PyResult<Vec<Seam>> {
     Ok(f.chunks_exact(8).map(|c| Seam { a: [[c[0], c[1]], [c[2], c[3]]], b: [[c[4], c[5]], [c[6], c[7]]] }).collect())
 }
 
-/// Stitch the seams of a page: returns `(rgb, info)`, a new (h, w, 3) float32 image whose two
-/// sides of every seam interpolate (bilinearly) to nearly the same values, and a dict with
-/// `seams`, `constraints`, `texels_changed`, `iterations`, `mismatch_before`/`mismatch_after`
-/// ((max, mean) absolute difference along the seams).
+/// Stitch the seams of a page: returns `(image, info)`, a new (h, w, c) float32 image (any
+/// number of channels c: a directional page's images stacked are stitched in one call) whose
+/// two sides of every seam interpolate (bilinearly) to nearly the same values, and a dict with
+/// `seams`, `constraints`, `groups`, `texels_changed`, `iterations`,
+/// `mismatch_before`/`mismatch_after` ((max, mean) absolute difference along the seams).
 #[pyfunction]
-#[pyo3(signature = (rgb, seams, samples_per_texel=2.0, strength=0.03, max_iterations=1000))]
+#[pyo3(signature = (image, seams, samples_per_texel=2.0, strength=0.03, max_iterations=1000))]
 fn stitch_seams<'py>(
     py: Python<'py>,
-    rgb: PyReadonlyArray3<'py, f32>,
+    image: PyReadonlyArray3<'py, f32>,
     seams: PyReadonlyArray4<'py, f64>,
     samples_per_texel: f64,
     strength: f64,
     max_iterations: usize,
 ) -> PyResult<(Bound<'py, numpy::PyArray3<f32>>, Bound<'py, PyDict>)> {
-    let (h, w) = image_shape(&rgb)?;
+    let (h, w, c) = (image.shape()[0], image.shape()[1], image.shape()[2]);
     let seams = seams_from_array(&seams)?;
-    let mut img = contiguous(&rgb, "rgb")?.to_vec();
+    let mut img = contiguous(&image, "image")?.to_vec();
     let opt = StitchOptions { samples_per_texel, lambda: strength, max_iterations };
-    let st = py.detach(|| lightmap_post::stitch_seams(&mut img, w, h, &seams, &opt)).map_err(PyValueError::new_err)?;
+    let st = py.detach(|| lightmap_post::stitch_seams_channels(&mut img, c, w, h, &seams, &opt)).map_err(PyValueError::new_err)?;
     let d = PyDict::new(py);
     d.set_item("seams", st.seams)?;
     d.set_item("constraints", st.constraints)?;
+    d.set_item("groups", st.groups)?;
     d.set_item("texels_changed", st.texels_changed)?;
     d.set_item("iterations", st.iterations)?;
     d.set_item("mismatch_before", st.mismatch_before)?;
     d.set_item("mismatch_after", st.mismatch_after)?;
-    Ok((Array3::from_shape_vec((h, w, 3), img).expect("page size").into_pyarray(py), d))
+    Ok((Array3::from_shape_vec((h, w, c), img).expect("page size").into_pyarray(py), d))
 }
 
 /// `(max, mean)` absolute difference between the two sides' bilinear lookups along the seams.
@@ -221,9 +224,62 @@ fn lightmap_log_average(page: Bound<'_, PyAny>, direction: Option<PyReadonlyArra
     Ok((sum.sum, sum.count))
 }
 
+/// A page's charts packed for denoising in few calls (`cook_core::lightmap_mosaic`):
+/// `DenoiseMosaic(rgb, chart, margin)` plans the tiles of `rgb` (h, w, 3) float32 with `chart`
+/// (h, w) uint32; `sheets()` gives the images to denoise, `scatter(outputs)` the page with every
+/// tiled chart's texels replaced by the denoised ones (a new array; the rest as in `rgb`).
+#[pyclass(frozen, name = "DenoiseMosaic", module = "asset_pipeline._core")]
+pub struct PyDenoiseMosaic {
+    mosaic: Mosaic,
+    rgb: Vec<f32>,
+    chart: Vec<u32>,
+    h: usize,
+    w: usize,
+}
+
+#[pymethods]
+impl PyDenoiseMosaic {
+    #[new]
+    fn new(py: Python<'_>, rgb: PyReadonlyArray3<'_, f32>, chart: PyReadonlyArray2<'_, u32>, margin: usize) -> PyResult<Self> {
+        let (h, w) = image_shape(&rgb)?;
+        if chart.shape() != [h, w] {
+            return Err(PyValueError::new_err(format!("chart has shape {:?}, expected ({h}, {w})", chart.shape())));
+        }
+        let rgb = contiguous(&rgb, "rgb")?.to_vec();
+        let chart = contiguous(&chart, "chart")?.to_vec();
+        let mosaic = py.detach(|| lightmap_mosaic::plan(&rgb, &chart, w, h, margin)).map_err(PyValueError::new_err)?;
+        Ok(PyDenoiseMosaic { mosaic, rgb, chart, h, w })
+    }
+
+    /// Charts tiled (the all-zero ones are not).
+    #[getter]
+    fn tiles(&self) -> usize {
+        self.mosaic.tiles.len()
+    }
+
+    /// The sheets to denoise: a list of (h, w, 3) float32 arrays.
+    fn sheets<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, numpy::PyArray3<f32>>> {
+        let sheets = py.detach(|| lightmap_mosaic::gather(&self.mosaic, &self.rgb, &self.chart, self.w));
+        sheets
+            .into_iter()
+            .zip(&self.mosaic.sheets)
+            .map(|(s, &(h, w))| Array3::from_shape_vec((h, w, 3), s).expect("sheet size").into_pyarray(py))
+            .collect()
+    }
+
+    /// The page with the denoised sheets (`outputs`, as `sheets()` gave them) put back.
+    fn scatter<'py>(&self, py: Python<'py>, outputs: Vec<PyReadonlyArray3<'py, f32>>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let views: Vec<&[f32]> = outputs.iter().map(|o| contiguous(o, "sheet")).collect::<PyResult<_>>()?;
+        let mut out = self.rgb.clone();
+        py.detach(|| lightmap_mosaic::scatter(&self.mosaic, &views, &mut out, &self.chart, self.w)).map_err(PyValueError::new_err)?;
+        Ok(Array3::from_shape_vec((self.h, self.w, 3), out).expect("page size").into_pyarray(py))
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(lightmap_log_average, m)?)?;
     m.add_function(wrap_pyfunction!(dilate_lightmap, m)?)?;
+    m.add_class::<PyDenoiseMosaic>()?;
     m.add_function(wrap_pyfunction!(find_uv_seams, m)?)?;
     m.add_function(wrap_pyfunction!(stitch_seams, m)?)?;
     m.add_function(wrap_pyfunction!(seam_mismatch, m)?)?;

@@ -26,6 +26,7 @@ pub mod uv_raster;
 pub mod wire;
 pub mod exr_io;
 pub mod lightmap_post;
+pub mod lightmap_mosaic;
 pub mod lod;
 pub mod mips;
 

@@ -10,13 +10,16 @@ this module orders it and runs the optional denoiser.
 
 Order, and why:
 
-1. **Denoise** (optional, ``pyoidn``, OIDN's ``RTLightmap`` filter) chart by chart: each chart's
-   covered texels are cut out with a margin, the margin filled by dilating that chart alone (then
-   the chart's mean), so the denoiser never sees another chart, a black gutter or the page edge
-   of the atlas, and only the chart's own covered texels are taken back. No energy moves between
-   charts. ``RTLightmap`` takes no albedo/normal auxiliary images (OIDN's API: colour only; the
-   ``pyoidn`` wrapper rejects them), so none are passed. Without ``pyoidn`` this step is skipped
-   with a warning.
+1. **Denoise** (optional, ``pyoidn``, OIDN's ``RTLightmap`` filter), every chart as if alone:
+   each chart's covered texels are cut out with a margin, scaled to a mean of 1, the margin
+   filled by dilating that chart alone (then the chart's mean), so the denoiser never sees
+   another chart's light, a black gutter or the page edge of the atlas, and only the chart's own
+   covered texels are taken back, scaled back. No energy moves between charts. The tiles are
+   packed into a few sheets, one denoiser call each (``_core.DenoiseMosaic``; why the tiles of a
+   sheet stay apart: ``cook_core::lightmap_mosaic``). All-zero charts are not denoised (OIDN
+   makes faint light out of zeros). ``RTLightmap`` takes no albedo/normal auxiliary images
+   (OIDN's API: colour only; the ``pyoidn`` wrapper rejects them), so none are passed. Without
+   ``pyoidn`` this step is skipped with a warning.
 2. **Dilate** ``rings`` texels into the gutters (after denoising: the denoiser's output is what
    must be extended, and denoising the dilated ring would blur gutter values back into charts).
 3. **Stitch seams**: last of the image steps, since denoising (and dilation) re-open seams; the
@@ -47,7 +50,12 @@ class LightmapPostSettings:
     dilate_rings: int = 4
     denoise: bool = True
     # Texels of context around each chart handed to the denoiser (filled from that chart only).
-    denoise_margin: int = 8
+    # 2, not 8: measured on the 100k-triangle benchmark level's page against a second bake with
+    # another seed (the mean squared error to an independent unbiased bake ranks denoisers as
+    # their error to the truth does), margins of 1-2 came out as good as 8 or better (relative
+    # MSE 0.1008 at 2 against 0.1048 at 8, per-chart mean drift 0.36 % against 0.66 %) and denoise
+    # 2.4x fewer texels.
+    denoise_margin: int = 2
     stitch: bool = True
     seam_samples_per_texel: float = 2.0
     # Least-squares weight of "keep the baked value" against "both sides agree" (smaller closes
@@ -91,11 +99,16 @@ def page_seams(lods: Sequence[ir.Lod], layout: ir.LightmapLayout, page: int, *, 
                                min_normal_cos=float(min_normal_cos))
 
 
-def stitch(rgb: np.ndarray, seams: np.ndarray, settings: LightmapPostSettings | None = None) -> tuple[np.ndarray, dict]:
-    """Make both sides of every seam interpolate to the same values; returns ``(rgb, info)``."""
+def stitch(img: np.ndarray, seams: np.ndarray, settings: LightmapPostSettings | None = None) -> tuple[np.ndarray, dict]:
+    """Make both sides of every seam interpolate to the same values; returns ``(img, info)``.
+    ``img`` is (h, w, c) float32 with any number of channels (the system is solved once per
+    channel; stacking a page's images stitches them in one call)."""
     s = settings or LightmapPostSettings()
+    img = np.ascontiguousarray(img, np.float32)
+    if img.ndim != 3 or img.shape[2] < 1:
+        raise ValueError(f"lightmap image has shape {img.shape}, expected (h, w, channels)")
     seams = np.ascontiguousarray(seams, np.float64).reshape(-1, 2, 2, 2)
-    return _core.stitch_seams(_check(rgb), seams, float(s.seam_samples_per_texel), float(s.seam_strength))
+    return _core.stitch_seams(img, seams, float(s.seam_samples_per_texel), float(s.seam_strength))
 
 
 def _load_pyoidn():
@@ -114,10 +127,11 @@ def denoiser() -> str:
     return library_version("pyoidn") if pyoidn is not None else f"no denoiser ({why})"
 
 
-def denoise(rgb: np.ndarray, chart: np.ndarray, margin: int = 8) -> tuple[np.ndarray, dict]:
-    """Denoise every chart's covered texels with OIDN's RTLightmap filter, each chart on its own
-    (see the module notes). Gutter texels are returned unchanged. If ``pyoidn`` cannot be
-    imported, warns and returns the page unchanged with ``info["denoised"] = False``."""
+def denoise(rgb: np.ndarray, chart: np.ndarray, margin: int = 2) -> tuple[np.ndarray, dict]:
+    """Denoise every chart's covered texels with OIDN's RTLightmap filter, each chart as if on
+    its own (see the module notes), many charts a call. Gutter texels are returned unchanged. If
+    ``pyoidn`` cannot be imported, warns and returns the page unchanged with
+    ``info["denoised"] = False``."""
     rgb = _check(rgb, chart)
     chart = np.ascontiguousarray(chart, np.uint32)
     pyoidn, why = _load_pyoidn()
@@ -125,34 +139,11 @@ def denoise(rgb: np.ndarray, chart: np.ndarray, margin: int = 8) -> tuple[np.nda
         warnings.warn(f"lightmap denoising skipped: pyoidn is not available ({why}); "
                       "install the cooker's 'denoise' extra (pip install 'asset_pipeline[denoise]')", RuntimeWarning, stacklevel=2)
         return rgb.copy(), {"denoised": False, "reason": why, "charts": 0}
-    out = rgb.copy()
-    h, w = chart.shape
-    covered = chart != NONE
-    ids = np.unique(chart[covered])
-    if len(ids) == 0:
-        return out, {"denoised": True, "charts": 0}
-    # Bounding box per chart, from one pass over the covered texels.
-    ys, xs = np.nonzero(covered)
-    cid = np.searchsorted(ids, chart[ys, xs])
-    y0 = np.full(len(ids), h); y1 = np.zeros(len(ids), np.int64)
-    x0 = np.full(len(ids), w); x1 = np.zeros(len(ids), np.int64)
-    np.minimum.at(y0, cid, ys); np.maximum.at(y1, cid, ys)
-    np.minimum.at(x0, cid, xs); np.maximum.at(x1, cid, xs)
-    for k, c in enumerate(ids):
-        ya, yb = max(int(y0[k]) - margin, 0), min(int(y1[k]) + margin + 1, h)
-        xa, xb = max(int(x0[k]) - margin, 0), min(int(x1[k]) + margin + 1, w)
-        mine = chart[ya:yb, xa:xb] == c
-        local = np.where(mine[..., None], rgb[ya:yb, xa:xb], 0).astype(np.float32)
-        local_chart = np.where(mine, np.uint32(0), np.uint32(NONE)).astype(np.uint32)
-        local, local_chart = _core.dilate_lightmap(np.ascontiguousarray(local), local_chart, int(margin))
-        rest = local_chart == NONE
-        if rest.any():
-            local[rest] = rgb[ya:yb, xa:xb][mine].mean(axis=0)
-        den = pyoidn.denoise(np.ascontiguousarray(local), hdr=True, filter_type="RTLightmap")
-        den = np.maximum(np.nan_to_num(np.asarray(den, np.float32), nan=0.0, posinf=0.0), 0.0)
-        region = out[ya:yb, xa:xb]
-        region[mine] = den[mine]
-    return out, {"denoised": True, "charts": int(len(ids))}
+    charts = int(len(np.unique(chart[chart != NONE])))
+    mosaic = _core.DenoiseMosaic(rgb, chart, int(margin))
+    sheets = mosaic.sheets()
+    outputs = [np.asarray(pyoidn.denoise(sheet, hdr=True, filter_type="RTLightmap"), np.float32) for sheet in sheets]
+    return mosaic.scatter(outputs), {"denoised": True, "charts": charts, "tiles": int(mosaic.tiles), "calls": len(sheets)}
 
 
 def write_exr(path: str | Path, rgb: np.ndarray) -> None:
@@ -188,7 +179,8 @@ def finish_directional_page(raw: np.ndarray, chart: np.ndarray, *, seams: np.nda
     steps on RGB images the denoiser can take, which must be non-negative HDR: b0, and for each
     axis a, ``q_a = b0 + b1_a / 2``, the irradiance of a half-strength lobe toward +a (non-negative
     since non-negative radiance keeps ``|b1| <= 2 b0``); b1 is recovered as ``2 (q_a - b0)``.
-    Each goes through the denoiser on its own. The sun's visibility is dilated and stitched, not
+    Each goes through the denoiser and dilation on its own; the seams are stitched once for all
+    of them. The sun's visibility is dilated and stitched, not
     denoised (noise there is a few penumbra texels). Returns the finished (h, w, 13) page."""
     s = _checked(settings)
     chart = np.ascontiguousarray(chart, np.uint32)
@@ -200,14 +192,19 @@ def finish_directional_page(raw: np.ndarray, chart: np.ndarray, *, seams: np.nda
     images = [b0] + [b0 + 0.5 * b1[..., :, a] for a in range(3)] + [np.repeat(raw[..., 12:13], 3, axis=2)]
     done, info, chart_out = [], {}, chart
     for k, img in enumerate(images):
-        img, chart_out, step = _finish_rgb(_check(img, chart), chart, seams, s, denoised=s.denoise and k < 4)
+        img, chart_out, step = _finish_rgb(_check(img, chart), chart, None, s, denoised=s.denoise and k < 4)
         done.append(img)
         info[["b0", "q_x", "q_y", "q_z", "sun"][k]] = step
+    # Stitched together, after every image is denoised and dilated: one system for the page's
+    # 13 channels (b0, q_x, q_y, q_z, one channel of the sun's visibility).
+    stacked = np.concatenate(done[:4] + [done[4][..., :1]], axis=2)
+    if s.stitch and seams is not None and len(seams):
+        stacked, info["stitch"] = stitch(stacked, seams, s)
     out = np.empty(raw.shape, np.float32)
-    out[..., 0:3] = done[0]
+    out[..., 0:3] = stacked[..., 0:3]
     for a in range(3):
-        out[..., 3 + a:12:3] = 2.0 * (done[1 + a] - done[0])
-    out[..., 12] = np.clip(done[4][..., 0], 0.0, 1.0)
+        out[..., 3 + a:12:3] = 2.0 * (stacked[..., 3 + 3 * a:6 + 3 * a] - stacked[..., 0:3])
+    out[..., 12] = np.clip(stacked[..., 12], 0.0, 1.0)
     return PagePost(out, chart_out, info)
 
 
