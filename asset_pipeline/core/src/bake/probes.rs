@@ -157,7 +157,7 @@ fn incoming(scene: &BakeScene, x: V3, w: V3, bounces: u32, rng: &mut Rng, rays: 
 /// Shared with the reflection probes' capture.
 pub(super) fn leaving(scene: &BakeScene, x: V3, w: V3, h: &Hit, bounces: u32, rng: &mut Rng, rays: &mut u64) -> Option<V3> {
     let s = scene.surface(x, w, h)?;
-    let b = if bounces == 0 { scale(direct(scene, s.p, s.n, rng, rays), FRAC_1_PI) } else { sample_path(scene, s.p, s.n, bounces - 1, rng, rays) };
+    let b = if bounces == 0 { scale(direct(scene, s.p, s.n, rng, rays, None), FRAC_1_PI) } else { sample_path(scene, s.p, s.n, bounces - 1, rng, rays, None) };
     let shade = scene.surfaces.shade(s.prim, s.bary);
     Some(add(shade.emission, mul(shade.albedo, b)))
 }

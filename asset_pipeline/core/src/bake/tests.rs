@@ -404,8 +404,10 @@ fn one_point_light_is_picked_and_all_in_view_bake_exactly() {
     // the others', so single channels are exact on average only (checked below).
     let (b, w) = (out.b[0].iter().map(|&v| v as f64).sum::<f64>(), want.iter().map(|&v| v as f64).sum::<f64>() / PI as f64);
     assert!((b - w).abs() <= 1e-5 * w, "channel sum: {b} want {w}");
-    // Per sample: one shadow ray and the continuation ray (which sees the black void).
-    assert_eq!(out.rays, 2 * samples as u64);
+    // Per sample the continuation ray (which sees the black void), and one shadow ray per
+    // light the first time it is picked (from a texel that stays put a delta light's shadow ray
+    // is the same ray every sample: see `SeenFrom`).
+    assert_eq!(out.rays, samples as u64 + 3);
     // A box between x and light b: B loses b's share, on average.
     s.cube([1.75, 0.5, -0.35], [0.2, 0.2, 0.2], false, 0.0, 0.0);
     let lit = lights(json);
@@ -420,6 +422,45 @@ fn one_point_light_is_picked_and_all_in_view_bake_exactly() {
         let w = without_b[c] as f64 / PI as f64;
         assert!((m - w).abs() < 4.0 * se && se < 0.02 * w, "channel {c}: {m} +- {se}, want {w}");
     }
+}
+
+#[test]
+fn a_texel_asks_once_whether_it_sees_a_point_light_and_bakes_the_same_bits() {
+    // A floor, boxes casting shadows, five point and spot lights (some hidden from some points):
+    // the bake (which remembers per point what its samples learnt of each delta light) against
+    // the same samples each asking again (`sample_path` without `SeenFrom`): the same bits, and
+    // fewer rays by exactly one per sample that picked a light already asked about.
+    let mut s = Soup::new();
+    s.quad([-5.0, 0.0, 5.0], [10.0, 0.0, 0.0], [0.0, 0.0, -10.0], 0.0, 0.0);
+    s.cube([1.0, 0.6, 0.0], [0.3, 0.6, 0.3], false, 0.0, 0.0);
+    s.cube([-1.5, 0.4, 1.0], [0.5, 0.4, 0.2], false, 0.0, 0.0);
+    let json = r#"[{"name":"a","kind":"point","intensity":40,"position":[2,1,0],"range":8},
+                   {"name":"b","kind":"point","intensity":60,"color":[1,0.6,0.3],"position":[-2,1.5,2]},
+                   {"name":"c","kind":"spot","intensity":80,"position":[0,3,0],"direction":[0,-1,0],"outer_cone":0.9},
+                   {"name":"d","kind":"point","intensity":30,"position":[-1.5,0.3,0.5],"range":3},
+                   {"name":"e","kind":"point","intensity":20,"position":[3,0.5,-2]}]"#;
+    let scene = s.scene(lights(json), Some([0.2, 0.3, 0.5]));
+    let pts: Vec<V3> = (0..40).map(|i| [-4.0 + 0.2 * i as f32, 0.0, 0.35 * (i % 7) as f32 - 1.0]).collect();
+    let nrm = vec![[0.0, 1.0, 0.0]; pts.len()];
+    let st = settings(32, 2, 11);
+    let out = bake(&scene, &pts, &nrm, &st);
+    let mut asked = 0u64;
+    for (i, (&x, &n)) in pts.iter().zip(&nrm).enumerate() {
+        let mut sum = [0.0f64; 3];
+        for k in 0..st.samples {
+            let mut rng = Rng::for_sample(st.seed, i as u64, k as u64);
+            let v = sample_path(&scene, x, n, st.bounces, &mut rng, &mut asked, None);
+            for c in 0..3 {
+                sum[c] += v[c] as f64;
+            }
+        }
+        let want = sum.map(|v| (v / st.samples as f64) as f32);
+        assert_eq!(out.b[i].map(f32::to_bits), want.map(f32::to_bits), "point {i}");
+    }
+    assert!(out.rays < asked, "{} rays remembering, {asked} asking every time", out.rays);
+    // At least one point sees each of a, b, c; each sample at most one delta shadow ray saved.
+    assert!(asked - out.rays <= (pts.len() * st.samples as usize) as u64);
+    assert!(asked - out.rays >= (pts.len() * (st.samples as usize - 5)) as u64 / 2, "{asked} -> {}", out.rays);
 }
 
 #[test]
