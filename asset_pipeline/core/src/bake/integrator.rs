@@ -338,22 +338,27 @@ pub(super) fn direct(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: &mut 
     h
 }
 
-/// Which point and spot lights one fixed point sees, learnt as its samples go: a delta light
-/// has one direction, so from a point that stays put (a lightmap texel's, over its samples) its
-/// shadow ray is the same ray every time, with the same answer. Asked once, remembered: the
-/// bake is bit-identical, with one shadow ray per light in view of the texel instead of one
-/// per sample (a fifth of the rays of a level with a point light in every room). Holds the
-/// lights near one point: a few.
+/// What one fixed point (a lightmap texel's, over its samples) learns of its lights once and
+/// keeps: the lights that reach it, in the order [`LightSet::near`] visits them, with each point
+/// or spot light's sample (a delta light has one direction: its sample there never changes),
+/// and whether it sees each delta light (its shadow ray is the same ray every sample, with the
+/// same answer). Asked once, remembered: the bake is bit-identical, with one shadow ray per
+/// light in view of the texel instead of one per sample (a sixth of the rays of a level with a
+/// point light in every room) and one walk of the light tree per texel. A few lights: those
+/// near one point.
 #[derive(Default)]
-pub(super) struct SeenFrom(Vec<(usize, bool)>);
+pub(super) struct SeenFrom {
+    near: Option<Vec<(usize, Option<LightSample>)>>,
+    visible: Vec<(usize, bool)>,
+}
 
 impl SeenFrom {
-    fn get_or(&mut self, light: usize, test: impl FnOnce() -> bool) -> bool {
-        if let Some(&(_, v)) = self.0.iter().find(|e| e.0 == light) {
+    fn visible_or(&mut self, light: usize, test: impl FnOnce() -> bool) -> bool {
+        if let Some(&(_, v)) = self.visible.iter().find(|e| e.0 == light) {
             return v;
         }
         let v = test();
-        self.0.push((light, v));
+        self.visible.push((light, v));
         v
     }
 }
@@ -375,7 +380,7 @@ pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: 
             !scene.occluded(&Ray { origin: o, dir: s.dir, tmin: 0.0, tmax })
         };
         let visible = match seen {
-            Some(seen) => seen.get_or(i, test),
+            Some(seen) => seen.visible_or(i, test),
             None => test(),
         };
         if visible {
@@ -389,9 +394,10 @@ pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: 
     // divided by that probability: one shadow ray instead of one per light, and no noise from the
     // choice when they are all in view.
     let (mut total, mut picked) = (0.0f32, None);
-    scene.lights.near(x, |i, l| {
+    // One light in range: `known` is its sample when it is a delta light whose sample `seen` holds.
+    let mut visit = |i: usize, l: &Light, known: Option<LightSample>, rays: &mut u64| {
         let (u1, u2) = light_numbers(key, i);
-        let Some(s) = l.sample(x, n, u1, u2) else { return };
+        let Some(s) = known.or_else(|| l.sample(x, n, u1, u2)) else { return };
         if !is_delta(l) {
             shadow(i, s, 1.0, rays, None);
             return;
@@ -403,7 +409,30 @@ pub(super) fn direct_each(scene: &BakeScene, x: V3, n: V3, rng: &mut Rng, rays: 
                 picked = Some((i, s, w));
             }
         }
-    });
+    };
+    let seen = match seen {
+        Some(seen) => {
+            let near = seen.near.get_or_insert_with(|| {
+                let mut near = Vec::new();
+                scene.lights.near(x, |i, l| match is_delta(l) {
+                    // A delta light that does not light x (behind it, out of its cone or
+                    // range) is skipped every sample: left out.
+                    true => near.extend(l.sample(x, n, 0.0, 0.0).map(|s| (i, Some(s)))),
+                    false => near.push((i, None)),
+                });
+                near
+            });
+            let all = scene.lights.all();
+            for &(i, known) in near.iter() {
+                visit(i, &all[i], known, rays);
+            }
+            Some(seen)
+        }
+        None => {
+            scene.lights.near(x, |i, l| visit(i, l, None, rays));
+            None
+        }
+    };
     if let Some((i, s, w)) = picked {
         shadow(i, s, total / w, rays, seen);
     }

@@ -26,6 +26,7 @@ pub enum Light {
 /// A next-event sample: unit direction to the light, distance (inf for the sun), the irradiance
 /// this sample contributes if unoccluded (lux, already divided by the pdf), and for area lights
 /// the solid-angle pdf of the sample (for MIS against cosine sampling).
+#[derive(Clone, Copy, Debug)]
 pub struct LightSample {
     pub dir: V3,
     pub dist: f32,
