@@ -238,6 +238,29 @@ def test_multiple_pages_when_the_level_exceeds_the_max_page_size():
     assert abs(stats["density_ratio"] - 1) < 0.1
 
 
+def test_a_big_level_packs_in_groups_of_a_page_each_in_parallel_and_keeps_the_rules(monkeypatch):
+    # Groups are for levels of thousands of charts (one brute-force packing of all of them
+    # scans every full page for every chart); here a small level is made to use them.
+    monkeypatch.setattr(uv2, "_GROUP_MIN_CHARTS", 0)
+    monkeypatch.setattr(uv2, "_GROUP_FILL", 0.3)
+    meshes = generated_meshes()
+    small = dataclasses.replace(SETTINGS, max_page_size=128)
+    entries = [m[:3] for m in meshes]
+    one = uv2.lightmap_uvs(entries, dataclasses.replace(small, workers=1))
+    lods, layout, stats = placed(one)
+    assert len(layout.pages) >= 3, layout.pages  # several groups, a page or more each
+    assert set(np.concatenate([l.lightmap_blocks for l in lods])) == set(range(len(layout.pages)))
+    assert stats["overlapping_texels"] == 0 and stats["texels_within_padding"] == 0
+    check_layout(lods, layout, small.padding)
+    assert abs(stats["density_ratio"] - 1) < 0.1
+    # The same layout from worker processes.
+    par = uv2.lightmap_uvs(entries, dataclasses.replace(small, workers=2))
+    assert par.layout == one.layout and par.regions == one.regions
+    for x, y in zip(one.lods, par.lods):
+        np.testing.assert_array_equal(x.attributes["uv1"], y.attributes["uv1"])
+        np.testing.assert_array_equal(x.lightmap_blocks, y.lightmap_blocks)
+
+
 def test_deterministic_and_parallel_charting_gives_the_same_result():
     meshes = [m[:3] for m in generated_meshes()]
     a = uv2.lightmap_uvs(meshes, SETTINGS)
