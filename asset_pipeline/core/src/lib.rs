@@ -205,10 +205,11 @@ pub fn check_output(out: &Path, source: &Path) -> Result<(), CookError> {
 }
 
 /// Write `pack` to `out` atomically (temporary file + rename): on failure `out` is untouched
-/// and no temporary file remains. Returns the pack's size in bytes.
+/// and no temporary file remains. Returns the pack's size in bytes. Compresses on the current
+/// rayon pool's thread count (the bytes do not depend on it).
 pub fn write_pack(pack: &Pack, out: &Path) -> Result<u64, CookError> {
     let file = out.display().to_string();
-    pack::write_pack_atomic(pack, out).map_err(|e| match e {
+    pack::write_pack_atomic(pack, out, rayon::current_num_threads()).map_err(|e| match e {
         // The pack crate's I/O message already starts with the path.
         PackError::Io(m) => CookError::io(&file, m.strip_prefix(&format!("{file}: ")).unwrap_or(&m)),
         e => CookError::BadPack { file: file.clone(), reason: format!("cooker produced a malformed pack: {e}") },

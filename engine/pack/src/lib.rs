@@ -70,17 +70,41 @@ pub const DATA_ALIGN: usize = 16;
 pub enum DataEncoding {
     /// As the GPU takes it: what tests that edit a pack's bytes in place write.
     Raw,
-    /// One zstd frame (level `ZSTD_LEVEL`): lossless, what the cooker writes. The demo level's
+    /// One zstd frame (level `zstd_level`): lossless, what the cooker writes. The demo level's
     /// blob is 2.5x smaller (11.5 -> 4.6 MB), the golem's 4.9x, PalmTree's 6.1x (its lightmap
     /// atlas is mostly empty); decoding runs once, when the pack is read.
     Zstd,
 }
 
-/// The cooker's zstd level, the highest of the normal ones: against level 12 it stores the
-/// demo level's blob in 4.58 MB instead of 4.86 (6 % less; Terrain's 2.77 instead of 2.91,
-/// the golem's 20 % less) for about 7x the encoding time (2-3 MB/s a core: seconds for the
-/// largest packs) and decoding at about 600 MB/s instead of 1 GB/s (`zstd -b12 -e19`).
+/// The cooker's zstd level for a blob of up to `ZSTD_BEST_MAX` bytes, the highest of the normal
+/// ones: against level 12 it stores the demo level's blob in 4.58 MB instead of 4.86 (6 % less;
+/// Terrain's 2.77 instead of 2.91, the golem's 20 % less) for about 7x the encoding time (2-3 MB/s
+/// a core) and decoding at about 600 MB/s instead of 1 GB/s (`zstd -b12 -e19`).
 pub const ZSTD_LEVEL: i32 = 19;
+/// Above this many bytes a blob is stored at `ZSTD_LEVEL_LARGE`: level 19 would take minutes
+/// (the 1M-triangle benchmark level's 114 MB blob: 37 s on one core, 26 s on two) to save a
+/// tenth (38.7 MB against 43.0 at level 9, which takes 1.6 s on two cores; level 12: 42.9 MB,
+/// 3.7 s; level 16: 40.7 MB, 14 s; `zstd -b9 -e19 -T2` on that blob). At 32 MiB level 19 costs
+/// about 10 s on one core.
+pub const ZSTD_BEST_MAX: usize = 32 << 20;
+/// The zstd level of a blob bigger than `ZSTD_BEST_MAX`.
+pub const ZSTD_LEVEL_LARGE: i32 = 9;
+
+/// The zstd level the cooker stores a blob of `len` bytes at.
+pub fn zstd_level(len: usize) -> i32 {
+    if len <= ZSTD_BEST_MAX { ZSTD_LEVEL } else { ZSTD_LEVEL_LARGE }
+}
+
+/// The blob as one zstd frame at `zstd_level`, its jobs on `workers` threads (at least one:
+/// zstd's multithreaded frames are the same bytes for any number of workers, unlike the
+/// single-threaded encoder's, so the pack does not depend on the cook's thread count).
+fn zstd_frame(data: &[u8], workers: usize) -> Result<Vec<u8>, PackError> {
+    let err = |e: std::io::Error| PackError::Io(format!("zstd: {e}"));
+    let mut c = zstd::bulk::Compressor::new(zstd_level(data.len())).map_err(err)?;
+    c.set_parameter(zstd::zstd_safe::CParameter::NbWorkers(workers.clamp(1, 64) as u32)).map_err(err)?;
+    c.compress(data).map_err(err)
+}
+
 /// The largest data blob a pack may decode to (a damaged or forged frame header must not make
 /// the reader allocate without bound).
 pub const MAX_DATA_BYTES: u64 = 1 << 36;
@@ -239,8 +263,14 @@ impl Pack {
         self.to_bytes_with(DataEncoding::Zstd)
     }
 
-    /// Encode to bytes (header, metadata, data stored as `encoding` says).
+    /// Encode to bytes (header, metadata, data stored as `encoding` says), compressing on one
+    /// worker thread.
     pub fn to_bytes_with(&self, encoding: DataEncoding) -> Result<Vec<u8>, PackError> {
+        self.encode(encoding, 1)
+    }
+
+    /// Encode to bytes, compressing on `workers` threads: the same bytes for any number.
+    pub fn encode(&self, encoding: DataEncoding, workers: usize) -> Result<Vec<u8>, PackError> {
         self.manifest.validate(self.data.len() as u64)?;
         self.manifest.validate_indices(&self.data)?;
         let meta = serde_json::to_vec(&self.manifest)
@@ -251,7 +281,7 @@ impl Pack {
         let data: &[u8] = match encoding {
             DataEncoding::Raw => &self.data,
             DataEncoding::Zstd => {
-                zstd = zstd::bulk::compress(&self.data, ZSTD_LEVEL).map_err(|e| PackError::Io(format!("zstd: {e}")))?;
+                zstd = zstd_frame(&self.data, workers)?;
                 &zstd
             }
         };

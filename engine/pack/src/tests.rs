@@ -336,6 +336,41 @@ fn the_data_blob_is_stored_zstd_compressed_and_read_back_exactly() {
     assert!(big.to_bytes().unwrap().len() < big.to_bytes_with(DataEncoding::Raw).unwrap().len() - 15_000);
 }
 
+/// A blob's frame is the same bytes whatever the number of compressing threads (the cook's
+/// output must not depend on the machine), and a big blob is stored at the faster level.
+#[test]
+fn the_compressed_blob_does_not_depend_on_the_worker_count_and_big_blobs_use_the_fast_level() {
+    let data_off = |b: &[u8]| u64_at(b, 40) as usize;
+    // Vertex-like data: a slowly varying sequence with noise, so every level finds matches.
+    let mut big = sample();
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let n = ZSTD_BEST_MAX + (1 << 20);
+    big.data.reserve(n);
+    for i in 0..n / 4 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        big.data.extend_from_slice(&(((i / 64) as u32).wrapping_mul(2_654_435_761) ^ (state as u32 & 0xff)).to_le_bytes());
+    }
+    assert!(big.data.len() > ZSTD_BEST_MAX);
+    let one = big.encode(DataEncoding::Zstd, 1).unwrap();
+    assert_eq!(big.encode(DataEncoding::Zstd, 3).unwrap(), one, "3 workers, other bytes");
+    assert_eq!(Pack::from_bytes(&one).unwrap(), big);
+    // The frame is level 9's, made by zstd's multithreaded encoder.
+    let mut c = zstd::bulk::Compressor::new(ZSTD_LEVEL_LARGE).unwrap();
+    c.set_parameter(zstd::zstd_safe::CParameter::NbWorkers(2)).unwrap();
+    assert_eq!(&one[data_off(&one)..], &c.compress(&big.data).unwrap()[..]);
+    // A small blob: level 19, the same bytes on any number of workers too.
+    let small = sample();
+    let a = small.encode(DataEncoding::Zstd, 1).unwrap();
+    assert_eq!(small.encode(DataEncoding::Zstd, 4).unwrap(), a);
+    assert_eq!(small.to_bytes().unwrap(), a);
+    let mut c = zstd::bulk::Compressor::new(ZSTD_LEVEL).unwrap();
+    c.set_parameter(zstd::zstd_safe::CParameter::NbWorkers(1)).unwrap();
+    assert_eq!(&a[data_off(&a)..], &c.compress(&small.data).unwrap()[..]);
+    assert_eq!((zstd_level(ZSTD_BEST_MAX), zstd_level(ZSTD_BEST_MAX + 1)), (19, 9));
+}
+
 #[test]
 fn a_bad_data_encoding_or_frame_is_malformed_not_a_panic() {
     // Rewrite the stored blob and the encoding word, with a valid checksum (a foreign writer).
@@ -368,13 +403,13 @@ fn atomic_write_leaves_no_temporary_and_replaces_whole() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("a.pack");
     std::fs::write(&path, b"old").unwrap();
-    write_pack_atomic(&sample(), &path).unwrap();
+    write_pack_atomic(&sample(), &path, 2).unwrap();
     assert_eq!(Pack::read_file(&path).unwrap(), sample());
     let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names.len(), 1, "left behind: {names:?}");
     // A write into a directory that does not exist fails and creates nothing.
     let bad = dir.join("missing/b.pack");
-    assert!(matches!(write_pack_atomic(&sample(), &bad), Err(PackError::Io(_))));
+    assert!(matches!(write_pack_atomic(&sample(), &bad, 1), Err(PackError::Io(_))));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -385,7 +420,7 @@ fn concurrent_writes_to_one_path_never_leave_a_broken_file() {
     let path = dir.join("a.pack");
     std::thread::scope(|s| {
         for _ in 0..8 {
-            s.spawn(|| write_pack_atomic(&sample(), &path).unwrap());
+            s.spawn(|| write_pack_atomic(&sample(), &path, 2).unwrap());
         }
     });
     assert_eq!(Pack::read_file(&path).unwrap(), sample());

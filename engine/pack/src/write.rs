@@ -45,9 +45,10 @@ impl PackBuilder {
 
 /// Write `pack` to `path` atomically: the bytes go to a temporary file in the same directory,
 /// are flushed to disk, and only then renamed over `path`. On any error the temporary file is
-/// removed and `path` is untouched.
-pub fn write_pack_atomic(pack: &Pack, path: &Path) -> Result<(), PackError> {
-    let bytes = pack.to_bytes()?;
+/// removed and `path` is untouched. The blob is compressed on `workers` threads (the bytes do
+/// not depend on how many).
+pub fn write_pack_atomic(pack: &Pack, path: &Path, workers: usize) -> Result<(), PackError> {
+    let bytes = pack.encode(crate::DataEncoding::Zstd, workers)?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
