@@ -15,6 +15,7 @@ import pytest
 from asset_pipeline import CookError, _core, ir
 from asset_pipeline.csg import build_level
 from asset_pipeline.level import load_level
+from asset_pipeline.vertex_format import uv_precision_warnings
 from conftest import COOK
 
 REPO = Path(__file__).resolve().parent.parent
@@ -359,6 +360,13 @@ def test_normals_crisp_on_boxes_smooth_on_cylinders(tmp_path):
     assert np.abs(n[side] - n[side][first][at.reshape(-1)]).max() < 1e-6
 
 
+def whole_repeats(uv: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """uv - world (in repeats) where that is a whole number of repeats per vertex (asserted)."""
+    shift = uv - world
+    assert np.allclose(shift, np.rint(shift), atol=2e-3), "uv0 differs from the projection by whole repeats only"
+    return np.rint(shift)
+
+
 def test_uv0_tiles_at_the_materials_scale(tmp_path):
     scene = build(tmp_path, BOX_MINUS_BOX)
     lod = scene.meshes[0].base
@@ -367,11 +375,35 @@ def test_uv0_tiles_at_the_materials_scale(tmp_path):
     vert_mat = np.zeros(len(p), dtype=int)
     vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
     s = scale[vert_mat]
-    up = n[:, 1] > 0.9  # top faces: u = x / uv_scale, v = z / uv_scale
-    assert np.allclose(uv[up] * s[up, None], p[up][:, [0, 2]], atol=1e-5)
+    up = n[:, 1] > 0.9  # top faces: u = x / uv_scale, v = z / uv_scale (plus whole repeats)
+    whole_repeats(uv[up], p[up][:, [0, 2]] / s[up, None])
     east = n[:, 0] > 0.9  # +X faces: u = -z, v = -y
-    assert np.allclose(uv[east] * s[east, None], -p[east][:, [2, 1]], atol=1e-5)
+    whole_repeats(uv[east], -p[east][:, [2, 1]] / s[east, None])
     assert set(np.round(s, 3)) == {2.0, 0.5}  # both materials' scales are in use
+
+
+def test_uv0_of_a_room_far_from_the_origin_spans_the_room_not_the_distance(tmp_path):
+    """World-space projection puts u = x on a floor and u = -z on a wall: far from the origin one
+    room's uv0 would span its distance from it. Each projection is moved by whole repeats (the
+    texture looks the same) to lie around 0, so the pack's 16-bit coordinates keep their
+    precision: the span is the room's size, every face reads the same texels as before, and
+    neighbouring faces of one projection and material stay continuous (one shift for them)."""
+    far = BOX_MINUS_BOX.replace('size = [4, 3, 4]', 'size = [4, 3, 4]\n    translation = [1200, 40, -900]')
+    scene = build(tmp_path, far.replace('translation = [0.5, 0, 0]', 'translation = [1200.5, 40, -900]'))
+    lod = scene.meshes[0].base
+    p, uv, n = (lod.attributes[k].astype(np.float64) for k in ("position", "uv0", "normal"))
+    assert p[:, 0].min() > 1100, "the room is far from the origin"
+    scale = np.array([m.uv_scale for m in load_level(tmp_path / "level.toml").materials])
+    vert_mat = np.zeros(len(p), dtype=int)
+    vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
+    s = scale[vert_mat]
+    size = (p.max(axis=0) - p.min(axis=0)).max()
+    assert np.ptp(uv) <= size / s.min() + 2, f"uv0 spans {np.ptp(uv):.1f} repeats for a room of {size:.1f} m"
+    for face, world in ((n[:, 1] > 0.9, lambda q: q[:, [0, 2]]), (n[:, 0] > 0.9, lambda q: -q[:, [2, 1]]), (n[:, 2] < -0.9, lambda q: -q[:, [0, 1]])):
+        shifts = whole_repeats(uv[face], world(p[face]) / s[face, None])
+        for scale_of in np.unique(s[face]):
+            assert len(np.unique(shifts[s[face] == scale_of], axis=0)) == 1, "one shift per projection and material: its faces stay continuous"
+    assert not uv_precision_warnings(scene), "the pack's 16-bit uv0 holds it"
 
 
 def test_nested_objects_and_intersection(tmp_path):

@@ -116,6 +116,15 @@ def surface(pos: np.ndarray, tris: np.ndarray, tri_mat: np.ndarray, uv_scale: np
     U, V = PROJ_U[vc], PROJ_V[vc]
     s = uv_scale[vm][:, None]
     uv = np.stack([np.sum(vp * U, axis=1), np.sum(vp * V, axis=1)], axis=1) / s
+    # Textures repeat, so each projection's coordinates move by whole repeats to lie around 0
+    # (one shift per projection and material: materials repeat at their own scales). Far from
+    # the origin a room's uv0 would otherwise span the distance between its faces' axes (u = x
+    # on its floor, u = -z on its walls: 400 repeats for one room of the 1M-triangle benchmark
+    # level), more than the pack's 16-bit coordinates hold to a quarter texel.
+    group = vc.astype(np.int64) * (int(vm.max(initial=0)) + 1) + vm
+    for g in np.unique(group):
+        at = group == g
+        uv[at] -= np.floor(0.5 * (uv[at].min(axis=0) + uv[at].max(axis=0)))
     # tangent = dP/du: in the surface, along which v stays constant (perpendicular to V)
     tan = np.cross(vn, V)
     tan *= np.where(np.sum(tan * U, axis=1) < 0, -1.0, 1.0)[:, None]
