@@ -44,8 +44,9 @@ struct Grid {
 /// Grid cells per ranged light, about: a room's light then covers a few cells and a cell holds
 /// the few lights around it.
 const CELLS_PER_LIGHT: f32 = 8.0;
-/// The most cell entries (light x cell) the grid may hold; coarser cells beyond.
+/// The most cell entries (light x cell) and cells the grid may hold; coarser cells beyond.
 const MAX_ENTRIES: usize = 1 << 24;
+const MAX_CELLS: usize = 1 << 22;
 
 impl Grid {
     fn new(ranged: &[(u32, V3, f32)]) -> Grid {
@@ -76,7 +77,9 @@ impl Grid {
             let grid = Grid { lo, inv_cell, dims, start: Vec::new(), items: Vec::new() };
             let spans: Vec<[(u32, u32); 3]> = boxes.iter().map(|(a, b)| std::array::from_fn(|k| (grid.coord(a, k), grid.coord(b, k)))).collect();
             let entries: usize = spans.iter().map(|s| s.iter().map(|&(a, b)| (b - a + 1) as usize).product::<usize>()).sum();
-            if entries > MAX_ENTRIES {
+            let cells: usize = dims.iter().map(|&d| d as usize).product();
+            // (One cell holds every light once: the coarsest grid, taken whatever its size.)
+            if (entries > MAX_ENTRIES || cells > MAX_CELLS) && dims != [1, 1, 1] {
                 cell *= 2.0;
                 continue;
             }
