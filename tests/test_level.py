@@ -360,6 +360,14 @@ def test_normals_crisp_on_boxes_smooth_on_cylinders(tmp_path):
     assert np.abs(n[side] - n[side][first][at.reshape(-1)]).max() < 1e-6
 
 
+def vertex_uv_scale(lod: ir.Lod, level: Path) -> np.ndarray:
+    """Each vertex's material's uv_scale (metres per repeat)."""
+    scale = np.array([m.uv_scale for m in load_level(level).materials])
+    vert_mat = np.zeros(len(lod.attributes["position"]), dtype=int)
+    vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
+    return scale[vert_mat]
+
+
 def whole_repeats(uv: np.ndarray, world: np.ndarray) -> np.ndarray:
     """uv - world (in repeats) where that is a whole number of repeats per vertex (asserted)."""
     shift = uv - world
@@ -371,10 +379,7 @@ def test_uv0_tiles_at_the_materials_scale(tmp_path):
     scene = build(tmp_path, BOX_MINUS_BOX)
     lod = scene.meshes[0].base
     p, uv, n = (lod.attributes[k].astype(np.float64) for k in ("position", "uv0", "normal"))
-    scale = np.array([m.uv_scale for m in load_level(tmp_path / "level.toml").materials])
-    vert_mat = np.zeros(len(p), dtype=int)
-    vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
-    s = scale[vert_mat]
+    s = vertex_uv_scale(lod, tmp_path / "level.toml")
     up = n[:, 1] > 0.9  # top faces: u = x / uv_scale, v = z / uv_scale (plus whole repeats)
     whole_repeats(uv[up], p[up][:, [0, 2]] / s[up, None])
     east = n[:, 0] > 0.9  # +X faces: u = -z, v = -y
@@ -393,10 +398,7 @@ def test_uv0_of_a_room_far_from_the_origin_spans_the_room_not_the_distance(tmp_p
     lod = scene.meshes[0].base
     p, uv, n = (lod.attributes[k].astype(np.float64) for k in ("position", "uv0", "normal"))
     assert p[:, 0].min() > 1100, "the room is far from the origin"
-    scale = np.array([m.uv_scale for m in load_level(tmp_path / "level.toml").materials])
-    vert_mat = np.zeros(len(p), dtype=int)
-    vert_mat[lod.triangles.ravel()] = np.repeat(lod.materials, 3)
-    s = scale[vert_mat]
+    s = vertex_uv_scale(lod, tmp_path / "level.toml")
     size = (p.max(axis=0) - p.min(axis=0)).max()
     assert np.ptp(uv) <= size / s.min() + 2, f"uv0 spans {np.ptp(uv):.1f} repeats for a room of {size:.1f} m"
     for face, world in ((n[:, 1] > 0.9, lambda q: q[:, [0, 2]]), (n[:, 0] > 0.9, lambda q: -q[:, [2, 1]]), (n[:, 2] < -0.9, lambda q: -q[:, [0, 1]])):
