@@ -966,7 +966,8 @@ fn bvh_raw_bench() {
     let dir: Vec<V3> = (0..nr).map(|i| [f(w + 3 * i), f(w + 3 * i + 1), f(w + 3 * i + 2)]).collect();
     let t0 = std::time::Instant::now();
     let bvh = Bvh::build(&pos, &tris);
-    println!("build {:.1} ms, {} nodes", t0.elapsed().as_secs_f64() * 1e3, bvh.node_count());
+    let (blocks, used) = bvh.block_fill();
+    println!("build {:.1} ms, {} nodes, {blocks} leaf blocks holding {:.2} triangles each", t0.elapsed().as_secs_f64() * 1e3, bvh.node_count(), used as f64 / blocks as f64);
     let n = std::env::var("BVH_RAYS").ok().and_then(|s| s.parse().ok()).unwrap_or(nr).min(nr);
     let rays: Vec<Ray> = (0..n).map(|i| Ray { origin: org[i], dir: dir[i], tmin: 0.0, tmax: f32::INFINITY }).collect();
     let mut best = f64::INFINITY;

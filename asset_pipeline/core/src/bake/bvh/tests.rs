@@ -3,7 +3,7 @@
 //! (Hits against brute force are checked in `bake::tests`.)
 
 use super::lanes::{Lanes, Scalar};
-use super::traverse::{Kernel, TriRay};
+use super::traverse::{BoxRay, Kernel, TriRay};
 use super::triangle::{intersect, Prepared};
 use super::wide::{child, Tris, BLOCK};
 use super::*;
@@ -40,6 +40,12 @@ impl Bvh {
 
     pub(crate) fn node_count(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// (leaf blocks, triangle slots holding a distinct triangle): how full the leaves are.
+    pub(crate) fn block_fill(&self) -> (usize, usize) {
+        let used = self.blocks.iter().map(|b| (1..BLOCK).filter(|&l| b.id[l] != b.id[l - 1]).count() + 1).sum();
+        (self.blocks.len(), used)
     }
 
     fn with_kernel(mut self, k: Kernel) -> Bvh {
@@ -85,6 +91,13 @@ fn every_kernel_gives_the_portable_hits_to_the_bit() {
     // Finite tmax and tmin too, to exercise both bounds.
     rays.extend(random_rays(&mut r, 2000, -12.0, 12.0).into_iter().map(|ray| Ray { tmin: 0.5, tmax: 6.0, ..ray }));
     let portable = Bvh::build(&pos, &tris).with_kernel(Kernel::Portable);
+    // And bounds a hair either side of each hit, where box and triangle roundings meet.
+    let near: Vec<Ray> = rays[..4000]
+        .iter()
+        .filter_map(|ray| portable.closest(ray).map(|h| (ray, h.t)))
+        .flat_map(|(ray, t)| [0.99999f32, 1.0, 1.00001].into_iter().flat_map(move |f| [Ray { tmax: t * f, ..*ray }, Ray { tmin: t * f, ..*ray }]))
+        .collect();
+    rays.extend(near);
     let want: Vec<_> = rays.iter().map(|ray| (portable.closest(ray), portable.any(ray))).collect();
     assert!(want.iter().filter(|w| w.0.is_some()).count() > rays.len() / 4);
     for k in Kernel::available() {
@@ -284,4 +297,98 @@ fn the_tree_is_the_same_on_any_thread_count_and_its_nodes_are_full() {
     let slots: usize = a.nodes.iter().map(|n| (0..wide::WIDTH).filter(|&s| used(n, s)).count()).sum();
     let per_node = slots as f64 / a.nodes.len() as f64;
     assert!(per_node > 6.5, "{per_node:.2} of 8 slots used per node");
+}
+
+/// The slab test never drops a box the ray enters (its exact interval, in f64, is not empty),
+/// and drops those it clearly misses, plain and AVX: boxes far from the origin, rays starting
+/// on, just inside or just outside a face, tiny direction components.
+fn assert_box_test_is_conservative<B: Lanes>() {
+    let mut r = Rng::for_sample(21, 0, 0);
+    let (mut kept, mut dropped) = (0, 0);
+    for case in 0..40_000 {
+        let scale = [1.0f32, 1e3, 1e5][case % 3];
+        let centre = rand3(&mut r, -scale, scale);
+        let mut n = wide::Wide::EMPTY;
+        let mut boxes = [([0f32; 3], [0f32; 3]); 8];
+        for (slot, b) in boxes.iter_mut().enumerate() {
+            let half = rand3(&mut r, 0.0, scale * 0.01 + 0.5);
+            let off = rand3(&mut r, -scale * 0.02 - 1.0, scale * 0.02 + 1.0);
+            for k in 0..3 {
+                b.0[k] = centre[k] + off[k] - half[k];
+                b.1[k] = centre[k] + off[k] + half[k];
+                n.planes[2 * k][slot] = b.0[k];
+                n.planes[2 * k + 1][slot] = b.1[k];
+            }
+        }
+        // The origin on a face of box 0, nudged by a few ulps either way, or anywhere near.
+        let b0 = boxes[0];
+        let mut o = [0, 1, 2].map(|k| b0.0[k] + (b0.1[k] - b0.0[k]) * r.next_f32());
+        if case % 2 == 0 {
+            let k = (r.next_u32() % 3) as usize;
+            o[k] = if r.next_f32() < 0.5 { b0.0[k] } else { b0.1[k] };
+            for _ in 0..r.next_u32() % 4 {
+                o[k] = if r.next_f32() < 0.5 { o[k].next_up() } else { o[k].next_down() };
+            }
+        } else if case % 4 == 1 {
+            o = rand3(&mut r, -scale, scale);
+        }
+        let mut dir = rand3(&mut r, -1.0, 1.0);
+        if case % 5 == 0 {
+            dir[(r.next_u32() % 3) as usize] *= 1e-6;
+        }
+        let ray = Ray { origin: o, dir, tmin: if case % 7 == 0 { 0.25 } else { 0.0 }, tmax: f32::INFINITY };
+        let tcull = if case % 3 == 0 { 1e30 } else { scale * 0.05 };
+        let (mask, _) = BoxRay::<B>::new(&ray).enter(&n, tcull);
+        for (slot, b) in boxes.iter().enumerate() {
+            let (mut lo, mut hi) = (ray.tmin as f64, tcull as f64);
+            for k in 0..3 {
+                let (a, c) = ((b.0[k] as f64 - o[k] as f64) / dir[k] as f64, (b.1[k] as f64 - o[k] as f64) / dir[k] as f64);
+                lo = lo.max(a.min(c));
+                hi = hi.min(a.max(c));
+            }
+            let got = mask >> slot & 1 == 1;
+            if lo <= hi {
+                assert!(got, "case {case} slot {slot}: a box the ray enters over [{lo}, {hi}] was dropped: {ray:?} {b:?}");
+                kept += 1;
+            } else if lo > hi + 1e-3 * (lo.abs() + hi.abs()) {
+                assert!(!got, "case {case} slot {slot}: a box the ray misses ([{lo}, {hi}]) was kept: {ray:?} {b:?}");
+                dropped += 1;
+            }
+        }
+    }
+    assert!(kept > 20_000 && dropped > 100_000, "kept {kept}, dropped {dropped}");
+}
+
+#[test]
+fn box_test_keeps_every_box_the_ray_enters() {
+    assert_box_test_is_conservative::<Scalar<8>>();
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        assert_box_test_is_conservative::<super::lanes::Avx>();
+    }
+}
+
+/// Rays whose tmin lies a hair before a hit (found among the demo level's rays with tmin
+/// moved up to 0.99999 of their hit): the triangle test puts the hit just after tmin, while the
+/// box of the (pre-split) long triangle is left just before it. Boxes are culled against tmin
+/// lowered by the cull slack, so the walk finds what the brute-force test finds.
+#[test]
+fn a_hit_just_after_tmin_is_found_as_brute_force_finds_it() {
+    // The level's floor (60 m) and a sill (22 m), each flat in one axis: every box of their
+    // (pre-split) parts is flat there, so its exit on that axis is where the ray crosses.
+    let scenes = [
+        (vec![[30.0, 0.0, 32.0], [30.0, 0.0, -28.0], [-30.0, 0.0, -28.0]], [9.28369, -0.07022603, 5.2010283], [-0.771693, 0.5272763, 0.35562572], 0.13318649),
+        (vec![[-11.0, 0.3, 5.2], [11.0, -0.1, 5.2], [11.0, 0.3, 5.2]], [6.1339073, 0.0007133907, 5.185656], [0.77647173, 0.5564271, 0.2957711], 0.04849686),
+    ];
+    for (i, (pos, origin, dir, tmin)) in scenes.into_iter().enumerate() {
+        let tris = vec![[0, 1, 2]];
+        let ray = Ray { origin, dir, tmin, tmax: f32::INFINITY };
+        let want = closest_brute(&pos, &tris, &ray);
+        assert!(want.is_some_and(|h| h.t > ray.tmin), "scene {i}: the brute-force test hits after tmin");
+        for k in Kernel::available() {
+            let bvh = Bvh::build(&pos, &tris).with_kernel(k);
+            assert_eq!(bvh.closest(&ray), want, "{k:?} scene {i}");
+            assert!(bvh.any(&ray), "{k:?} scene {i}");
+        }
+    }
 }

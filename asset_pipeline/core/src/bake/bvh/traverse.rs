@@ -107,7 +107,7 @@ mod avx {
 }
 
 /// Per-ray constants of the box test, broadcast to the lanes.
-struct BoxRay<B> {
+pub(super) struct BoxRay<B> {
     org: [B; 3],
     inv: [B; 3],
     /// `inv` times ROBUST, for the far planes.
@@ -123,7 +123,7 @@ struct BoxRay<B> {
 // AVX kernel, and an intrinsic outside it becomes a function call per operation.
 impl<B: Lanes> BoxRay<B> {
     #[inline(always)]
-    fn new(ray: &Ray) -> Self {
+    pub(super) fn new(ray: &Ray) -> Self {
         let (o, d) = (ray.origin, ray.dir);
         let neg = [d[0].is_sign_negative() as usize, d[1].is_sign_negative() as usize, d[2].is_sign_negative() as usize];
         // IEEE infinities handle zero components.
@@ -137,7 +137,10 @@ impl<B: Lanes> BoxRay<B> {
             inv_far: [B::splat(inv[0] * ROBUST), B::splat(inv[1] * ROBUST), B::splat(inv[2] * ROBUST)],
             near: [neg[0], 2 + neg[1], 4 + neg[2]],
             far: [1 - neg[0], 3 - neg[1], 5 - neg[2]],
-            tmin: B::splat(ray.tmin),
+            // Lowered by the cull slack, as tmax is raised: a triangle's computed t can lie a few
+            // ulps beyond its box's computed exit, so a box left just before tmin can still
+            // hold a hit the triangle test puts just after it.
+            tmin: B::splat(if ray.tmin > 0.0 { ray.tmin / CULL_SLACK } else { ray.tmin * CULL_SLACK }),
         }
     }
 
@@ -145,7 +148,7 @@ impl<B: Lanes> BoxRay<B> {
     /// their entry distances). A NaN (origin on a slab plane, direction 0 on that axis) leaves
     /// the bound as it was, which keeps the box: conservative.
     #[inline(always)]
-    fn enter(&self, n: &Wide, tcull: f32) -> (u32, B) {
+    pub(super) fn enter(&self, n: &Wide, tcull: f32) -> (u32, B) {
         const { assert!(B::N == WIDTH) };
         let mut lo = self.tmin;
         let mut hi = B::splat(tcull);
