@@ -14,7 +14,9 @@
 //!   triangles by the SAH again (Ylitie et al. 2017's dynamic programme: each subtree costed as
 //!   a block, a wide node, or spread over its parent's slots), which fills the nodes (7.1 of 8
 //!   slots on the anchor scene, against 4.2 for greedy collapsing); child boxes stored plane by
-//!   plane; a leaf is one block of triangles stored lane by lane.
+//!   plane; a leaf is one block of triangles stored lane by lane, or half of one (a leaf of at
+//!   most 4 triangles shares its block with the next such leaf: 26 % fewer blocks, 1.10-1.12x
+//!   the rays/s on one thread on the anchor).
 //! - Traversal ([`traverse`]): explicit stack; a visit tests the 8 child boxes at once, goes on
 //!   with the nearest hit child and pushes the others in entry-distance order, so a subtree is
 //!   skipped once a closer hit is known (the book's "shrink t1", notes §4.2); every child the ray

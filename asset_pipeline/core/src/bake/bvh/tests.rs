@@ -128,7 +128,9 @@ fn wide_tree_holds_every_usable_triangle_and_fits_the_stack() {
                 if c & child::LEAF == 0 {
                     stack.push(c);
                 } else {
-                    bvh.blocks[child::block(c)].id.iter().for_each(|&id| seen[id as usize] = true);
+                    // Only the lanes the leaf owns (a leaf of up to 4 shares its block).
+                    let b = &bvh.blocks[child::block(c)];
+                    (0..BLOCK).filter(|&l| child::lanes(c) >> l & 1 == 1).for_each(|l| seen[b.id[l] as usize] = true);
                 }
             }
         }

@@ -354,7 +354,10 @@ fn leaf<T: Lanes, const CLOSEST: bool, F: AnyHit>(tr: &TriRay<T>, ray: &Ray, bvh
     stats::add(0, BLOCK as u64);
     // Closest: up to and including tmax, for the ties (`next_up`: the tests' bound is strict).
     let bound = if CLOSEST { tmax.next_up() } else { *tmax };
-    let (mut hit, redo, t) = tr.block(b, bound);
+    let (hit, redo, t) = tr.block(b, bound);
+    // The other half of a shared block is another leaf's: its lanes are dropped.
+    let own = child::lanes(cur);
+    let (mut hit, redo) = (hit & own, redo & own);
     if hit | redo == 0 {
         return false;
     }
