@@ -62,12 +62,13 @@ pub fn weld(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Welded {
     }).collect();
     let faces: Vec<[u32; 3]> = face_origin.iter().map(|&f| wf[f as usize]).collect();
     let split: Vec<[u32; 3]> = face_origin.iter().map(|&f| triangles[f as usize]).collect();
-    let seams = measure::seam_edges(&faces, &split).into_iter().map(|e| [e[0], e[1]]).collect();
+    let seamy: Vec<bool> = copies.iter().map(|&c| c > 1).collect();
+    let seams = measure::seam_edges(&faces, &split, &seamy).into_iter().map(|e| [e[0], e[1]]).collect();
     Welded {
         points: first.iter().map(|&i| positions[i as usize]).collect(),
         faces,
         face_origin,
-        seamy: copies.iter().map(|&c| c > 1).collect(),
+        seamy,
         seams,
         near,
         diagonal: if lo[0] <= hi[0] { norm([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]) } else { 0.0 },
@@ -126,8 +127,19 @@ pub fn track_collapses(faces: &[[u32; 3]], real: usize, collapses: &[[u32; 2]], 
     }
     let mapped = |t: &[u32; 3]| t.map(|i| root[i as usize]);
     let alive = |t: &[u32; 3]| t[0] != t[1] && t[1] != t[2] && t[0] != t[2];
+    // The surviving faces (in order) over their roots, mapped once. Serial: the LOD stage calls
+    // this on its calling thread between simplifications, while the other core carries the
+    // level before.
+    let survivors: Vec<(u32, [u32; 3])> = faces
+        .iter()
+        .enumerate()
+        .filter_map(|(f, t)| {
+            let t = mapped(t);
+            alive(&t).then_some((f as u32, t))
+        })
+        .collect();
     let mut used = vec![false; points];
-    for t in faces.iter().map(mapped).filter(alive) {
+    for (_, t) in &survivors {
         t.iter().for_each(|&i| used[i as usize] = true);
     }
     let mut number = vec![u32::MAX; points];
@@ -138,19 +150,17 @@ pub fn track_collapses(faces: &[[u32; 3]], real: usize, collapses: &[[u32; 2]], 
             k += 1;
         }
     }
-    if !faces.iter().map(mapped).filter(alive).map(|t| t.map(|i| number[i as usize])).eq(out_faces.iter().copied()) {
+    let matches = survivors.len() == out_faces.len() && survivors.iter().zip(out_faces).all(|((_, t), o)| t.map(|i| number[i as usize]) == *o);
+    if !matches {
         return Err("fast_simplification's output does not match its collapse list".into());
     }
     // The real faces and the vertices they use (a flap tip that absorbed a real vertex stands in
     // for it, at its position: it is just a vertex).
-    let mut kept = Vec::new();
+    let real_survivors = &survivors[..survivors.partition_point(|&(f, _)| (f as usize) < real)];
+    let kept: Vec<u32> = real_survivors.iter().map(|&(f, _)| f).collect();
     let mut used_real = vec![false; points];
-    for (f, t) in faces[..real].iter().enumerate() {
-        let t = mapped(t);
-        if alive(&t) {
-            kept.push(f as u32);
-            t.iter().for_each(|&i| used_real[i as usize] = true);
-        }
+    for (_, t) in real_survivors {
+        t.iter().for_each(|&i| used_real[i as usize] = true);
     }
     let mut renumber = vec![u32::MAX; points];
     let mut roots = Vec::new();
@@ -182,7 +192,7 @@ pub fn track_collapses(faces: &[[u32; 3]], real: usize, collapses: &[[u32; 2]], 
     new_seams.sort_unstable();
     new_seams.dedup();
     Ok(Tracked {
-        faces: kept.iter().map(|&f| mapped(&faces[f as usize]).map(|i| renumber[i as usize])).collect(),
+        faces: real_survivors.iter().map(|(_, t)| t.map(|i| renumber[i as usize])).collect(),
         kept,
         rows: roots.iter().map(|&r| number[r as usize]).collect(),
         seamy: new_seamy,

@@ -839,10 +839,19 @@ struct VertexFaces {
 
 impl VertexFaces {
     fn new(triangles: &[[u32; 3]]) -> VertexFaces {
-        let n = triangles.iter().flatten().map(|&i| i as usize + 1).max().unwrap_or(0);
+        Self::build(vertex_count(triangles), (0..triangles.len() as u32).map(|f| (f, triangles[f as usize])))
+    }
+
+    /// Only the faces `only` (ascending) of `triangles` over `n` vertices, around each vertex:
+    /// every face around those vertices all of whose faces are among them.
+    fn of(n: usize, triangles: &[[u32; 3]], only: &[u32]) -> VertexFaces {
+        Self::build(n, only.iter().map(|&f| (f, triangles[f as usize])))
+    }
+
+    fn build(n: usize, faces_in: impl Iterator<Item = (u32, [u32; 3])> + Clone) -> VertexFaces {
         let mut start = vec![0u32; n + 1];
-        for t in triangles {
-            for &i in t {
+        for (_, t) in faces_in.clone() {
+            for i in t {
                 start[i as usize + 1] += 1;
             }
         }
@@ -851,9 +860,9 @@ impl VertexFaces {
         }
         let mut fill = start.clone();
         let mut faces = vec![0u32; start[n] as usize];
-        for (f, t) in triangles.iter().enumerate() {
-            for &i in t {
-                faces[fill[i as usize] as usize] = f as u32;
+        for (f, t) in faces_in {
+            for i in t {
+                faces[fill[i as usize] as usize] = f;
                 fill[i as usize] += 1;
             }
         }
@@ -871,6 +880,11 @@ impl VertexFaces {
             (g != f && !dup && (0..3).any(|j| (tg[j] == a && tg[(j + 1) % 3] == b) || (tg[j] == b && tg[(j + 1) % 3] == a))).then_some(g)
         })
     }
+}
+
+/// One past the largest vertex index the triangles use.
+fn vertex_count(triangles: &[[u32; 3]]) -> usize {
+    triangles.iter().flatten().map(|&i| i as usize + 1).max().unwrap_or(0)
 }
 
 /// A fast non-cryptographic hasher for integer keys (FxHash's mixing step).
@@ -905,41 +919,94 @@ impl std::hash::Hasher for FxHasher {
 
 /// Weld equal positions (bitwise, with -0.0 == 0.0): (an index per vertex, numbered in order of
 /// first use; the first vertex of each index).
+///
+/// In parallel, with the serial result: vertices are bucketed by their key's hash (a stable
+/// counting sort, so each bucket lists its vertices in index order), each bucket finds every
+/// vertex's first equal one in a map small enough for the cache, and one pass in index order
+/// numbers the first ones. One map over all vertices missed the cache on nearly every insert
+/// (36 ms of LOD 0's 1M-triangle weld on the LOD stage's calling thread; 12-20 ms so).
 pub fn weld_positions(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u32>) {
-    let mut ids: FxMap<[u32; 3], u32> = Default::default();
-    ids.reserve(positions.len());
-    let mut first = Vec::new();
-    let weld = positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let key = p.map(|x| (x + 0.0).to_bits());
-            let next = ids.len() as u32;
-            let id = *ids.entry(key).or_insert(next);
-            if id == next {
-                first.push(i as u32);
-            }
-            id
+    use std::hash::{Hash, Hasher};
+    const BUCKET_BITS: u32 = 8;
+    let key = |p: &[f32; 3]| p.map(|x| (x + 0.0).to_bits());
+    let bucket: Vec<u16> = positions
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| {
+            let mut h = FxHasher::default();
+            key(p).hash(&mut h);
+            // Middle bits: the maps below index by the low ones and tag by the top 7 (a
+            // bucket of equal top bits would make every probe compare keys).
+            (h.finish() >> 40) as u16 & ((1 << BUCKET_BITS) - 1)
         })
         .collect();
+    let mut start = vec![0usize; (1 << BUCKET_BITS) + 1];
+    for &b in &bucket {
+        start[b as usize + 1] += 1;
+    }
+    for b in 0..1 << BUCKET_BITS {
+        start[b + 1] += start[b];
+    }
+    let mut fill = start.clone();
+    let mut order = vec![0u32; positions.len()];
+    for (i, &b) in bucket.iter().enumerate() {
+        order[fill[b as usize]] = i as u32;
+        fill[b as usize] += 1;
+    }
+    // Per bucket, each vertex's first equal vertex (in `order`'s slots).
+    let mut firsts = vec![0u32; positions.len()];
+    let mut slices = Vec::with_capacity(1 << BUCKET_BITS);
+    let mut rest = &mut firsts[..];
+    for b in 0..1 << BUCKET_BITS {
+        let (mine, tail) = rest.split_at_mut(start[b + 1] - start[b]);
+        slices.push((&order[start[b]..start[b + 1]], mine));
+        rest = tail;
+    }
+    slices.into_par_iter().for_each(|(members, out)| {
+        let mut seen: FxMap<[u32; 3], u32> = Default::default();
+        seen.reserve(members.len());
+        for (o, &i) in out.iter_mut().zip(members) {
+            *o = *seen.entry(key(&positions[i as usize])).or_insert(i);
+        }
+    });
+    let mut weld = vec![0u32; positions.len()];
+    for (&i, &f) in order.iter().zip(&firsts) {
+        weld[i as usize] = f; // the first equal vertex, for now
+    }
+    let mut first = Vec::new();
+    for i in 0..weld.len() {
+        weld[i] = if weld[i] as usize == i {
+            first.push(i as u32);
+            first.len() as u32 - 1
+        } else {
+            weld[weld[i] as usize] // numbered already: it comes first
+        };
+    }
     (weld, first)
 }
 
 /// Seam edges: edges (by welded vertex index, `welded`) whose faces do not all use the same two
 /// split vertices (`split`, corner for corner): UV seams, hard edges, material borders. Returns
 /// for each (in edge order) [a, b, face, other face] with a < b, the first two faces using it.
-pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
+/// `seamy`: per welded vertex, whether faces use more than one split copy of it.
+///
+/// An edge with neither end seamy is no seam (every face on it uses the same two split
+/// vertices), so only faces with a seamy corner are looked at: on a mesh with a few UV seams,
+/// a small part of it (the LOD stage welds LOD 0 on its calling thread, before simplifying).
+pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]], seamy: &[bool]) -> Vec<[u32; 4]> {
     assert_eq!(welded.len(), split.len());
-    let vf = VertexFaces::new(welded);
-    let per_face: Vec<Vec<[u32; 4]>> = welded
+    let on = |v: u32| seamy.get(v as usize).copied().unwrap_or(false);
+    let near: Vec<u32> = (0..welded.len() as u32).into_par_iter().with_min_len(4096).filter(|&f| welded[f as usize].iter().any(|&v| on(v))).collect();
+    // Every face on an edge with a seamy end is among them.
+    let vf = VertexFaces::of(vertex_count(welded), welded, &near);
+    let per_face: Vec<Vec<[u32; 4]>> = near
         .par_iter()
-        .enumerate()
-        .map(|(f, t)| {
-            let f = f as u32;
+        .map(|&f| {
+            let t = welded[f as usize];
             let mut out = Vec::new();
             for j in 0..3 {
                 let (a, b) = (t[j], t[(j + 1) % 3]);
-                if a == b {
+                if a == b || !(on(a) || on(b)) {
                     continue;
                 }
                 let mine = (split[f as usize][j], split[f as usize][(j + 1) % 3]);
@@ -976,7 +1043,18 @@ pub const NO_FACE: u32 = u32::MAX;
 /// [`NO_FACE`] twice where the edge does not have exactly two faces (a border, a non-manifold
 /// edge, no edge at all).
 pub fn edge_faces(triangles: &[[u32; 3]], edges: &[[u32; 2]]) -> Vec<[u32; 2]> {
-    let vf = VertexFaces::new(triangles);
+    // Only the faces around the edges' ends: a level's seams touch a small part of it (the LOD
+    // stage asks this of every level, on its calling thread, before simplifying the next; there
+    // the other core is carrying the level before, so this runs on one).
+    let n = vertex_count(triangles);
+    let mut end = vec![false; n];
+    for &v in edges.iter().flatten() {
+        if let Some(e) = end.get_mut(v as usize) {
+            *e = true;
+        }
+    }
+    let near: Vec<u32> = (0..triangles.len() as u32).filter(|&f| triangles[f as usize].iter().any(|&v| end[v as usize])).collect();
+    let vf = VertexFaces::of(n, triangles, &near);
     edges
         .par_iter()
         .map(|&[a, b]| {
@@ -1097,10 +1175,14 @@ fn for_each_around(triangles: &[[u32; 3]], adjacency: &[[u32; 3]], start: u32, k
 /// [`walk_closest`] for many (start, point) pairs in parallel.
 pub fn walk_closest_many(positions: &[[f32; 3]], triangles: &[[u32; 3]], adjacency: &[[u32; 3]], starts: &[u32], points: &[[f32; 3]]) -> Vec<(u32, f64, [f64; 3])> {
     assert_eq!(starts.len(), points.len());
+    // Few walks come in small chunks: a coarse level's walks are long (its vertices moved far
+    // over LOD 0), and the LOD stage waits for its last levels' walks, so even a hundred of them
+    // are split between threads.
+    let chunk = (points.len() / 64).clamp(16, CHUNK);
     let mut out = vec![(0u32, 0f64, [0f64; 3]); points.len()];
-    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, dst)| {
+    out.par_chunks_mut(chunk).enumerate().for_each(|(c, dst)| {
         for (j, o) in dst.iter_mut().enumerate() {
-            let i = c * CHUNK + j;
+            let i = c * chunk + j;
             *o = walk_closest(positions, triangles, adjacency, starts[i], v3(points[i]));
         }
     });
@@ -1394,6 +1476,110 @@ mod tests {
         }
     }
 
+    /// Per welded vertex: faces use more than one split copy of it.
+    fn seamy_of(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<bool> {
+        let n = welded.iter().flatten().map(|&v| v as usize + 1).max().unwrap_or(0);
+        let (mut first, mut seamy) = (vec![u32::MAX; n], vec![false; n]);
+        for (w, s) in welded.iter().zip(split) {
+            for k in 0..3 {
+                let f = &mut first[w[k] as usize];
+                if *f == u32::MAX {
+                    *f = s[k];
+                } else if *f != s[k] {
+                    seamy[w[k] as usize] = true;
+                }
+            }
+        }
+        seamy
+    }
+
+    /// `seam_edges` looking at every edge of every face (what it did before it skipped those
+    /// with no seamy end).
+    fn seam_edges_everywhere(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
+        let vf = VertexFaces::new(welded);
+        let mut out = Vec::new();
+        for (f, t) in welded.iter().enumerate() {
+            let f = f as u32;
+            for j in 0..3 {
+                let (a, b) = (t[j], t[(j + 1) % 3]);
+                if a == b {
+                    continue;
+                }
+                let mine = (split[f as usize][j], split[f as usize][(j + 1) % 3]);
+                let (mut first_other, mut seam) = (None, false);
+                for g in vf.across(welded, f, a, b) {
+                    if g < f {
+                        (first_other, seam) = (None, false);
+                        break;
+                    }
+                    first_other.get_or_insert(g);
+                    let (wg, sg) = (welded[g as usize], split[g as usize]);
+                    let at = |v: u32| sg[(0..3).find(|&k| wg[k] == v).unwrap()];
+                    seam |= (at(a), at(b)) != mine;
+                }
+                if let (true, Some(g)) = (seam, first_other) {
+                    out.push([a.min(b), a.max(b), f, g]);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn seam_edges_and_edge_faces_skip_no_seam() {
+        // A box with each side's own vertices (seams along its edges), then random charts: a
+        // fifth of the faces get one of three other split copies at every corner, so seams
+        // run in all directions, end inside charts and meet in junctions.
+        let (pos, tris) = grid_cube(7, [0.0; 3]);
+        let (weld, _) = weld_positions(&pos);
+        let welded: Vec<[u32; 3]> = tris.iter().map(|t| t.map(|i| weld[i as usize])).collect();
+        let mut rng = Rng(3);
+        let charts: Vec<[u32; 3]> = welded.iter().map(|t| {
+            let c = if rng.next() < 0.8 { 0 } else { 1 + (rng.next() * 3.0) as u32 };
+            t.map(|v| v * 4 + c)
+        }).collect();
+        for split in [&tris, &charts] {
+            let seams = seam_edges(&welded, split, &seamy_of(&welded, split));
+            assert!(seams.len() >= 12 * 7);
+            assert_eq!(seams, seam_edges_everywhere(&welded, split));
+            // edge_faces (faces around the edges' ends only) against every face around them.
+            let edges: Vec<[u32; 2]> = seams.iter().map(|s| [s[0], s[1]]).chain([[0, 1], [5, 5]]).collect();
+            let vf = VertexFaces::new(&welded);
+            let want: Vec<[u32; 2]> = edges.iter().map(|&[a, b]| {
+                let on: Vec<u32> = if a == b { vec![] } else {
+                    vf.faces[vf.start[a as usize] as usize..vf.start[a as usize + 1] as usize].iter().copied()
+                        .filter(|&f| welded[f as usize].contains(&b)).collect()
+                };
+                if on.len() == 2 { [on[0], on[1]] } else { [NO_FACE; 2] }
+            }).collect();
+            assert_eq!(edge_faces(&welded, &edges), want);
+        }
+    }
+
+    #[test]
+    fn weld_positions_matches_one_map_in_index_order() {
+        // Many repeats (values from a small set), -0.0 beside 0.0, and enough vertices for every
+        // bucket: the bucketed weld numbers them exactly as one map in index order does.
+        let mut rng = Rng(7);
+        let vals = [0.0f32, -0.0, 1.0, -1.0, 0.5, 1e-30, f32::MAX];
+        let pos: Vec<[f32; 3]> = (0..100_000).map(|_| [0; 3].map(|_| vals[(rng.next() * 7.0) as usize % 7] * if rng.next() < 0.5 { 1.0 } else { 3.0 })).collect();
+        let mut map: FxMap<[u32; 3], u32> = Default::default();
+        let (mut want, mut want_first) = (Vec::new(), Vec::new());
+        for (i, p) in pos.iter().enumerate() {
+            let next = map.len() as u32;
+            let id = *map.entry(p.map(|x| (x + 0.0).to_bits())).or_insert(next);
+            if id == next {
+                want_first.push(i as u32);
+            }
+            want.push(id);
+        }
+        assert!(want_first.len() > 1000 && want_first.len() < 3000);
+        assert_eq!(weld_positions(&pos), (want, want_first));
+        let unique: Vec<[f32; 3]> = (0..50_000).map(|i| [i as f32, 0.5, -(i as f32)]).collect();
+        assert_eq!(weld_positions(&unique), ((0..50_000).collect(), (0..50_000).collect()));
+        assert_eq!(weld_positions(&[]), (vec![], vec![]));
+    }
+
     #[test]
     fn weld_and_seam_edges_of_a_split_box() {
         // grid_cube gives each face its own vertices: 12 box edges of n segments are seams.
@@ -1406,7 +1592,7 @@ mod tests {
             assert!(weld[..f as usize].iter().all(|&w| w as usize != id), "first use");
         }
         let welded: Vec<[u32; 3]> = tris.iter().map(|t| t.map(|i| weld[i as usize])).collect();
-        let seams = seam_edges(&welded, &tris);
+        let seams = seam_edges(&welded, &tris, &seamy_of(&welded, &tris));
         assert_eq!(seams.len(), 12 * n as usize);
         // edge_faces finds the same two faces, in either edge orientation; none for a non-edge.
         let faces = edge_faces(&welded, &seams.iter().map(|s| [s[1], s[0]]).chain([[0, 0], [seams[0][0], u32::MAX - 1]]).collect::<Vec<_>>());
