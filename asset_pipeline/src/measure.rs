@@ -149,7 +149,7 @@ fn edge_faces<'py>(py: Python<'py>, triangles: PyReadonlyArray2<'py, u32>, edges
     let edges = rows::<u32, 2>(&edges, "edges")?;
     let out = py.detach(|| measure::edge_faces(&tri, &edges));
     let k = out.len();
-    Ok(PyArray1::from_vec(py, out.into_iter().flatten().collect()).reshape([k, 2])?)
+    Ok(PyArray1::from_vec(py, out.into_flattened()).reshape([k, 2])?)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -24,7 +24,7 @@ fn optimize_lod<'py>(
         .detach(|| cook_core::mesh_opt::optimize(&t, &k, &p))
         .map_err(|e| PyValueError::new_err(format!("mesh optimisation: {e}")))?;
     let m = out.triangles.len();
-    let tris = PyArray1::from_vec(py, out.triangles.into_iter().flatten().collect()).reshape([m, 3])?;
+    let tris = PyArray1::from_vec(py, out.triangles.into_flattened()).reshape([m, 3])?;
     Ok((tris, PyArray1::from_vec(py, out.triangle_order), PyArray1::from_vec(py, out.vertices)))
 }
 
