@@ -322,6 +322,25 @@ def test_serial_turns_give_the_same_chain(monkeypatch):
             np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
 
 
+def test_chains_in_flight_give_the_same_lods():
+    """start_lods for several meshes at once (the cook's LOD stage keeps a few in flight),
+    finished later in any order: each mesh's LODs are what build_lods makes of it alone."""
+    from asset_pipeline.lod import start_lods
+
+    meshes = [textured_sphere(30, 60), two_material_box(16), skinned_cylinder(24, 20), textured_sphere(20, 40, bump=0.1)]
+    alone = [build_lods(m) for m in meshes]
+    started = [start_lods(m) for m in meshes]
+    together = [started[i].finish() for i in (2, 0, 3, 1)]
+    for i, lods in zip((2, 0, 3, 1), together):
+        assert len(lods) == len(alone[i]) >= 2
+        for x, y in zip(lods, alone[i]):
+            assert x.error == y.error
+            np.testing.assert_array_equal(x.triangles, y.triangles)
+            np.testing.assert_array_equal(x.materials, y.materials)
+            for k in y.attributes:
+                np.testing.assert_array_equal(x.attributes[k], y.attributes[k])
+
+
 def test_stop_rules():
     lod0 = textured_sphere(30, 60)
     m = lod0.triangle_count

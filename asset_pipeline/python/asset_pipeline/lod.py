@@ -122,6 +122,26 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
     collapses, not found again in each level's split vertices. The error stop rule is applied
     when the measurements are in; levels simplified past it meanwhile are dropped, so the result
     does not depend on timing."""
+    return start_lods(lod0, settings).finish()
+
+
+class PendingLods:
+    """A mesh's LODs being carried and measured on their chain's thread (see `start_lods`)."""
+
+    def __init__(self, finish):
+        self._finish = finish
+
+    def finish(self) -> list[ir.Lod]:
+        """Wait for the chain's thread; the LODs `build_lods` returns."""
+        return self._finish()
+
+
+def start_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> PendingLods:
+    """`build_lods` in two halves: this one simplifies every level and queues it to the chain's
+    thread; `.finish()` waits for their carrying and measuring. A caller with many meshes starts
+    the next mesh's simplification while the meshes before are still measured (a small mesh's
+    chain otherwise leaves a core idle: its levels are made in a moment, then measured while this
+    thread waits). Bad input raises here, as from `build_lods`."""
     lod0.validate("lod0")
     s = settings
     if not (0.0 < s.min_saving < 1.0) or s.max_lods < 0 or s.floor_triangles < 1:
@@ -130,7 +150,7 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
     m0 = lod0.triangle_count
     floor = max(int(s.floor_triangles), math.ceil(s.floor_fraction * m0))
     if m0 <= floor or s.max_lods == 0:
-        return []
+        return PendingLods(list)
     if not np.isfinite(pos0).all():
         raise ir.IrError("lod0: a position is not finite")
 
@@ -160,7 +180,11 @@ def build_lods(lod0: ir.Lod, settings: LodSettings = LodSettings()) -> list[ir.L
         if SERIAL:
             chain.wait()
         origins.append(level.face_origin)
+    return PendingLods(lambda: _finished(lod0, chain, origins, stored, limit))
 
+
+def _finished(lod0: ir.Lod, chain: LodChain, origins: list, stored, limit: float) -> list[ir.Lod]:
+    """The chain's levels up to the error limit, as `ir.Lod`s."""
     lods: list[ir.Lod] = []
     error = 0.0
     for (attributes, triangles, measured, morph_positions, morph_normals), origin in zip(chain.finish(), origins):
