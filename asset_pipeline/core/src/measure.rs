@@ -994,19 +994,25 @@ pub fn weld_positions(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u32>) {
 /// vertices), so only faces with a seamy corner are looked at: on a mesh with a few UV seams,
 /// a small part of it (the LOD stage welds LOD 0 on its calling thread, before simplifying).
 pub fn seam_edges(welded: &[[u32; 3]], split: &[[u32; 3]], seamy: &[bool]) -> Vec<[u32; 4]> {
-    assert_eq!(welded.len(), split.len());
     let on = |v: u32| seamy.get(v as usize).copied().unwrap_or(false);
     let near: Vec<u32> = (0..welded.len() as u32).into_par_iter().with_min_len(4096).filter(|&f| welded[f as usize].iter().any(|&v| on(v))).collect();
     // Every face on an edge with a seamy end is among them.
-    let vf = VertexFaces::of(vertex_count(welded), welded, &near);
-    let per_face: Vec<Vec<[u32; 4]>> = near
+    seam_edges_among(welded, split, &near, |a, b| on(a) || on(b))
+}
+
+/// The seam edges among those of `faces` (ascending) that `candidate(a, b)` accepts; every face
+/// on an accepted edge must be in `faces`. In face order, then corner order.
+fn seam_edges_among(welded: &[[u32; 3]], split: &[[u32; 3]], faces: &[u32], candidate: impl Fn(u32, u32) -> bool + Sync) -> Vec<[u32; 4]> {
+    assert_eq!(welded.len(), split.len());
+    let vf = VertexFaces::of(vertex_count(welded), welded, faces);
+    let per_face: Vec<Vec<[u32; 4]>> = faces
         .par_iter()
         .map(|&f| {
             let t = welded[f as usize];
             let mut out = Vec::new();
             for j in 0..3 {
                 let (a, b) = (t[j], t[(j + 1) % 3]);
-                if a == b || !(on(a) || on(b)) {
+                if a == b || !candidate(a, b) {
                     continue;
                 }
                 let mine = (split[f as usize][j], split[f as usize][(j + 1) % 3]);
@@ -1496,33 +1502,7 @@ mod tests {
     /// `seam_edges` looking at every edge of every face (what it did before it skipped those
     /// with no seamy end).
     fn seam_edges_everywhere(welded: &[[u32; 3]], split: &[[u32; 3]]) -> Vec<[u32; 4]> {
-        let vf = VertexFaces::new(welded);
-        let mut out = Vec::new();
-        for (f, t) in welded.iter().enumerate() {
-            let f = f as u32;
-            for j in 0..3 {
-                let (a, b) = (t[j], t[(j + 1) % 3]);
-                if a == b {
-                    continue;
-                }
-                let mine = (split[f as usize][j], split[f as usize][(j + 1) % 3]);
-                let (mut first_other, mut seam) = (None, false);
-                for g in vf.across(welded, f, a, b) {
-                    if g < f {
-                        (first_other, seam) = (None, false);
-                        break;
-                    }
-                    first_other.get_or_insert(g);
-                    let (wg, sg) = (welded[g as usize], split[g as usize]);
-                    let at = |v: u32| sg[(0..3).find(|&k| wg[k] == v).unwrap()];
-                    seam |= (at(a), at(b)) != mine;
-                }
-                if let (true, Some(g)) = (seam, first_other) {
-                    out.push([a.min(b), a.max(b), f, g]);
-                }
-            }
-        }
-        out
+        seam_edges_among(welded, split, &(0..welded.len() as u32).collect::<Vec<_>>(), |_, _| true)
     }
 
     #[test]

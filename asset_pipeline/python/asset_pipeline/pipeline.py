@@ -557,12 +557,19 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
         # order, so the cache sees the same stores as one mesh at a time.
         pending: collections.deque = collections.deque()
 
-        def finish_oldest():
-            i, started = pending.popleft()
-            chains[i] = started.finish()
-            docs, arrays = ir.lods_to_wire(chains[i])
+        def settings_of(i: int) -> LodSettings:
+            return chunk_settings if i in locked else lod_settings
+
+        def made(i: int, chain: list) -> None:
+            """Mesh i's chain is made (here or by a Ray task): keep and cache it."""
+            chains[i] = chain
+            docs, arrays = ir.lods_to_wire(chain)
             cache.store("lod", keys[i], {"lods": docs}, arrays)
             bar.advance()
+
+        def finish_oldest():
+            i, started = pending.popleft()
+            made(i, started.finish())
 
         for i, m in enumerate(scene.meshes):
             base = m.base
@@ -576,21 +583,14 @@ def _lod_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, progr
             elif executor is None:
                 if len(pending) >= LODS_IN_FLIGHT:
                     finish_oldest()
-                pending.append((i, start_lods(base, chunk_settings if i in locked else lod_settings)))
+                pending.append((i, start_lods(base, settings_of(i))))
             else:
                 todo.append(i)
         while pending:
             finish_oldest()
 
-        def done(j, chain):
-            i = todo[j]
-            chains[i] = chain
-            docs, arrays = ir.lods_to_wire(chain)
-            cache.store("lod", keys[i], {"lods": docs}, arrays)
-            bar.advance()
-
         if todo:  # the meshes not in the cache, one Ray task each
-            executor.run([(lod_chain, (scene.meshes[i].base, chunk_settings if i in locked else lod_settings)) for i in todo], on_done=done)
+            executor.run([(lod_chain, (scene.meshes[i].base, settings_of(i))) for i in todo], on_done=lambda j, chain: made(todo[j], chain))
     meshes = [dataclasses.replace(m, lods=[m.base, *chain]) for m, chain in zip(scene.meshes, chains)]
     rec.seconds = time.perf_counter() - t0
     return dataclasses.replace(scene, meshes=meshes), rec
