@@ -1,6 +1,8 @@
 """``cook SOURCE -o OUT.pack``: the command-line front of :func:`asset_pipeline.cook`.
 
 Exit status: 0 on success, 2 on bad arguments or bad input (as argparse), 130 when interrupted.
+With ``--watch`` (asset_pipeline.watch): 0 when stopped with Ctrl-C, whatever the cooks did; 2
+only when it cannot start (no such source, no output directory).
 Errors are one line on stderr, ``cook: error: <message>``, never a traceback.
 """
 
@@ -73,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--out", required=True, metavar="OUT.pack", help="where to write the pack (its directory must exist)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     parser.add_argument("--force", action="store_true", help="ignore cached stage results and rebuild everything")
+    parser.add_argument("--watch", action="store_true",
+                        help="after cooking, watch every file the cook read and cook again when one changes (through the stage cache: only "
+                             "what the change affects runs again); a failed cook keeps the last good pack; Ctrl-C stops")
     parser.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
@@ -123,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     scale.add_argument("--tile-texels", type=_positive, metavar="N", default=BakeSettings.tile_texels,
                        help=f"lightmap texels per Ray task (default: {BakeSettings.tile_texels})")
     args = parser.parse_args(argv)
+    if args.watch and args.force:
+        parser.error("--watch and --force: a forced cook would rerun every stage on every save (drop --force)")
     if args.ray_address is not None and args.executor != "ray":
         parser.error("--ray-address needs --executor ray")
     if args.no_chunks and (args.chunk_size is not None or args.chunk_triangles is not None):
@@ -148,6 +155,10 @@ def main(argv: list[str] | None = None) -> int:
                             mips=not args.no_mips, mesh_opt=not args.no_mesh_opt, compress=not args.no_compress,
                             texture_compression=texture_compression, mip_filter=args.mip_filter, executor=executor, ray_address=args.ray_address,
                             allow_external_uris=args.allow_external_uris, sky_nits=args.sky_nits)
+    if args.watch:
+        from asset_pipeline.watch import run as watch
+
+        return watch(args.source, args.out, settings, progress=not args.quiet)
     try:
         result = cook_detailed(args.source, args.out, progress=not args.quiet, settings=settings)
     except CookError as e:

@@ -97,6 +97,9 @@ class CookResult:
     chunks: dict = field(default_factory=dict)  # the chunk stage's (chunks.split_chunks' stats)
     mesh_opt: dict = field(default_factory=dict)  # the mesh_opt stage's (mesh_opt.MeshOptStats.as_dict)
     compress: dict = field(default_factory=dict)  # the compress stage's (compress.summarise)
+    # Every file the cook read: the source, then what it names (props, buffers, images,
+    # textures), resolved, in first-read order; what `cook --watch` watches.
+    files: list[str] = field(default_factory=list)
 
 
 def _settings_doc(obj) -> object:
@@ -202,7 +205,7 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         try:
             recorded = json.loads(stamp.read_text())
             if recorded["key"] == _cook_key(source_key, settings_doc, settings) and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
-                return CookResult(summary=recorded["summary"], up_to_date=True)
+                return CookResult(summary=recorded["summary"], up_to_date=True, files=list(files))
         except (OSError, ValueError, KeyError):
             pass
 
@@ -298,7 +301,7 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene,
-                      chunks=chunk_stats, mesh_opt=mesh_opt_stats, compress=compress_stats)
+                      chunks=chunk_stats, mesh_opt=mesh_opt_stats, compress=compress_stats, files=list(files))
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
