@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import queue
 import signal
 import subprocess
@@ -16,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from asset_pipeline import _core
@@ -68,6 +70,15 @@ class Watcher:
     def _pump(self, name: str, stream) -> None:
         for line in stream:
             self.lines.put((name, line.rstrip("\n")))
+
+    def next_line(self) -> tuple[str, str]:
+        """The next line (stream, text), within the fail-safe."""
+        try:
+            item = self.lines.get(timeout=STEP_TIMEOUT_S)
+        except queue.Empty:
+            pytest.fail(f"the cooker said nothing for {STEP_TIMEOUT_S} s; so far:\n" + self.transcript())
+        self.seen.append(item)
+        return item
 
     def expect(self, prefix: str, stream: str = "out") -> str:
         """Wait for the next line of `stream` starting with `prefix`; fail (with everything the
@@ -138,7 +149,7 @@ def test_watch_recooks_an_edit_keeps_the_pack_on_a_broken_one_and_resumes(tmp_pa
         wrote = w.expect("cook: wrote level.pack")
         seconds = time.monotonic() - t0
         assert colour_of(pack) == pytest.approx([0.2, 0.8, 0.2])
-        ran, cached = wrote.split("(ran: ")[1].rstrip(")").split("; cached: ")
+        ran, cached = re.search(r"ran: ([^;]*); cached: ([^)]*)\)", wrote).groups()
         assert {"level", "bake", "write"} <= set(ran.split(", ")), wrote
         assert {"uv2", "lod", "mesh_opt"} <= set(cached.split(", ")), wrote
         assert seconds < 5.0, f"the edit took {seconds:.2f} s to reach the pack"
@@ -191,3 +202,76 @@ def test_watch_cannot_start_without_its_output_directory(tmp_path):
                        timeout=STEP_TIMEOUT_S)
     assert r.returncode == 2
     assert r.stderr.strip().splitlines() == ["cook: error: missing/level.pack: output directory 'missing' does not exist"]
+
+
+def samples_of(pack: Path) -> int | None:
+    return json.loads(_core.read_pack_manifest(pack))["lightmap"].get("samples")
+
+
+def test_refining_bake_writes_growing_sample_counts_and_ends_at_the_one_shot_bytes(tmp_path):
+    """While watching, each cook bakes in steps (a sixteenth, a quarter, all of the target's
+    samples), each written as a pack; the last is the one-shot `cook --quality medium` to the byte."""
+    level, pack = tmp_path / "level.toml", tmp_path / "level.pack"
+    level.write_text(LEVEL.format(color="[0.8, 0.5, 0.2]"))
+    w = Watcher("level.toml", "-o", "level.pack", "--quality", "medium", "-q", cwd=tmp_path)
+    try:
+        for cycle in range(2):
+            lines, seen = [], []
+            while True:
+                name, line = w.next_line()
+                if line.startswith("cook: wrote level.pack"):
+                    lines.append(line)
+                    seen.append(samples_of(pack))  # the pack as it is now (a later step may have replaced it)
+                elif line.startswith("cook: watching"):
+                    break
+            counts = [int(re.search(r"bake (\d+) samples per texel", line).group(1)) for line in lines]
+            assert counts == [8, 32, 128], w.transcript()
+            assert all("refining" in line for line in lines[:-1]) and "refining" not in lines[-1], lines
+            assert all(a <= b for a, b in zip(seen, seen[1:])) and seen[-1] == 128, seen
+            if cycle == 0:
+                write_level(level, LEVEL.format(color="[0.3, 0.5, 0.9]"))
+    finally:
+        assert w.stop() == 0, w.transcript()
+    assert samples_of(pack) == 128
+
+    # The same source cooked once at the target, elsewhere (its own cache): the same bytes.
+    other = tmp_path / "once"
+    other.mkdir()
+    (other / "level.toml").write_text(level.read_text())
+    r = subprocess.run([str(COOK), "level.toml", "-o", "level.pack", "--quality", "medium", "-q"], cwd=other, capture_output=True, text=True,
+                       timeout=STEP_TIMEOUT_S)
+    assert r.returncode == 0, r.stderr
+    assert (other / "level.pack").read_bytes() == pack.read_bytes()
+    assert (other / "level.lightmap0.exr").read_bytes() == (tmp_path / "level.lightmap0.exr").read_bytes()
+
+
+def test_a_step_given_up_for_an_edit_writes_nothing_and_keeps_the_sums(tmp_path):
+    """Refinement.stop asked between batches: a step given up raises Superseded before anything
+    is written, and the sums stay those of the last finished step (the next step goes on from them)."""
+    from asset_pipeline.bake import BakeSettings, Refinement, Superseded
+    from asset_pipeline.cook import cook_detailed
+    from asset_pipeline.pipeline import CookSettings
+
+    level, pack = tmp_path / "level.toml", tmp_path / "level.pack"
+    level.write_text(LEVEL.format(color="[0.8, 0.5, 0.2]"))
+    r = Refinement()
+    small = BakeSettings(preset="medium", samples=4, reflection_samples=1, batch_texels=64)
+    cook_detailed(level, pack, progress=False, settings=CookSettings(bake=small, refine=r))
+    assert r.samples == 4 and len(r.pages) == 1 and len(r.pages[0]) > 3 * 64  # several batches a page
+    sums, before = r.pages[0].copy(), pack.read_bytes()
+    asked = []
+    r.stop = lambda: asked.append(1) or len(asked) > 2  # an edit arrives after two batches
+    with pytest.raises(Superseded):
+        cook_detailed(level, pack, progress=False, settings=CookSettings(bake=BakeSettings(preset="medium", batch_texels=64), refine=r))
+    assert len(asked) == 3
+    assert r.samples == 4 and np.array_equal(r.pages[0], sums)
+    assert pack.read_bytes() == before
+    # Going on from the kept sums ends where a one-shot bake does.
+    r.stop = None
+    cook_detailed(level, pack, progress=False, settings=CookSettings(bake=BakeSettings(preset="medium", batch_texels=64), refine=r))
+    assert r.samples == 128
+    once = tmp_path / "once"
+    once.mkdir()
+    (once / "level.toml").write_text(level.read_text())
+    cook_detailed(once / "level.toml", once / "level.pack", progress=False, settings=CookSettings(bake=BakeSettings(preset="medium")))
+    assert (once / "level.lightmap0.exr").read_bytes() == (tmp_path / "level.lightmap0.exr").read_bytes()

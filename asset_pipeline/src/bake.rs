@@ -6,15 +6,15 @@
 
 use crate::measure::{rows, rows3, vec1};
 use cook_core::bake::bvh::Bvh;
-use cook_core::bake::integrator::{bake_points, bake_points_directional, BakeSettings};
+use cook_core::bake::integrator::{add_point_samples, add_texel_samples, bake_points, bake_points_directional, finish_point, finish_texel, BakeSettings, TexelSums};
 use cook_core::bake::lights::Light;
 use cook_core::bake::material::{Material, VertexAttributes};
 use cook_core::bake::probes::bake_probes;
-use cook_core::bake::reflection::{capture, prefilter, PREFILTER_SAMPLES};
+use cook_core::bake::reflection::{add_capture_samples, capture, finish_capture, prefilter, PREFILTER_SAMPLES};
 use cook_core::bake::scene::{BakeScene, Geometry};
 use cook_core::bake::textures::{Texture, TextureInfo};
 use cook_core::bake::with_threads;
-use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::borrow::Cow;
@@ -231,6 +231,167 @@ impl PyBaker {
         let rows: Vec<[f32; 3]> = cubes.into_iter().flat_map(|c| c.texels).collect();
         Ok((to_array(py, &rows), rays))
     }
+
+    /// Refinement (`cook --watch`): the samples `start..end` of every point added to its running
+    /// sums `sums` (float64, updated in place: (k, 3) for `bake_points`' B, (k, 13) with
+    /// `directional`: b0's then b1's sums and the sun samples that saw the sun), as
+    /// `bake_points` draws them. `finish_samples` then gives what `bake_points` with `samples`
+    /// = end gives, to the bit, whatever steps the samples came in. Returns the rays cast.
+    #[pyo3(signature = (points, normals, sums, start, end, ids=None, preset="medium", seed=0, bounces=None, threads=None, directional=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_samples<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        normals: PyReadonlyArray2<'py, f32>,
+        mut sums: PyReadwriteArray2<'py, f64>,
+        start: u32,
+        end: u32,
+        ids: Option<PyReadonlyArray1<'py, u64>>,
+        preset: &str,
+        seed: u64,
+        bounces: Option<u32>,
+        threads: Option<usize>,
+        directional: bool,
+    ) -> PyResult<u64> {
+        let s = settings(preset, seed, Some(end), bounces, None)?;
+        let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let width = if directional { SUMS_DIRECTIONAL } else { 3 };
+        if pts.len() != nrm.len() || sums.shape() != [pts.len(), width] || start > end {
+            return Err(PyValueError::new_err(format!(
+                "add_samples: {} points, {} normals, sums of shape {:?} (expected ({}, {width})), samples {start}..{end}",
+                pts.len(), nrm.len(), sums.shape(), pts.len()
+            )));
+        }
+        let ids = ids_for(&ids, pts.len())?;
+        let flat = sums.as_slice_mut().map_err(|_| PyValueError::new_err("add_samples: sums must be a C-contiguous float64 array"))?;
+        let cancel = AtomicBool::new(false);
+        let quiet = |_: u64, _: u64| {};
+        let out = py.detach(|| {
+            with_threads(threads, || {
+                if directional {
+                    let mut acc: Vec<TexelSums> = flat.chunks_exact(SUMS_DIRECTIONAL).map(texel_sums).collect();
+                    let rays = add_texel_samples(&self.scene, &pts, &nrm, ids.as_deref(), &s, start..end, &mut acc, &quiet, &cancel);
+                    for (row, a) in flat.chunks_exact_mut(SUMS_DIRECTIONAL).zip(&acc) {
+                        row.copy_from_slice(&texel_row(a));
+                    }
+                    rays
+                } else {
+                    let acc: &mut [[f64; 3]] = bytemuck::cast_slice_mut(flat);
+                    add_point_samples(&self.scene, &pts, &nrm, ids.as_deref(), &s, start..end, acc, &quiet, &cancel)
+                }
+            })
+        });
+        out.map_err(PyRuntimeError::new_err)?.map_err(|_| PyRuntimeError::new_err("bake cancelled"))
+    }
+
+    /// What `bake_points` returns for these points with `samples` samples, from their sums of
+    /// that many (`add_samples`): float32 (k, 3), or (k, 13) with `directional`.
+    #[pyo3(signature = (points, normals, sums, samples, directional=false))]
+    fn finish_samples<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        normals: PyReadonlyArray2<'py, f32>,
+        sums: PyReadonlyArray2<'py, f64>,
+        samples: u32,
+        directional: bool,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let (pts, nrm) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let width = if directional { SUMS_DIRECTIONAL } else { 3 };
+        if pts.len() != nrm.len() || sums.shape() != [pts.len(), width] {
+            return Err(PyValueError::new_err(format!("finish_samples: {} points, {} normals, sums of shape {:?}", pts.len(), nrm.len(), sums.shape())));
+        }
+        let flat = sums.as_slice().map_err(|_| PyValueError::new_err("finish_samples: sums must be a C-contiguous float64 array"))?;
+        if !directional {
+            let rows: Vec<[f32; 3]> = flat.chunks_exact(3).map(|v| finish_point(&[v[0], v[1], v[2]], samples)).collect();
+            return Ok(to_array(py, &rows));
+        }
+        let out: Vec<f32> = flat
+            .chunks_exact(SUMS_DIRECTIONAL)
+            .zip(pts.iter().zip(nrm.iter()))
+            .flat_map(|(row, (&x, &n))| {
+                let t = finish_texel(&self.scene, &texel_sums(row), samples, x, n);
+                t.b0.into_iter().chain(t.b1.into_iter().flatten()).chain([t.sun_visibility])
+            })
+            .collect();
+        Ok(PyArray1::from_vec(py, out).reshape([pts.len(), 13])?)
+    }
+
+    /// Refinement of a reflection probe (as `add_samples`): its capture's samples `start..end`
+    /// added to the cube texels' sums (float64 (6 face_size², 3), in place). Returns the rays.
+    #[pyo3(signature = (position, id, face_size, sums, start, end, preset="medium", seed=0, bounces=None, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_reflection_samples<'py>(
+        &self,
+        py: Python<'py>,
+        position: [f32; 3],
+        id: u64,
+        face_size: usize,
+        mut sums: PyReadwriteArray2<'py, f64>,
+        start: u32,
+        end: u32,
+        preset: &str,
+        seed: u64,
+        bounces: Option<u32>,
+        threads: Option<usize>,
+    ) -> PyResult<u64> {
+        let s = settings(preset, seed, None, bounces, None)?;
+        if sums.shape() != [6 * face_size * face_size, 3] || start > end || !position.iter().all(|v| v.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "add_reflection_samples: sums of shape {:?} for a {face_size}-texel face, samples {start}..{end}, position {position:?}",
+                sums.shape()
+            )));
+        }
+        let flat = sums.as_slice_mut().map_err(|_| PyValueError::new_err("add_reflection_samples: sums must be a C-contiguous float64 array"))?;
+        let acc: &mut [[f64; 3]] = bytemuck::cast_slice_mut(flat);
+        let cancel = AtomicBool::new(false);
+        let out = py.detach(|| with_threads(threads, || add_capture_samples(&self.scene, position, id, face_size, start..end, s.bounces, s.seed, acc, &|_, _| {}, &cancel)));
+        out.map_err(PyRuntimeError::new_err)?.map_err(|_| PyRuntimeError::new_err("bake cancelled"))
+    }
+
+    /// What `bake_reflection_probe` returns (its first part) from the capture's sums of
+    /// `samples` samples.
+    fn finish_reflection<'py>(&self, py: Python<'py>, sums: PyReadonlyArray2<'py, f64>, samples: u32, face_size: usize, levels: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        if sums.shape() != [6 * face_size * face_size, 3] || !(1..=face_size.trailing_zeros() as usize + 1).contains(&levels) {
+            return Err(PyValueError::new_err(format!("finish_reflection: sums of shape {:?}, face {face_size}, {levels} levels", sums.shape())));
+        }
+        let flat = sums.as_slice().map_err(|_| PyValueError::new_err("finish_reflection: sums must be a C-contiguous float64 array"))?;
+        let cube = finish_capture(bytemuck::cast_slice(flat), face_size, samples);
+        let cubes = py.detach(|| prefilter(&cube, levels, PREFILTER_SAMPLES));
+        let rows: Vec<[f32; 3]> = cubes.into_iter().flat_map(|c| c.texels).collect();
+        Ok(to_array(py, &rows))
+    }
+}
+
+/// Columns of a directional texel's sums in `Baker.add_samples`: L/p (3), L w/p (3 x 3), sun seen.
+const SUMS_DIRECTIONAL: usize = 13;
+
+fn texel_sums(row: &[f64]) -> TexelSums {
+    TexelSums {
+        l: [row[0], row[1], row[2]],
+        lw: std::array::from_fn(|c| [row[3 + 3 * c], row[4 + 3 * c], row[5 + 3 * c]]),
+        // Exact: a count far below 2^53.
+        sun_seen: row[12] as u32,
+    }
+}
+
+fn texel_row(a: &TexelSums) -> [f64; SUMS_DIRECTIONAL] {
+    let mut r = [0.0; SUMS_DIRECTIONAL];
+    r[..3].copy_from_slice(&a.l);
+    for c in 0..3 {
+        r[3 + 3 * c..6 + 3 * c].copy_from_slice(&a.lw[c]);
+    }
+    r[12] = a.sun_seen as f64;
+    r
+}
+
+/// `(samples, probe_samples, bounces)` of a bake preset (draft | medium | high): what `Baker`'s
+/// methods use where their arguments say None.
+#[pyfunction]
+fn bake_preset(preset: &str) -> PyResult<(u32, u32, u32)> {
+    let s = settings(preset, 0, None, None, None)?;
+    Ok((s.samples, s.probe_samples, s.bounces))
 }
 
 /// Closest hits of rays (`origins`, `directions` float32 (k, 3), t in (0, inf)) against the
@@ -266,5 +427,6 @@ fn trace_rays<'py>(
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyBaker>()?;
     m.add_function(wrap_pyfunction!(trace_rays, m)?)?;
+    m.add_function(wrap_pyfunction!(bake_preset, m)?)?;
     Ok(())
 }

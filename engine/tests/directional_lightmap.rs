@@ -82,7 +82,7 @@ fn quad_pack(normal_ts: Vec3, b0: f32, t: Vec3, vis: f32) -> Pack {
     // The direction's bytes 128 + 127 t, and the sun's visibility as alpha.
     let dir: Vec<u8> = [t.x, t.y, t.z].map(|c| (128.0 + (127.0 * c).round()) as u8).into_iter().chain([(vis * 255.0).round() as u8]).collect::<Vec<u8>>().repeat(16);
     let direction = texture(&mut b, "lightmap0 direction", TextureFormat::Rgba8Unorm, [4, 4], &[&dir]);
-    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![lightmap], directions: vec![direction], log_average: None });
+    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]], padding: 2, textures: vec![lightmap], directions: vec![direction], log_average: None, samples: None });
     b.manifest.lights.push(sun(SUN_LUX, to_quad(towards_sun()), 0.0));
     b.finish()
 }

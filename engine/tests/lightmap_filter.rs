@@ -33,7 +33,7 @@ fn edge_pack() -> Pack {
         .flat_map(u16::to_le_bytes)
         .collect();
     let page = texture(&mut b, "lightmap0", TextureFormat::Rgba16Float, [TEXELS, TEXELS], &[&texels]);
-    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 16.0, pages: vec![[TEXELS, TEXELS]], padding: 2, textures: vec![page], directions: vec![], log_average: None });
+    b.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 16.0, pages: vec![[TEXELS, TEXELS]], padding: 2, textures: vec![page], directions: vec![], log_average: None, samples: None });
     b.finish()
 }
 

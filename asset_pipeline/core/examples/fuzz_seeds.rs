@@ -138,6 +138,7 @@ fn rich_pack(base: Pack) -> Pack {
         textures: vec![1],
         directions: vec![],
         log_average: None,
+        samples: None,
     });
     if let Some(sm) = b.manifest.meshes.first_mut().and_then(|m| m.lods[0].submeshes.first_mut()) {
         sm.lightmap_block = Some(0);

@@ -471,7 +471,7 @@ fn scene_ir_survives_the_wire_both_ways() {
         mips: vec![vec![1, 2, 3, 4]],
         sampler: pack::Sampler { wrap_s: pack::Wrap::Clamp, min_filter: pack::Filter::Nearest, mipmap_filter: None, ..Default::default() },
     });
-    scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2, textures: vec![], directions: vec![], log_average: None });
+    scene.lightmap = Some(pack::LightmapLayout { texels_per_metre: 8.0, pages: vec![[64, 32]], padding: 2, textures: vec![], directions: vec![], log_average: None, samples: None });
     scene.probes = Some(crate::ir::ProbesIr { origin: [1.0, 2.0, 3.0], spacing: [2.0; 3], counts: [2, 1, 1], sh: vec![[0.5; 27], [0.25; 27]], sun_visibility: vec![1.0, 0.0] });
     scene.sky = Some(pack::Sky { color: [0.1, 0.2, 0.3], intensity: 2.0 });
     let (json, arrays) = crate::wire::to_wire(&scene);

@@ -346,8 +346,53 @@ def _texel_ids(page: int, flat: np.ndarray) -> np.ndarray:
     return (np.uint64(page) << np.uint64(40)) | flat.astype(np.uint64)
 
 
-def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=None, executor=None) -> Baked:
-    """`executor`: None bakes in this process; a RayExecutor bakes tiles as Ray tasks (same bytes)."""
+class Superseded(Exception):
+    """A refining bake step given up because its inputs changed meanwhile (Refinement.stop)."""
+
+
+@dataclass
+class Refinement:
+    """A bake refined in steps (``cook --watch``): the running sums of every lightmap texel and
+    reflection probe texel for one set of bake inputs, and their probes.
+
+    ``bake_level(scene, settings, refine=r)`` with ``r.key`` the inputs' key (everything the bake
+    reads and every setting but the sample counts) traces only the samples the sums lack, up to
+    ``settings``' counts, and finishes the pages and cubes from the sums. A sample of a texel is
+    the same whichever step draws it and the sums take samples in order (``Baker.add_samples``),
+    so each step is, to the bit, the one-shot bake of its counts, and the last one the one-shot
+    bake of the target. Probes do not refine: they are baked at the first step with the
+    settings' ``probe_samples`` (a fraction of a second where lightmaps take tens) and kept.
+    Only local bakes refine (with a Ray executor each step bakes in full)."""
+
+    key: str | None = None
+    samples: int = 0  # lightmap samples in `pages`
+    pages: list = field(default_factory=list)  # per page, float64 sums of its covered texels
+    reflection_samples: int = 0
+    reflections: list = field(default_factory=list)  # per reflection probe, float64 (6 face², 3) sums
+    probes: tuple | None = None  # (probe_out, seconds) as `bake_level` makes them
+    # Asked between batches of texels: True gives the step up (raises Superseded), its sums
+    # left as the last finished step made them.
+    stop: "object | None" = None
+
+    def begin(self, key: str) -> None:
+        """Start over unless these sums belong to the inputs `key`."""
+        if key != self.key:
+            self.key, self.samples, self.pages, self.reflection_samples, self.reflections, self.probes = key, 0, [], 0, [], None
+
+    def check(self) -> None:
+        if self.stop is not None and self.stop():
+            raise Superseded()
+
+
+def preset_samples(s: BakeSettings) -> tuple[int, int]:
+    """(lightmap samples per texel, reflection capture samples per texel) of settings `s`."""
+    lightmap = int(s.samples) if s.samples is not None else _core.bake_preset(s.preset)[0]
+    return lightmap, s.reflection()[2]
+
+
+def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=None, executor=None, refine: Refinement | None = None) -> Baked:
+    """`executor`: None bakes in this process; a RayExecutor bakes tiles as Ray tasks (same bytes).
+    `refine`: go on from a Refinement's sums (local bakes only; see Refinement)."""
     s = settings or BakeSettings()
     if s.preset not in PRESETS:
         raise ValueError(f"bake: unknown preset '{s.preset}' ({', '.join(PRESETS)})")
@@ -360,7 +405,9 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     layout = scene.lightmap
     st = static_scene(scene)
     baked_instances = st.baked if layout is not None else []
-    stats: dict = {"preset": s.preset, "lightmap_mode": s.lightmap_mode, "static_triangles": int(len(st.triangles)), "static_instances": len(st.instances)}
+    samples, reflection_samples = preset_samples(s)
+    stats: dict = {"preset": s.preset, "lightmap_mode": s.lightmap_mode, "samples": samples, "static_triangles": int(len(st.triangles)),
+                   "static_instances": len(st.instances)}
     if len(st.triangles) == 0:
         return Baked(pages=[], probes=None, stats=stats)
     kw = dict(preset=s.preset, seed=int(s.seed), bounces=s.bounces, threads=s.threads)
@@ -384,7 +431,14 @@ def bake_level(scene: ir.Scene, settings: BakeSettings | None = None, progress=N
     stats["instances"] = [{"node": i.name, "mesh": i.mesh_name, "texels": texels_of.get(i.node, 0)} for i in st.instances]
     probe_points, probe_layout = _probe_points(st, s)
 
-    if executor is None:
+    if executor is None and refine is not None:
+        t0 = time.perf_counter()
+        baker = _core.Baker(*st.baker_args)
+        stats["bvh_seconds"] = time.perf_counter() - t0
+        stats["refined_from"] = refine.samples if refine.samples <= samples else 0
+        traced, probe_out, probe_seconds, refl_out = _refine_local(baker, refine, inputs, probe_points, refl_points, refl, s,
+                                                                  samples, reflection_samples, kw, directional, channels, progress)
+    elif executor is None:
         t0 = time.perf_counter()
         baker = _core.Baker(*st.baker_args)
         stats["bvh_seconds"] = time.perf_counter() - t0
@@ -442,6 +496,53 @@ def _bake_page_local(baker, page: int, inp, s: BakeSettings, kw: dict, channels:
             bar.note(f"{rays / max(seconds, 1e-9) / 1e6:.2f} Mrays/s")
             bar.advance(b - a)
     return raw, rays, time.perf_counter() - t_page
+
+
+def _refine_local(baker, r: Refinement, inputs, probe_points, refl_points, refl, s: BakeSettings, samples: int, reflection_samples: int,
+                  kw: dict, directional: bool, channels: int, progress):
+    """`bake_level`'s local bake going on from `r`'s sums to `samples` and `reflection_samples`;
+    returns what the one-shot local path returns, and commits the new sums to `r` only once the
+    whole step is done (a step given up leaves `r` as the last one left it)."""
+    # Sums with more samples than asked for cannot be taken back: start those over.
+    start = r.samples if r.samples <= samples and len(r.pages) == len(inputs) else 0
+    refl_start = r.reflection_samples if r.reflection_samples <= reflection_samples and len(r.reflections) == len(refl_points) else 0
+    width = 13 if directional else 3
+    new_pages, traced = [], []
+    for page, (w, h, _, covered, points, normals, ids) in enumerate(inputs):
+        sums = r.pages[page].copy() if start else np.zeros((len(covered), width), np.float64)
+        rays, t_page = 0, time.perf_counter()
+        with _stage(progress, f"bake p{page}", len(covered)) as bar:
+            bar.note(f"samples {start} -> {samples}")
+            for a in range(0, len(covered), s.batch_texels):
+                r.check()
+                b = min(a + s.batch_texels, len(covered))
+                part = sums[a:b]  # rows of a C-ordered array: contiguous, updated in place
+                rays += baker.add_samples(points[a:b], normals[a:b], part, start, samples, ids=ids[a:b], directional=directional, **kw)
+                bar.advance(b - a)
+        raw = np.zeros((h * w, channels), np.float32)
+        raw[covered] = baker.finish_samples(points, normals, sums, samples, directional=directional)
+        new_pages.append(sums)
+        traced.append((raw, rays, time.perf_counter() - t_page))
+    r.check()
+    if r.probes is None:
+        t_probes = time.perf_counter()
+        probes = (_bake_probes_local(baker, probe_points, s, progress, kw), time.perf_counter() - t_probes)
+    else:
+        probes = r.probes
+    new_refl, cubes, refl_rays, t_refl = [], [], 0, time.perf_counter()
+    if len(refl_points):
+        face, levels, _ = refl
+        with _stage(progress, "reflections", len(refl_points)) as bar:
+            for i, p in enumerate(refl_points):
+                r.check()
+                sums = r.reflections[i].copy() if refl_start else np.zeros((6 * face * face, 3), np.float64)
+                refl_rays += baker.add_reflection_samples(tuple(float(x) for x in p), i, face, sums, refl_start, reflection_samples, **kw)
+                cubes.append(baker.finish_reflection(sums, reflection_samples, face, levels))
+                new_refl.append(sums)
+                bar.advance()
+    refl_out = (cubes, refl_rays, time.perf_counter() - t_refl)
+    r.samples, r.pages, r.reflection_samples, r.reflections, r.probes = samples, new_pages, reflection_samples, new_refl, probes
+    return traced, probes[0], probes[1], refl_out
 
 
 def _bake_on_ray(executor, st: StaticScene, inputs, probe_points: np.ndarray, refl_points: np.ndarray, refl, s: BakeSettings, kw: dict,
@@ -687,7 +788,8 @@ def attach(scene: ir.Scene, baked: Baked) -> ir.Scene:
         log_sum, covered = log_sum + s, covered + n
     log_average = float(np.exp(log_sum / covered)) if covered else 1.0
     layout = None if scene.lightmap is None else dataclasses.replace(scene.lightmap, textures=ids, directions=directions,
-                                                                     log_average=log_average if baked.pages else None)
+                                                                     log_average=log_average if baked.pages else None,
+                                                                     samples=baked.stats.get("samples") if baked.pages else None)
     cubes = baked.reflections if baked.reflections is not None and len(baked.reflections.cubes) == len(scene.reflection_probes) else None
     return dataclasses.replace(scene, textures=textures, lightmap=layout, probes=baked.probes, reflection_cubes=cubes)
 

@@ -324,6 +324,8 @@ class LightmapLayout:
     # The log-average luminance the runtime's exposure is made from (pack::exposure), of the
     # pages as baked; None until baked.
     log_average: float | None = None
+    # Paths per texel the pages were baked with (pack::LightmapLayout::samples); None until baked.
+    samples: int | None = None
 
 
 @dataclass
@@ -607,7 +609,7 @@ def from_wire(text: str, arrays: list[np.ndarray]) -> Scene:
     if doc.get("lightmap"):
         lm = doc["lightmap"]
         scene.lightmap = LightmapLayout(lm["texels_per_metre"], [tuple(p) for p in lm["pages"]], lm.get("padding", 2), list(lm.get("textures", [])),
-                                        list(lm.get("directions", [])), lm.get("log_average"))
+                                        list(lm.get("directions", [])), lm.get("log_average"), lm.get("samples"))
     rp = doc.get("reflection_probes")
     authored = doc.get("authored_reflection_probes", rp["probes"] if rp else [])
     scene.reflection_probes = [_probe_from_doc(p) for p in authored]

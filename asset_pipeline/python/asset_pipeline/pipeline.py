@@ -74,6 +74,10 @@ class CookSettings:
     # Read buffers, images, textures and props outside the source's folder tree (absolute paths,
     # file: URIs, `..` that leads out); off, such a path is an error.
     allow_external_uris: bool = False
+    # A bake.Refinement to go on from (`cook --watch` refining a bake step by step): the bake
+    # stage adds to its sums instead of tracing every sample again. Not part of any key: each
+    # step's result is, to the bit, the one-shot bake of its settings.
+    refine: "object | None" = None
 
 
 @dataclass
@@ -165,6 +169,63 @@ def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettin
         raise
 
 
+def _recorded_output(out: Path, stamp: Path, source_key: str | None, settings_doc: dict, settings: CookSettings) -> dict | None:
+    """The record of `out` (its summary) when it is what this cook would write: it exists, it
+    is the file made from this key, and nothing is forced; else None."""
+    if settings.force or source_key is None or not out.exists() or not stamp.exists():
+        return None
+    try:
+        recorded = json.loads(stamp.read_text())
+        if recorded["key"] == _cook_key(source_key, settings_doc, settings) and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
+            return recorded
+    except (OSError, ValueError, KeyError):
+        pass
+    return None
+
+
+def is_up_to_date(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None) -> bool:
+    """Whether `cook(source, out, settings)` would find `out` up to date (and do nothing)."""
+    settings = settings or CookSettings()
+    source, out = Path(source), Path(out)
+    if not source.is_file():
+        return False
+    cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
+    settings_doc = _key_settings(settings)
+    files, source_key = _known_source(source, settings, cache)
+    return _recorded_output(out, _stamp(cache, out), source_key, settings_doc, settings) is not None
+
+
+def _key_settings(settings: CookSettings) -> dict:
+    """The settings that shape the output (the cook key's): where and how finely the work runs
+    does not change the bytes, so it is left out."""
+    from asset_pipeline.bake import SCHEDULING
+
+    doc = {f.name: _settings_doc(getattr(settings, f.name)) for f in dataclasses.fields(settings)
+           if f.name not in ("force", "cache_dir", "report", "executor", "ray_address", "refine")}
+    if isinstance(doc.get("bake"), dict):
+        for k in SCHEDULING:
+            doc["bake"].pop(k, None)
+    return doc
+
+
+def _known_source(source: Path, settings: CookSettings, cache: StageCache) -> tuple[list[str] | None, str | None]:
+    """The files the last import of `source` read (stage "source-deps") and the source stage's
+    key over their bytes; (None, None) when not known."""
+    deps_key = _deps_key(source, settings)
+    deps = cache.load("source-deps", deps_key)
+    files = deps[0]["files"] if deps is not None else None
+    return files, _source_key(source, files)
+
+
+def _deps_key(source: Path, settings: CookSettings) -> str:
+    return Hasher("source-deps").text(os.fspath(source.resolve())).settings(settings.allow_external_uris).key()
+
+
+def _stamp(cache: StageCache, out: Path) -> Path:
+    """Where the record of the cook that wrote `out` is kept."""
+    return cache.root / "outputs" / (Hasher("output").text(os.fspath(out.resolve())).key()[:24] + ".json")
+
+
 def _cook(source, out, settings: CookSettings | None, progress: Progress | None) -> CookResult:
     settings = settings or CookSettings()
     progress = progress or Progress(enabled=False)
@@ -180,34 +241,22 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
     cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
     stages: list[StageRecord] = []
 
-    from asset_pipeline.bake import SCHEDULING
     from asset_pipeline.executor import make_executor
 
     executor = make_executor(settings.executor, settings.ray_address)
-    # Where and how finely the work runs does not change the bytes, so it is not in the key.
-    settings_doc = {f.name: _settings_doc(getattr(settings, f.name)) for f in dataclasses.fields(settings)
-                    if f.name not in ("force", "cache_dir", "report", "executor", "ray_address")}
-    if isinstance(settings_doc.get("bake"), dict):
-        for k in SCHEDULING:
-            settings_doc["bake"].pop(k, None)
+    settings_doc = _key_settings(settings)
     # What a cook reads is known only once it has read it (a level names textures and props, a
     # prop its buffers and images), so the files the last import of this source read are kept
     # (stage "source-deps"); the source stage's key covers all of their bytes. An edit to any of
     # them, or a new file the edit names, changes the key.
-    deps_key = Hasher("source-deps").text(os.fspath(source.resolve())).settings(settings.allow_external_uris).key()
-    deps = cache.load("source-deps", deps_key)
-    files = deps[0]["files"] if deps is not None else None
-    source_key = _source_key(source, files)
-    stamp = cache.root / "outputs" / (Hasher("output").text(os.fspath(out.resolve())).key()[:24] + ".json")
+    deps_key = _deps_key(source, settings)
+    files, source_key = _known_source(source, settings, cache)
+    stamp = _stamp(cache, out)
 
     # Up to date: the output exists, is the file this key produced, and nothing is forced.
-    if not settings.force and source_key is not None and out.exists() and stamp.exists():
-        try:
-            recorded = json.loads(stamp.read_text())
-            if recorded["key"] == _cook_key(source_key, settings_doc, settings) and all(_unchanged(Path(f), size, mtime) for f, size, mtime in recorded["files"]):
-                return CookResult(summary=recorded["summary"], up_to_date=True, files=list(files))
-        except (OSError, ValueError, KeyError):
-            pass
+    recorded = _recorded_output(out, stamp, source_key, settings_doc, settings)
+    if recorded is not None:
+        return CookResult(summary=recorded["summary"], up_to_date=True, files=list(files))
 
     if executor is not None:
         # Connect now, so a bad address fails before minutes of work rather than after.
@@ -757,7 +806,11 @@ def _bake_stage(scene: ir.Scene, settings: CookSettings, cache: StageCache, prog
         rec.cached = pages
         progress.line(f"bake: {pages} page(s) from the cache")
     else:
-        baked = bake_level(scene, bake_settings, progress, executor)
+        refine = settings.refine if executor is None else None
+        if refine is not None:
+            # The sums go on across steps whose settings differ only in their sample counts.
+            refine.begin(_bake_key(scene, dataclasses.replace(bake_settings, samples=-1, reflection_samples=-1)))
+        baked = bake_level(scene, bake_settings, progress, executor, refine=refine)
         arrays = list(baked.pages)
         probes = None
         if baked.probes is not None:

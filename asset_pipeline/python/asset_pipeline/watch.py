@@ -20,16 +20,19 @@ started cooks again at once, and one made after it is an event.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from asset_pipeline import CookError
+from asset_pipeline.bake import BakeSettings, Refinement, Superseded, preset_samples
 from asset_pipeline.cook import cook_detailed
-from asset_pipeline.pipeline import CookResult, CookSettings
+from asset_pipeline.pipeline import CookResult, CookSettings, is_up_to_date
 
 # Quiet time after the last event before cooking (an editor's save can be several events).
 DEBOUNCE_MS = 150
@@ -65,6 +68,7 @@ class Outcome:
     result: CookResult | None
     error: str | None
     seconds: float
+    superseded: bool = False  # a refining bake step given up for an edit that arrived
 
 
 def stage_summary(result: CookResult) -> str:
@@ -77,39 +81,94 @@ def stage_summary(result: CookResult) -> str:
     return "; ".join(parts)
 
 
-def wait_for_change(files: list[str], before: Fingerprint, debounce_ms: int = DEBOUNCE_MS,
-                    stop: Callable[[], bool] | None = None) -> list[str] | None:
-    """Block until one of `files` changes; return the changed ones (None if `stop()` says so).
-    `before`: their stat when the last cook started; a file already different is returned at
-    once, once the watcher runs (so no change slips between the cook and the watch)."""
-    import watchfiles
+class FileWatch:
+    """Changes to a set of files, collected on a thread (``watchfiles`` over their folders), so a
+    refining bake can ask between batches whether an edit arrived (`pending`)."""
 
-    wanted = {os.fspath(Path(f)) for f in files}
-    dirs = sorted({os.fspath(Path(f).parent) for f in wanted if Path(f).parent.is_dir()})
-    if not dirs:
-        raise CookError("cook --watch: none of the files the cook read is in a directory that exists")
-    first = True
-    for changes in watchfiles.watch(*dirs, watch_filter=lambda _change, path: path in wanted, debounce=debounce_ms, step=50,
-                                    rust_timeout=WAKE_MS, yield_on_timeout=True, recursive=False, raise_interrupt=True):
-        if changes:
-            return sorted({path for _, path in changes})
-        if first:
-            # The watcher is running now: anything that changed since the cook started was
-            # missed by it, and the stat says so.
-            first = False
-            missed = changed_files(before)
-            if missed:
-                return missed
-        if stop is not None and stop():
-            return None
-    return None
+    def __init__(self, debounce_ms: int = DEBOUNCE_MS):
+        self.debounce_ms = debounce_ms
+        self._wanted: frozenset[str] = frozenset()
+        self._dirs: tuple[str, ...] = ()
+        self._changes: set[str] = set()
+        self._lock = threading.Lock()
+        self._event = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._stop: threading.Event | None = None
+        self._ready = threading.Event()
+
+    def follow(self, files: Iterable[str]) -> bool:
+        """Watch these files from now on; True when the watcher (re)started, so changes made
+        before this call were not seen by it."""
+        self._wanted = frozenset(os.fspath(Path(f)) for f in files)
+        dirs = tuple(sorted({os.fspath(Path(f).parent) for f in self._wanted if Path(f).parent.is_dir()}))
+        if dirs == self._dirs and self._thread is not None and self._thread.is_alive():
+            return False
+        self.close()
+        if not dirs:
+            raise CookError("cook --watch: none of the files the cook read is in a folder that exists")
+        self._dirs, self._stop, self._ready = dirs, threading.Event(), threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(dirs, self._stop, self._ready), name="cook-watch", daemon=True)
+        self._thread.start()
+        self._ready.wait()
+        return True
+
+    def _run(self, dirs, stop: threading.Event, ready: threading.Event) -> None:
+        import watchfiles
+
+        # The first (empty) yield comes once the watcher runs: `follow` waits for it.
+        for changes in watchfiles.watch(*dirs, watch_filter=lambda _c, path: path in self._wanted, debounce=self.debounce_ms, step=50,
+                                        stop_event=stop, rust_timeout=50, yield_on_timeout=True, recursive=False, raise_interrupt=False):
+            ready.set()
+            if changes:
+                self.add(path for _, path in changes)
+        ready.set()
+
+    def add(self, paths: Iterable[str]) -> None:
+        with self._lock:
+            self._changes.update(paths)
+            if self._changes:
+                self._event.set()
+
+    def pending(self) -> bool:
+        return self._event.is_set()
+
+    def take(self, stop: Callable[[], bool] | None = None) -> list[str] | None:
+        """Wait for changes and return them (None when `stop()` says so first)."""
+        while not self._event.wait(WAKE_MS / 1000):
+            if stop is not None and stop():
+                return None
+        with self._lock:
+            out, self._changes = sorted(self._changes), set()
+            self._event.clear()
+        return out
+
+    def close(self) -> None:
+        if self._stop is not None:
+            self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        self._thread, self._stop, self._dirs = None, None, ()
+
+
+def refine_steps(bake: BakeSettings) -> list[BakeSettings]:
+    """The bakes a refining cook writes in turn: the target's settings with a sixteenth and a
+    quarter of its lightmap and reflection samples, then the target itself (its one-shot bake,
+    to the bit)."""
+    samples, reflection = preset_samples(bake)
+    steps = []
+    for part in (16, 4):
+        n, r = max(1, samples // part), max(1, reflection // part)
+        if n < samples and (not steps or n > steps[-1].samples):
+            steps.append(dataclasses.replace(bake, samples=n, reflection_samples=r))
+    return [*steps, bake]
 
 
 def run(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None, progress: bool = True,
         say: Callable[[str], None] | None = None, warn: Callable[[str], None] | None = None,
-        stop: Callable[[], bool] | None = None, debounce_ms: int = DEBOUNCE_MS) -> int:
-    """The watch loop: returns 0 when stopped (Ctrl-C, or `stop()` true between cooks).
-    `say` prints progress lines (stdout), `warn` the errors (stderr)."""
+        stop: Callable[[], bool] | None = None, debounce_ms: int = DEBOUNCE_MS, refine: bool = True) -> int:
+    """The watch loop: returns 0 when stopped (Ctrl-C, or `stop()` true while waiting), 2 when
+    it cannot start. `say` prints progress lines (stdout), `warn` the errors (stderr). `refine`:
+    bake in steps of growing sample counts (local bakes; see `refine_steps`)."""
     say = say or (lambda line: print(line, flush=True))
     warn = warn or (lambda line: print(line, file=sys.stderr, flush=True))
     source, out = Path(source), Path(out)
@@ -119,40 +178,71 @@ def run(source: str | os.PathLike, out: str | os.PathLike, settings: CookSetting
             [f"{out}: output directory '{out.parent}' does not exist"] if not out.parent.is_dir() else []):
         warn(f"cook: error: {problem}")
         return 2
+    watch = FileWatch(debounce_ms)
+    target = settings.bake or BakeSettings()
+    local = settings.executor == "local" or settings.executor is None
+    refinement = Refinement(stop=watch.pending) if refine and settings.baking and local else None
+    steps = refine_steps(target) if refinement is not None else [target]
     files = [os.fspath(source.resolve())]
     try:
         while True:
             before = fingerprint(files)
-            outcome = cook_once(source, out, settings, progress)
-            if outcome.result is not None:
+            # A pack already cooked at the target is not replaced by a coarser one.
+            todo = steps if refinement is not None and not is_up_to_date(source, out, settings) else [target]
+            for bake in todo:
+                outcome = cook_once(source, out, dataclasses.replace(settings, bake=bake, refine=refinement), progress)
+                if outcome.superseded:
+                    say("cook: an edit arrived; this bake step is dropped")
+                    break
+                if outcome.result is None:
+                    warn(f"cook: error: {outcome.error}")
+                    say(f"cook: {out} left as it was; save a fix to cook again")
+                    break
                 result = outcome.result
                 # The files of the last good cook, and the source however it fails next.
                 files = list(dict.fromkeys([os.fspath(source.resolve()), *result.files]))
                 before.update({f: v for f, v in fingerprint(f for f in files if f not in before).items()})
-                if result.up_to_date:
-                    say(f"cook: {out} is up to date ({outcome.seconds:.2f} s)")
-                else:
-                    say(f"cook: wrote {out} in {outcome.seconds:.2f} s ({stage_summary(result)})")
-            else:
-                warn(f"cook: error: {outcome.error}")
-                say(f"cook: {out} left as it was; save a fix to cook again")
-            say(f"cook: watching {len(files)} file{'s' if len(files) != 1 else ''} (Ctrl-C to stop)")
-            changed = wait_for_change(files, before, debounce_ms, stop)
+                say(_cooked_line(out, outcome, bake is not target))
+                if watch.follow(files):
+                    # The watcher is new: what changed since the cook started was not seen by it.
+                    watch.add(changed_files(before))
+                if watch.pending():
+                    break
+            if not watch.pending():
+                if watch.follow(files):
+                    watch.add(changed_files(before))
+                say(f"cook: watching {len(files)} file{'s' if len(files) != 1 else ''} (Ctrl-C to stop)")
+            changed = watch.take(stop)
             if changed is None:
                 return 0
             say(f"cook: changed: {', '.join(_short(f, source) for f in changed)}")
     except KeyboardInterrupt:
         say("cook: stopped watching")
         return 0
+    finally:
+        watch.close()
+
+
+def _cooked_line(out: Path, outcome: "Outcome", step: bool) -> str:
+    """What a cook did, in one line: written or up to date, its bake's samples, its stages."""
+    result = outcome.result
+    if result.up_to_date:
+        return f"cook: {out} is up to date ({outcome.seconds:.2f} s)"
+    bake = result.bake.get("samples")
+    refining = f"bake {bake} samples per texel{', refining' if step else ''}; " if bake else ""
+    return f"cook: wrote {out} in {outcome.seconds:.2f} s ({refining}{stage_summary(result)})"
 
 
 def cook_once(source: Path, out: Path, settings: CookSettings, progress: bool) -> Outcome:
-    """One cook; a user's mistake becomes the outcome's error (the pack is left as it was)."""
+    """One cook; a user's mistake becomes the outcome's error (the pack is left as it was), an
+    edit arriving during a refining bake its `superseded`."""
     t0 = time.perf_counter()
     try:
         result = cook_detailed(source, out, progress=progress, settings=settings)
     except CookError as e:
         return Outcome(None, str(e), time.perf_counter() - t0)
+    except Superseded:
+        return Outcome(None, None, time.perf_counter() - t0, superseded=True)
     return Outcome(result, None, time.perf_counter() - t0)
 
 

@@ -184,6 +184,10 @@ pub struct LightmapLayout {
     /// texels); `None`: the runtime computes it from the pages it loads.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub log_average: Option<f32>,
+    /// Paths per texel the pages were baked with (`None`: not recorded). The runtime's overlay
+    /// shows it, so a designer watching a bake refine (`cook --watch`) sees it grow.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
 }
 
 /// Irradiance probes for dynamic objects on a regular grid: probe (i, j, k) sits at

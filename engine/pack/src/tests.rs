@@ -82,7 +82,7 @@ fn sample() -> Pack {
     // A baked 4x4 lightmap page (half floats) and a 2x1x1 probe grid.
     let lm = b.push_bytes(&[0x3cu8; 4 * 4 * 8]);
     b.manifest.textures.push(Texture { name: "lightmap0".into(), width: 4, height: 4, format: TextureFormat::Rgba16Float, mips: vec![lm], sampler: Sampler::default() });
-    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1], directions: vec![], log_average: None });
+    b.manifest.lightmap = Some(LightmapLayout { texels_per_metre: 16.0, pages: vec![[4, 4]], padding: 2, textures: vec![1], directions: vec![], log_average: None, samples: None });
     let sh = b.push_bytes(&[0u8; 2 * 27 * 4]);
     let sun = b.push_bytes(&[0u8; 2 * 4]);
     b.manifest.probes = Some(ProbeGrid { origin: [0.0; 3], spacing: [2.0; 3], counts: [2, 1, 1], sh, sun_visibility: sun });

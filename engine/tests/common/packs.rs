@@ -80,7 +80,7 @@ pub fn add_lightmap_pages(bld: &mut PackBuilder, pages: &[[[f32; 4]; 4]]) {
         let texels: Vec<u8> = page.iter().flatten().flat_map(|&b| [half_bits(b), half_bits(b), half_bits(b), half_bits(1.0)]).flat_map(u16::to_le_bytes).collect();
         textures.push(texture(bld, &format!("lightmap{p}"), TextureFormat::Rgba16Float, [4, 4], &[&texels]));
     }
-    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]; pages.len()], padding: 2, textures, directions: vec![], log_average: None });
+    bld.manifest.lightmap = Some(pack::LightmapLayout { texels_per_metre: 2.0, pages: vec![[4, 4]; pages.len()], padding: 2, textures, directions: vec![], log_average: None, samples: None });
 }
 
 /// A sun of `lux` (perpendicular illuminance, white) shining toward -`towards_sun`, with

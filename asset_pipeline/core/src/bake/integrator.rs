@@ -38,6 +38,7 @@ use super::sampling::*;
 use super::scene::BakeScene;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Roulette starts after this many bounces (the first bounces carry most of the indirect light).
@@ -99,9 +100,37 @@ pub fn bake_points(
     progress: &(dyn Fn(u64, u64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Baked, Cancelled> {
+    let mut sums = vec![[0.0f64; 3]; points.len()];
+    let rays = add_point_samples(scene, points, normals, ids, settings, 0..settings.samples, &mut sums, progress, cancel)?;
+    Ok(Baked { b: sums.iter().map(|s| finish_point(s, settings.samples)).collect(), rays })
+}
+
+/// The samples `samples` (indices, of `settings.samples` in all) of every point, added to its
+/// running sums (`bake_points` is this over 0..settings.samples, then [`finish_point`]). Sample
+/// k of a point is the same whichever call draws it (its streams are keyed by (seed, id, k)), and
+/// each point's sums take its samples in index order: sums made over 0..a and then a..b are the
+/// bits of sums made over 0..b, so a bake can be refined (`cook --watch`) and end exactly where
+/// a one-shot bake of b samples does. Returns the rays cast.
+#[allow(clippy::too_many_arguments)]
+pub fn add_point_samples(
+    scene: &BakeScene,
+    points: &[V3],
+    normals: &[V3],
+    ids: Option<&[u64]>,
+    settings: &BakeSettings,
+    samples: Range<u32>,
+    sums: &mut [[f64; 3]],
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<u64, Cancelled> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
-    let (b, rays) = par_bake(points.len(), CHUNK, ids, progress, cancel, |i, id, cast| bake_point(scene, points[i], normals[i], id, settings, cast))?;
-    Ok(Baked { b, rays })
+    assert_eq!(points.len(), sums.len(), "one sum per point");
+    par_update(sums, CHUNK, ids, progress, cancel, |i, id, sum, cast| add_point(scene, points[i], normals[i], id, settings, samples.clone(), sum, cast))
+}
+
+/// B from a point's sums of `samples` samples (0 for a point the baker cannot place).
+pub fn finish_point(sum: &[f64; 3], samples: u32) -> V3 {
+    sum.map(|v| (v / samples.max(1) as f64) as f32)
 }
 
 /// A texel of a directional lightmap (shading.md §4): each channel's L1 irradiance in lightmap
@@ -141,18 +170,66 @@ pub fn bake_points_directional(
     progress: &(dyn Fn(u64, u64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<BakedDirectional, Cancelled> {
-    assert_eq!(points.len(), normals.len(), "one normal per point");
-    let sun = scene.lights.all().iter().position(|l| matches!(l, Light::Sun { .. }));
-    let (texels, rays) = par_bake(points.len(), CHUNK, ids, progress, cancel, |i, id, cast| bake_texel(scene, points[i], normals[i], id, sun, settings, cast))?;
+    let mut sums = vec![TexelSums::default(); points.len()];
+    let rays = add_texel_samples(scene, points, normals, ids, settings, 0..settings.samples, &mut sums, progress, cancel)?;
+    let texels = sums.iter().zip(points.iter().zip(normals)).map(|(s, (&x, &n))| finish_texel(scene, s, settings.samples, x, n)).collect();
     Ok(BakedDirectional { texels, rays })
 }
 
-fn bake_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s: &BakeSettings, rays: &mut u64) -> DirectionalTexel {
-    let Some(n) = unit_normal(x, n) else { return DirectionalTexel::default() };
-    let samples = s.samples.max(1);
-    // Sums of L/p (radiance over the density it was drawn with) and of L w / p, per channel.
-    let mut l_sum = [0.0f64; 3];
-    let mut lw_sum = [[0.0f64; 3]; 3];
+/// A directional texel's running sums (see [`add_texel_samples`]): of L/p (radiance over the
+/// density it was drawn with) and of L w / p per channel, and how many sun samples saw the sun.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexelSums {
+    pub l: [f64; 3],
+    pub lw: [[f64; 3]; 3],
+    pub sun_seen: u32,
+}
+
+/// [`add_point_samples`] for a directional lightmap's texels (`bake_points_directional` is
+/// this over 0..settings.samples, then [`finish_texel`]).
+#[allow(clippy::too_many_arguments)]
+pub fn add_texel_samples(
+    scene: &BakeScene,
+    points: &[V3],
+    normals: &[V3],
+    ids: Option<&[u64]>,
+    settings: &BakeSettings,
+    samples: Range<u32>,
+    sums: &mut [TexelSums],
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<u64, Cancelled> {
+    assert_eq!(points.len(), normals.len(), "one normal per point");
+    assert_eq!(points.len(), sums.len(), "one sum per point");
+    let sun = first_sun(scene);
+    par_update(sums, CHUNK, ids, progress, cancel, |i, id, acc, cast| add_texel(scene, points[i], normals[i], id, sun, settings, samples.clone(), acc, cast))
+}
+
+/// The scene's first sun, the one the runtime draws.
+fn first_sun(scene: &BakeScene) -> Option<usize> {
+    scene.lights.all().iter().position(|l| matches!(l, Light::Sun { .. }))
+}
+
+/// A directional texel from its sums of `samples` samples at point `x` with normal `n` (a point
+/// the baker cannot place is all zero).
+pub fn finish_texel(scene: &BakeScene, acc: &TexelSums, samples: u32, x: V3, n: V3) -> DirectionalTexel {
+    if unit_normal(x, n).is_none() {
+        return DirectionalTexel::default();
+    }
+    // b0 = mean(L/p) / 4 pi, b1 = mean(L w / p) / 2 pi.
+    let samples = samples.max(1);
+    let k = 1.0 / samples as f64;
+    DirectionalTexel {
+        b0: acc.l.map(|v| (v * k / (4.0 * std::f64::consts::PI)) as f32),
+        b1: acc.lw.map(|c| c.map(|v| (v * k / (2.0 * std::f64::consts::PI)) as f32)),
+        sun_visibility: if first_sun(scene).is_some() { acc.sun_seen as f32 / samples as f32 } else { 1.0 },
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn add_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s: &BakeSettings, samples: Range<u32>, acc: &mut TexelSums, rays: &mut u64) {
+    let Some(n) = unit_normal(x, n) else { return };
+    let TexelSums { l: l_sum, lw: lw_sum, sun_seen } = acc;
     let mut add_sample = |l_over_pdf: V3, w: V3| {
         for c in 0..3 {
             l_sum[c] += l_over_pdf[c] as f64;
@@ -161,13 +238,13 @@ fn bake_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s
             }
         }
     };
-    let mut sun_seen = 0u32;
+    // What a texel learns of its lights holds for every sample (the same answers, fewer rays).
     let mut seen = SeenFrom::default();
-    for k in 0..samples {
+    for k in samples {
         let mut rng = Rng::for_sample(s.seed, index, k as u64);
         direct_each(scene, x, n, &mut rng, rays, Some(&mut seen), mixture_pdf, |source, w, e, cos| {
             if sun.is_some_and(|i| source == Source::Light(i)) {
-                sun_seen += 1;
+                *sun_seen += 1;
             } else if cos > 0.0 {
                 // The sample's irradiance is its radiance x cos / pdf: undo the cosine.
                 add_sample(scale(e, 1.0 / cos), w);
@@ -177,13 +254,6 @@ fn bake_texel(scene: &BakeScene, x: V3, n: V3, index: u64, sun: Option<usize>, s
         let w = to_world(local, n);
         let l = trace(scene, [0.0; 3], x, n, w, pdf, s.bounces, &mut rng, rays);
         add_sample(scale(l, 1.0 / pdf), w);
-    }
-    // b0 = mean(L/p) / 4 pi, b1 = mean(L w / p) / 2 pi.
-    let k = 1.0 / samples as f64;
-    DirectionalTexel {
-        b0: l_sum.map(|v| (v * k / (4.0 * std::f64::consts::PI)) as f32),
-        b1: lw_sum.map(|c| c.map(|v| (v * k / (2.0 * std::f64::consts::PI)) as f32)),
-        sun_visibility: if sun.is_some() { sun_seen as f32 / samples as f32 } else { 1.0 },
     }
 }
 
@@ -198,17 +268,33 @@ pub(super) fn par_bake<T: Clone + Default + Send>(
     cancel: &AtomicBool,
     f: impl Fn(usize, u64, &mut u64) -> T + Sync,
 ) -> Result<(Vec<T>, u64), Cancelled> {
-    assert!(ids.is_none_or(|ids| ids.len() == n), "one id per point");
-    let (done, rays) = (AtomicU64::new(0), AtomicU64::new(0));
     let mut out = vec![T::default(); n];
-    out.par_chunks_mut(chunk).enumerate().for_each(|(c, dst)| {
+    let rays = par_update(&mut out, chunk, ids, progress, cancel, |i, id, o, cast| *o = f(i, id, cast))?;
+    Ok((out, rays))
+}
+
+/// `items` updated in parallel, `chunk` at a time: `f(i, id, item, rays)` updates item i, whose
+/// random streams are keyed by `ids[i]` (default i), adding the rays it casts. Progress and
+/// cancel as [`par_bake`]; a cancelled call leaves some items updated and others not. Returns the
+/// rays.
+pub(super) fn par_update<T: Send>(
+    items: &mut [T],
+    chunk: usize,
+    ids: Option<&[u64]>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+    f: impl Fn(usize, u64, &mut T, &mut u64) + Sync,
+) -> Result<u64, Cancelled> {
+    assert!(ids.is_none_or(|ids| ids.len() == items.len()), "one id per point");
+    let (done, rays) = (AtomicU64::new(0), AtomicU64::new(0));
+    items.par_chunks_mut(chunk).enumerate().for_each(|(c, dst)| {
         if cancel.load(Ordering::Relaxed) {
             return;
         }
         let mut cast = 0u64;
         for (j, o) in dst.iter_mut().enumerate() {
             let i = c * chunk + j;
-            *o = f(i, ids.map_or(i as u64, |ids| ids[i]), &mut cast);
+            f(i, ids.map_or(i as u64, |ids| ids[i]), o, &mut cast);
         }
         let d = done.fetch_add(dst.len() as u64, Ordering::Relaxed) + dst.len() as u64;
         let r = rays.fetch_add(cast, Ordering::Relaxed) + cast;
@@ -217,7 +303,7 @@ pub(super) fn par_bake<T: Clone + Default + Send>(
     if cancel.load(Ordering::Relaxed) {
         return Err(Cancelled);
     }
-    Ok((out, rays.into_inner()))
+    Ok(rays.into_inner())
 }
 
 /// `n` made unit, or None for a point the baker cannot place (a zero or NaN normal, a
@@ -227,18 +313,17 @@ fn unit_normal(x: V3, n: V3) -> Option<V3> {
     (nl > 0.0 && x.iter().all(|v| v.is_finite())).then(|| scale(n, 1.0 / nl))
 }
 
-fn bake_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, rays: &mut u64) -> V3 {
-    let Some(n) = unit_normal(x, n) else { return [0.0; 3] };
-    let mut sum = [0.0f64; 3];
+#[allow(clippy::too_many_arguments)]
+fn add_point(scene: &BakeScene, x: V3, n: V3, index: u64, s: &BakeSettings, samples: Range<u32>, sum: &mut [f64; 3], rays: &mut u64) {
+    let Some(n) = unit_normal(x, n) else { return };
     let mut seen = SeenFrom::default();
-    for k in 0..s.samples {
+    for k in samples {
         let mut rng = Rng::for_sample(s.seed, index, k as u64);
         let v = sample_path(scene, x, n, s.bounces, &mut rng, rays, Some(&mut seen));
         for c in 0..3 {
             sum[c] += v[c] as f64;
         }
     }
-    sum.map(|v| (v / s.samples.max(1) as f64) as f32)
 }
 
 /// One estimate of B at x: (direct irradiance)/pi + radiance along one cosine-sampled ray.

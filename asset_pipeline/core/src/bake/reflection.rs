@@ -23,12 +23,13 @@
 //! Deterministic like the lightmaps: texel streams are keyed by (seed, probe id, texel, sample).
 
 use super::bvh::Ray;
-use super::integrator::{par_bake, Cancelled};
+use super::integrator::{par_update, Cancelled};
 use super::probes::leaving;
 use super::sampling::*;
 use super::scene::BakeScene;
 use rayon::prelude::*;
 use std::f32::consts::PI;
+use std::ops::Range;
 use std::sync::atomic::AtomicBool;
 
 /// Keys the reflection probes' random streams apart from the texels' and irradiance probes'.
@@ -173,13 +174,33 @@ pub fn capture(
     progress: &(dyn Fn(u64, u64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<(Cube, u64), Cancelled> {
+    let mut sums = vec![[0.0f64; 3]; 6 * size * size];
+    let rays = add_capture_samples(scene, x, id, size, 0..samples.max(1), bounces, seed, &mut sums, progress, cancel)?;
+    Ok((finish_capture(&sums, size, samples), rays))
+}
+
+/// The capture samples `samples` (indices) of every texel of the cube seen from `x`, added to
+/// its running sums (`6 size²` of them, face by face, row by row): as the lightmaps' samples
+/// (`integrator::add_point_samples`), sums over 0..a then a..b are the bits of sums over 0..b.
+#[allow(clippy::too_many_arguments)]
+pub fn add_capture_samples(
+    scene: &BakeScene,
+    x: V3,
+    id: u64,
+    size: usize,
+    samples: Range<u32>,
+    bounces: u32,
+    seed: u64,
+    sums: &mut [[f64; 3]],
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<u64, Cancelled> {
+    assert_eq!(sums.len(), 6 * size * size, "one sum per cube texel");
     // Texel indices stay below 2^24 (a 2048² face): the id sits above them.
     let stream = REFLECTION_STREAM ^ (id << 24);
-    let n = samples.max(1);
-    let (texels, rays) = par_bake(6 * size * size, 64, None, progress, cancel, |i, _, cast| {
+    par_update(sums, 64, None, progress, cancel, |i, _, sum, cast| {
         let (face, j, col) = (i / (size * size), (i / size) % size, i % size);
-        let mut sum = [0.0f64; 3];
-        for k in 0..n {
+        for k in samples.clone() {
             let mut rng = Rng::for_sample(seed, stream ^ i as u64, k as u64);
             let (u, v) = (rng.next_f32(), rng.next_f32());
             let a = 2.0 * (col as f32 + u) / size as f32 - 1.0;
@@ -189,9 +210,13 @@ pub fn capture(
                 sum[c] += l[c] as f64;
             }
         }
-        sum.map(|s| (s / n as f64) as f32)
-    })?;
-    Ok((Cube { size, texels }, rays))
+    })
+}
+
+/// The radiance cube from its texels' sums of `samples` samples.
+pub fn finish_capture(sums: &[[f64; 3]], size: usize, samples: u32) -> Cube {
+    let n = samples.max(1) as f64;
+    Cube { size, texels: sums.iter().map(|s| s.map(|v| (v / n) as f32)).collect() }
 }
 
 /// The i-th of n Hammersley points in [0, 1)².

@@ -1291,3 +1291,59 @@ fn capture_is_the_same_on_one_and_two_threads() {
     let c = capture(&scene, [1.0, 0.5, -1.0], 3, 8, 8, 2, 11, &|_, _| {}, &cancel).unwrap();
     assert_ne!(a.0, c.0);
 }
+
+// ---- refinement: samples added in steps end where one pass ends (cook --watch) ------------
+
+/// A lit room with a sun through an opening, a point light, a sky and a bounce: every kind of
+/// sample the lightmaps and the reflection capture draw.
+fn refinement_scene() -> BakeScene {
+    let mut soup = Soup::new();
+    soup.cube([0.0, 0.0, 0.0], [4.0, 3.0, 5.0], true, 0.7, 0.0);
+    soup.quad([0.0, 2.9, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.5], 0.0, 200.0);
+    soup.scene(
+        lights(r#"[{"name":"sun","kind":"sun","intensity":50000,"direction":[0.3,-1,0.2],"angular_radius":0.02},
+                  {"name":"lamp","kind":"point","intensity":40,"position":[1,2,1],"range":0}]"#),
+        Some([300.0, 400.0, 500.0]),
+    )
+}
+
+#[test]
+fn samples_added_in_steps_finish_to_the_bits_of_one_pass() {
+    let scene = refinement_scene();
+    let cancel = AtomicBool::new(false);
+    let quiet = |_: u64, _: u64| {};
+    // Points on the floor and walls, one without a usable normal (it bakes as nothing).
+    let pts: Vec<V3> = (0..40).map(|i| [-1.5 + 0.07 * i as f32, -1.49, -2.0 + 0.1 * i as f32]).chain([[0.0, 0.0, 0.0]]).collect();
+    let mut nrm = vec![[0.0, 1.0, 0.0]; 40];
+    nrm.push([0.0, 0.0, 0.0]);
+    let ids: Vec<u64> = (0..pts.len() as u64).map(|i| 1000 + 7 * i).collect();
+    let s = settings(12, 2, 5);
+    for steps in [vec![0, 12], vec![0, 1, 4, 12], vec![0, 5, 6, 12]] {
+        let mut sums = vec![[0.0f64; 3]; pts.len()];
+        let mut dsums = vec![TexelSums::default(); pts.len()];
+        for w in steps.windows(2) {
+            add_point_samples(&scene, &pts, &nrm, Some(&ids), &s, w[0]..w[1], &mut sums, &quiet, &cancel).unwrap();
+            add_texel_samples(&scene, &pts, &nrm, Some(&ids), &s, w[0]..w[1], &mut dsums, &quiet, &cancel).unwrap();
+        }
+        let one = bake_points(&scene, &pts, &nrm, Some(&ids), &s, &quiet, &cancel).unwrap();
+        let stepped: Vec<V3> = sums.iter().map(|v| finish_point(v, 12)).collect();
+        assert_eq!(stepped, one.b, "irradiance, steps {steps:?}");
+        let one = bake_points_directional(&scene, &pts, &nrm, Some(&ids), &s, &quiet, &cancel).unwrap();
+        let stepped: Vec<DirectionalTexel> = dsums.iter().zip(pts.iter().zip(&nrm)).map(|(v, (&x, &n))| finish_texel(&scene, v, 12, x, n)).collect();
+        assert_eq!(stepped, one.texels, "directional, steps {steps:?}");
+    }
+    // An intermediate step is the one-pass bake of that many samples.
+    let mut sums = vec![[0.0f64; 3]; pts.len()];
+    add_point_samples(&scene, &pts, &nrm, Some(&ids), &s, 0..4, &mut sums, &quiet, &cancel).unwrap();
+    let four = bake_points(&scene, &pts, &nrm, Some(&ids), &settings(4, 2, 5), &quiet, &cancel).unwrap();
+    assert_eq!(sums.iter().map(|v| finish_point(v, 4)).collect::<Vec<_>>(), four.b);
+    assert!(four.b[..40].iter().any(|b| b.iter().any(|&c| c > 0.0)), "the room is lit");
+
+    // Reflection capture likewise.
+    let one = capture(&scene, [0.5, 0.0, 0.3], 1, 8, 6, 2, 9, &quiet, &cancel).unwrap().0;
+    let mut sums = vec![[0.0f64; 3]; 6 * 64];
+    for w in [0, 2, 3, 6].windows(2) {
+        add_capture_samples(&scene, [0.5, 0.0, 0.3], 1, 8, w[0]..w[1], 2, 9, &mut sums, &quiet, &cancel).unwrap();
+    }
+    assert_eq!(finish_capture(&sums, 8, 6), one);
+}
