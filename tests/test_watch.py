@@ -1,8 +1,8 @@
-"""`cook --watch`: a level edited while the cooker watches it (asset_pipeline/watch.py).
+"""The iteration loop: `cook --watch` (asset_pipeline/watch.py) on a level edited while it
+watches, and `demo --watch --headless` (engine::assets::reload) on a pack rewritten under it.
 
-The cooker runs as the user runs it (the console script, a child process); the test waits on its
-output lines (events), never on sleeps: each step edits the level and waits for the line that
-says what the cooker did about it.
+Both run as the user runs them (child processes); the tests wait on their output lines (events),
+never on sleeps: each step edits a file and waits for the line that says what was done about it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from asset_pipeline import _core
-from conftest import COOK
+from conftest import COOK, DEMO
 
 LEVEL = """
 [level]
@@ -57,13 +57,16 @@ STEP_TIMEOUT_S = 120
 
 
 class Watcher:
-    """`cook --watch` in a child process, its stdout and stderr lines in one queue as they come."""
+    """`cook --watch` (or `command`) in a child process, its stdout and stderr lines in one queue
+    as they come."""
 
-    def __init__(self, *args: str, cwd: Path):
-        self.proc = subprocess.Popen([str(COOK), *args, "--watch"], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, bufsize=1)
+    def __init__(self, *args: str, cwd: Path, command: list[str] | None = None):
+        command = command if command is not None else [str(COOK), *args, "--watch"]
+        self.proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
         self.lines: queue.Queue[tuple[str, str]] = queue.Queue()
         self.seen: list[tuple[str, str]] = []
+        self.pos = {"out": 0, "err": 0}  # where each stream's next `expect` starts in `seen`
+        self.read = 0  # `next_line`'s place in `seen`
         for name, stream in (("out", self.proc.stdout), ("err", self.proc.stderr)):
             threading.Thread(target=self._pump, args=(name, stream), daemon=True).start()
 
@@ -71,26 +74,35 @@ class Watcher:
         for line in stream:
             self.lines.put((name, line.rstrip("\n")))
 
-    def next_line(self) -> tuple[str, str]:
-        """The next line (stream, text), within the fail-safe."""
+    def _pull(self, deadline: float, what: str) -> None:
+        """One more line from the child into `seen`, or fail at the deadline with the transcript."""
         try:
-            item = self.lines.get(timeout=STEP_TIMEOUT_S)
+            item = self.lines.get(timeout=max(0.0, deadline - time.monotonic()))
         except queue.Empty:
-            pytest.fail(f"the cooker said nothing for {STEP_TIMEOUT_S} s; so far:\n" + self.transcript())
+            pytest.fail(f"no {what} within {STEP_TIMEOUT_S} s; the child said:\n" + self.transcript())
         self.seen.append(item)
-        return item
+
+    def next_line(self) -> tuple[str, str]:
+        """The next line of either stream not yet read by `next_line`, within the fail-safe."""
+        deadline = time.monotonic() + STEP_TIMEOUT_S
+        while self.read >= len(self.seen):
+            self._pull(deadline, "line")
+        self.read += 1
+        return self.seen[self.read - 1]
 
     def expect(self, prefix: str, stream: str = "out") -> str:
-        """Wait for the next line of `stream` starting with `prefix`; fail (with everything the
-        cooker said) if the cooker exits or the fail-safe passes first."""
+        """The next line of `stream` (after the last one `expect` matched there) starting with
+        `prefix`. The two streams are read apart: stdout and stderr lines reach the pipes in
+        no fixed order, and waiting on one never drops a line of the other."""
         deadline = time.monotonic() + STEP_TIMEOUT_S
+        i = self.pos[stream]
         while True:
-            try:
-                name, line = self.lines.get(timeout=max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                pytest.fail(f"no '{prefix}' line within {STEP_TIMEOUT_S} s; the cooker said:\n" + self.transcript())
-            self.seen.append((name, line))
+            while i >= len(self.seen):
+                self._pull(deadline, f"'{prefix}' line")
+            name, line = self.seen[i]
+            i += 1
             if name == stream and line.startswith(prefix):
+                self.pos[stream] = i
                 return line
 
     def transcript(self) -> str:
@@ -275,3 +287,54 @@ def test_a_step_given_up_for_an_edit_writes_nothing_and_keeps_the_sums(tmp_path)
     (once / "level.toml").write_text(level.read_text())
     cook_detailed(once / "level.toml", once / "level.pack", progress=False, settings=CookSettings(bake=BakeSettings(preset="medium")))
     assert (once / "level.lightmap0.exr").read_bytes() == (tmp_path / "level.lightmap0.exr").read_bytes()
+
+
+def mean_rgb(png: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(png) as im:
+        return np.asarray(im.convert("RGB"), np.float64).reshape(-1, 3).mean(0)
+
+
+def test_demo_watch_reloads_a_rewritten_pack_and_keeps_the_old_one_for_a_corrupt_one(tmp_path):
+    """`demo --watch --headless`: a pack the cooker rewrites is shown from the next frame (the
+    screenshot after `reloaded` has the new colour); a corrupt pack put in its place is refused
+    with its error and the demo goes on with the old scene; validation clean throughout."""
+    assert DEMO.exists(), f"{DEMO} is built by `make build` (a prerequisite of `make test`)"
+    level, pack, shot = tmp_path / "level.toml", tmp_path / "level.pack", tmp_path / "shot.png"
+
+    def cook(color: str) -> None:
+        level.write_text(LEVEL.format(color=color))
+        r = subprocess.run([str(COOK), "level.toml", "-o", "level.pack", "--quality", "draft", "-q"], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=STEP_TIMEOUT_S)
+        assert r.returncode == 0, r.stderr
+
+    cook("[0.9, 0.1, 0.1]")
+    demo = Watcher(cwd=tmp_path, command=[str(DEMO), "level.pack", "--headless", "--watch", "--validation", "--flight", "0",
+                                          "--width", "320", "--height", "180", "--screenshot", str(shot)])
+    try:
+        demo.expect("watching level.pack")
+        red = mean_rgb(shot)
+        cook("[0.1, 0.1, 0.9]")
+        demo.expect("reloaded level.pack")
+        demo.expect(f"wrote {shot}")
+        blue = mean_rgb(shot)
+        assert blue[2] - red[2] > 2.0 and red[0] - blue[0] > 2.0, (red, blue)
+
+        # A corrupt pack, put in place whole (as a cook writes): refused, the old scene stays.
+        corrupt = tmp_path / ".level.pack.tmp"
+        corrupt.write_bytes(b"GAMEPACK" + bytes(200))
+        os.replace(corrupt, pack)
+        error = demo.expect("demo: error: level.pack", stream="err")
+        assert error.endswith("still showing the last good pack"), error
+        assert demo.proc.poll() is None, demo.transcript()
+        cook("[0.1, 0.9, 0.1]")
+        demo.expect("reloaded level.pack")
+        demo.expect(f"wrote {shot}")
+        green = mean_rgb(shot)
+        assert green[1] - blue[1] > 2.0, (blue, green)
+    finally:
+        code = demo.stop()
+    assert code == 0, demo.transcript()
+    demo.expect("validation errors: 0")
+    assert not [line for n, line in demo.seen if n == "err" and "validation" in line.lower()], demo.transcript()

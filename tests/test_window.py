@@ -57,6 +57,25 @@ class DemoLog:
             assert line is not None, f"demo exited ({self.proc.wait(timeout=60)}) before '{text}':\n{''.join(self.lines)}\n{''.join(self.err)}"
             self.lines.append(line)
 
+    def wait_for_count(self, text: str, count: int, timeout: float) -> None:
+        """Until `count` lines containing `text` have been printed."""
+        deadline = time.monotonic() + timeout
+        while sum(text in line for line in self.lines) < count:
+            try:
+                line = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise AssertionError(f"not {count} '{text}' lines within {timeout} s:\n{''.join(self.lines)}\n{''.join(self.err[-40:])}") from None
+            assert line is not None, f"demo exited ({self.proc.wait(timeout=60)}) before '{text}':\n{''.join(self.lines)}\n{''.join(self.err)}"
+            self.lines.append(line)
+
+    def wait_for_err(self, text: str, timeout: float) -> None:
+        """Until stderr has a line containing `text` (its reader thread appends them)."""
+        deadline = time.monotonic() + timeout
+        while not any(text in line for line in self.err):
+            assert self.proc.poll() is None, f"demo exited before '{text}' on stderr:\n{''.join(self.err)}"
+            assert time.monotonic() < deadline, f"no '{text}' on stderr within {timeout} s:\n{''.join(self.err[-40:])}"
+            time.sleep(0.05)
+
     def finish(self, timeout: float = 60) -> tuple[str, str]:
         """demo's whole stdout and stderr once it has exited."""
         self.proc.wait(timeout=timeout)
@@ -306,3 +325,42 @@ def test_resizing_hiding_and_showing_the_window_keep_it_rendering(xvfb, tmp_path
     # Back at full size, the scene covers the whole screen again.
     uncovered = (full == root).all(axis=-1).mean()
     assert uncovered < 0.01 and colours(full[:, 420:]) > 20, f"the window did not render again at full size ({uncovered:.1%} bare)"
+
+
+def test_the_window_reloads_a_rewritten_pack_under_watch(xvfb, tmp_path):
+    """`demo --watch` in the window: a pack rewritten by the cooker is shown (`reloaded`), a
+    corrupt one is refused with its error while the window goes on, validation clean."""
+    from conftest import COOK
+    from test_watch import LEVEL
+
+    level = tmp_path / "level.toml"
+
+    def cook(color: str) -> None:
+        level.write_text(LEVEL.format(color=color))
+        r = subprocess.run([str(COOK), "level.toml", "-o", "level.pack", "--quality", "draft", "-q"], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+
+    cook("[0.9, 0.1, 0.1]")
+    env = {**os.environ, "DISPLAY": xvfb, "ENGINE_VALIDATION": "1"}
+    env.pop("WAYLAND_DISPLAY", None)
+    demo = subprocess.Popen([str(DEMO), "level.pack", "--watch", "--width", str(WIDTH), "--height", str(HEIGHT)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    log = DemoLog(demo)
+    try:
+        log.wait_for("presented 10 frames", timeout=120)
+        assert any(l.startswith("window:") for l in log.lines), "demo fell back to headless instead of opening a window"
+        cook("[0.1, 0.1, 0.9]")
+        log.wait_for("reloaded level.pack", timeout=120)
+        corrupt = tmp_path / ".level.pack.tmp"
+        corrupt.write_bytes(b"not a pack")
+        os.replace(corrupt, tmp_path / "level.pack")
+        log.wait_for_err("still showing the last good pack", timeout=120)
+        cook("[0.1, 0.9, 0.1]")
+        log.wait_for_count("reloaded level.pack", 2, timeout=120)
+    finally:
+        demo.send_signal(signal.SIGTERM)
+        out, err = log.finish()
+    assert demo.returncode == 0, f"demo exit {demo.returncode}:\n{out}\n{err}"
+    assert "validation errors: 0" in out, out
+    assert "[vulkan validation error]" not in err, err

@@ -2,7 +2,8 @@
 //! one index buffer, textures (with the sampler state each material slot asks for), material
 //! descriptor sets, the baked lightmap pages as one array texture, the probe grid, and the
 //! instances from the node hierarchy, and each small LOD's triangles kept on the CPU for
-//! occlusion culling. What it makes is a `scene::GpuScene`.
+//! occlusion culling. What it makes is a `scene::GpuScene`. [`reload`]: a pack replaced while
+//! the program runs.
 
 use crate::gpu::{Gpu, Image, Uploader};
 use crate::render::occlusion::{OccluderMesh, MAX_OCCLUDER_TRIANGLES};
@@ -13,6 +14,8 @@ use ash::vk;
 use glam::Vec3;
 use pack::{Pack, TextureFormat, TextureTransform};
 use std::sync::Arc;
+
+pub mod reload;
 
 /// What the mesh shaders read per material (set 2 binding 2, std430; `MaterialConstants` in
 /// shaders/mesh_draw.glsl): the emission and the UV transforms of the slots they sample.

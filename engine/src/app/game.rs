@@ -3,7 +3,6 @@
 //! window owns the device, the swapchain, the renderer and the scene; the game owns everything
 //! else (the demo's is `src/bin/demo/game.rs`).
 
-use crate::anim::animated::AnimatedScene;
 use crate::scene::camera::Camera;
 use crate::gpu::Gpu;
 use crate::ui::Panel;
@@ -37,18 +36,10 @@ pub struct Cx<'a> {
 }
 
 impl Cx<'_> {
-    /// Replace the scene with `pack`'s meshes and animated characters (waits for the device:
-    /// frames in flight read the old scene).
+    /// Replace the scene with `pack`'s meshes and animated characters (`assets::reload`): on an
+    /// error the old scene stays, whole.
     pub fn load(&mut self, pack: &pack::Pack) -> Result<()> {
-        self.gpu.wait_idle();
-        if let Some(mut a) = self.renderer.animation.take() {
-            a.destroy(self.gpu);
-        }
-        let scene = GpuScene::upload(self.gpu, pack, self.renderer.layouts())?;
-        let mut old = std::mem::replace(self.scene, scene);
-        old.destroy(self.gpu);
-        self.renderer.animation = AnimatedScene::new(self.gpu, pack, self.scene, self.frames_in_flight)?;
-        Ok(())
+        crate::assets::reload::replace_scene(self.gpu, self.renderer, self.scene, pack, self.frames_in_flight)
     }
 }
 

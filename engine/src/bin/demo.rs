@@ -21,12 +21,15 @@ use game::DemoGame;
 mod flight;
 #[path = "demo/game.rs"]
 mod game;
+use engine::assets::reload::{PackInfo, PackWatch};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::process::ExitCode;
 
 const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W] [--height H]
             [--screenshot PATH] [--screenshot-every K] [--screens T,T,...] [--flight SECONDS]
-            [--overlay] [--device auto|cpu|gpu|NAME]
+            [--overlay] [--watch] [--device auto|cpu|gpu|NAME]
             [--validation] [--shadow-map-size N] [--aa off|msaa|fxaa]
             [--render-scale S | --target-ms T] [--upscaler easu|cubic]
        demo --dump-pose PACK --clip NAME --time T
@@ -47,6 +50,13 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
                        default 24); 0 keeps it at the player's view
   --overlay            show the debug overlay (frame-time graph, counters, switches) from the
                        start; headless, it is drawn into the frames, so screenshots show it
+  --watch              reload the (first) pack whenever its file is replaced (`cook --watch`
+                       rewrites it): the scene, its lightmaps and probes, keeping the camera; a
+                       pack that cannot be read or loaded keeps the last good one on screen, its
+                       error on stderr and in the overlay's \"pack\" section (which also shows
+                       when the pack was cooked and its bake's samples per texel). Headless, it
+                       renders until Ctrl-C (or --frames), prints `reloaded PACK` and writes
+                       --screenshot again from the first frame after each reload
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
   --validation         enable the Vulkan validation layer (also ENGINE_VALIDATION=1);
                        any validation error makes the exit status 3
@@ -77,6 +87,9 @@ fn usage() -> String {
 
 const DEFAULT_PACK: &str = "build/temple.pack";
 
+/// Frames a watching headless run's summary (medians, pass times) covers: its last minute.
+const WATCH_SUMMARY_FRAMES: u64 = 3600;
+
 struct Args {
     pack: Option<PathBuf>,
     /// More packs for the window's Tab.
@@ -93,6 +106,8 @@ struct Args {
     screens_dir: PathBuf,
     rss_at: Vec<u64>,
     overlay: bool,
+    /// Reload the first pack when its file is replaced.
+    watch: bool,
     device: DevicePreference,
     validation: bool,
     shadow_map_size: u32,
@@ -118,6 +133,7 @@ fn parse_args() -> Result<Args, String> {
         screens_dir: PathBuf::from("build/screens"),
         rss_at: Vec::new(),
         overlay: false,
+        watch: false,
         device: DevicePreference::from_env(),
         validation: GpuOptions::validation_from_env(),
         shadow_map_size: engine::render::shadow::DEFAULT_SHADOW_MAP_SIZE,
@@ -141,6 +157,7 @@ fn parse_args() -> Result<Args, String> {
             "--headless" => a.headless = true,
             "--validation" => a.validation = true,
             "--overlay" => a.overlay = true,
+            "--watch" => a.watch = true,
             "--frames" => a.frames = Some(number("--frames", value("--frames")?)?),
             "--width" => a.width = number("--width", value("--width")?)?,
             "--height" => a.height = number("--height", value("--height")?)?,
@@ -288,7 +305,9 @@ fn main() -> ExitCode {
             title: format!("demo - {}", pack_path.display()),
             overlay: args.overlay,
         };
-        match app::run(&packs[0], opts, &mut DemoGame::new(&packs)) {
+        let game = DemoGame::new(&packs);
+        let mut game = if args.watch { game.watching(&pack_path) } else { game };
+        match app::run(&packs[0], opts, &mut game) {
             Ok(run) => {
                 println!("window closed after {} frames on {}", run.frames, run.device_name);
                 return validation_verdict(args.validation, run.validation_errors);
@@ -297,7 +316,7 @@ fn main() -> ExitCode {
             Err(e) => eprintln!("demo: cannot use a window ({e:#}); rendering headless instead"),
         }
     }
-    match headless(&args, pack, &gpu_opts, startup) {
+    match headless(&args, &pack_path, pack, &gpu_opts, startup) {
         Ok(code) => code,
         Err(e) if e.is::<DeviceLost>() => exit_device_lost(&e),
         Err(e) => {
@@ -338,7 +357,7 @@ fn validation_verdict(enabled: bool, errors: usize) -> ExitCode {
     }
 }
 
-fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: Startup) -> anyhow::Result<ExitCode> {
+fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: Startup) -> anyhow::Result<ExitCode> {
     let gpu = Gpu::new(gpu_opts)?;
     println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
     startup.mark("device");
@@ -360,7 +379,17 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
     let flight = (args.flight > 0.0).then(|| flight::Flight::for_pack(&pack.manifest, min, max, args.flight));
-    let lighting = Lighting::for_pack(&pack.manifest);
+    let mut lighting = Lighting::for_pack(&pack.manifest);
+    // --watch: the pack's file, and Ctrl-C / SIGTERM to end the run with its summary and a
+    // clean teardown (a watching run has no last frame of its own).
+    let mut watch = args.watch.then(|| (PackWatch::new(pack_path), PackInfo::new(pack_path, pack)));
+    let stop = Arc::new(AtomicBool::new(false));
+    if args.watch {
+        let flag = stop.clone();
+        if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+            eprintln!("demo: cannot install the Ctrl-C handler ({e})");
+        }
+    }
     if !args.screens.is_empty() {
         std::fs::create_dir_all(&args.screens_dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", args.screens_dir.display()))?;
     }
@@ -368,15 +397,21 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
     engine::sim::level::warm_up(&mut world);
     startup.mark("simulation warm-up");
     // Long enough for every requested screen unless the frame count was given.
-    let frames = args.frames.unwrap_or_else(|| args.screens.iter().map(|&(k, _)| k + 1).max().unwrap_or(0).max(100));
+    let frames = match (args.frames, args.watch) {
+        (Some(n), _) => n,
+        (None, true) => u64::MAX,
+        (None, false) => args.screens.iter().map(|&(k, _)| k + 1).max().unwrap_or(0).max(100),
+    };
     if let Some(&(_, secs)) = args.screens.iter().find(|&&(k, _)| k >= frames) {
         anyhow::bail!("--screens {secs}: past the last frame ({frames} frames are {:.2} s)", frames as f64 / 60.0);
     }
     // The per-frame records are allocated and written once up front, so their memory is resident
     // before the first frame: `--rss-at` (the soak) compares resident memory between frames, and
     // records that grew as frames passed (by pages, and by doubling) would read as a leak.
+    // A watching run has no last frame: its summary covers its last minute of frames.
+    let window = if args.watch { frames.min(WATCH_SUMMARY_FRAMES) } else { frames };
     let record = || {
-        let mut v = vec![0.0f64; frames as usize];
+        let mut v = vec![0.0f64; window as usize];
         v.fill(1.0);
         v.clear();
         v
@@ -389,9 +424,50 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
     let mut skin_ms = record();
     // Frames drawn at each render scale (in hundredths).
     let mut scales: std::collections::BTreeMap<u32, u64> = Default::default();
+    let (mut reloaded, mut rendered) = (false, 0u64);
+    let mut next_frame = Instant::now();
     for f in 0..frames {
+        if args.watch {
+            // Watching, frames keep real time (at most 60 a second) instead of running flat out
+            // beside the cook that rewrites the pack.
+            next_frame += std::time::Duration::from_secs_f64(1.0 / 60.0);
+            let now = Instant::now();
+            match next_frame.checked_duration_since(now) {
+                Some(wait) => std::thread::sleep(wait),
+                None => next_frame = now,
+            }
+        }
+        if stop.load(Ordering::SeqCst) {
+            break;
+        }
+        if frame_ms.len() as u64 >= window {
+            for v in std::iter::once(&mut frame_ms).chain([&mut gpu_ms, &mut skin_ms]).chain(pass_ms.iter_mut()) {
+                v.clear();
+            }
+        }
+        let replaced = watch.as_mut().is_some_and(|(w, _)| w.changed());
+        if let Some((w, info)) = watch.as_mut().filter(|_| replaced) {
+            let path = w.path();
+            let fresh = pack::Pack::read_file(path).map_err(anyhow::Error::from);
+            match fresh.and_then(|p| engine::assets::reload::replace_scene(&gpu, &mut renderer, &mut scene, &p, 1).map(|()| p)) {
+                Ok(p) => {
+                    // The camera and the world go on; the light is the new pack's.
+                    lighting = Lighting::for_pack(&p.manifest);
+                    info.shown(&p);
+                    info.reloads += 1;
+                    println!("reloaded {}", path.display());
+                    reloaded = true;
+                }
+                Err(e) if e.is::<DeviceLost>() => return Err(e),
+                Err(e) => {
+                    eprintln!("demo: error: {}: {e:#}; still showing the last good pack", path.display());
+                    info.error = Some(format!("{e:#}"));
+                }
+            }
+        }
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
         renderer.animate(&mut scene, 1.0 / 60.0);
+        rendered += 1;
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
         // Headless frames advance the simulation by a fixed 1/60 s: the same frames give the
@@ -401,12 +477,18 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
         let camera = flight.as_ref().map_or(still, |fl| fl.camera(f as f32 / 60.0));
         let screen = args.screens.iter().find(|(k, _)| *k == f).map(|&(_, secs)| secs);
         engine::sim::level::prepare_frame(&world, &mut renderer, &scene, &camera);
-        let capture = last || every || screen.is_some();
+        // The first frame of a watching run, and the first after each reload, are written too.
+        let shown = watch.is_some() && (f == 0 || std::mem::take(&mut reloaded));
+        let capture = last || every || screen.is_some() || shown;
         let t = match overlay.as_mut() {
             Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, o, |o, renderer| {
                 // A fixed 60 Hz clock: the same frames give the same pictures.
                 let mut sim = ui::SimPanel::new(&mut world);
-                o.build(ui::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new()), renderer, &mut [&mut sim]);
+                let input = ui::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new());
+                match &watch {
+                    Some((_, info)) => o.build(input, renderer, &mut [&mut ui::PackPanel { info }, &mut sim]),
+                    None => o.build(input, renderer, &mut [&mut sim]),
+                };
             })?,
             None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
         };
@@ -433,6 +515,13 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
         if args.rss_at.contains(&(f + 1)) {
             println!("rss after frame {}: {} KiB", f + 1, resident_kib().unwrap_or(0));
         }
+        if shown && !last {
+            target.save_png(&args.screenshot)?;
+            println!("wrote {}", args.screenshot.display());
+            if f == 0 {
+                println!("watching {}", pack_path.display());
+            }
+        }
         if let Some(secs) = screen {
             let path = args.screens_dir.join(format!("t{secs}s.png"));
             target.save_png(&path)?;
@@ -445,7 +534,7 @@ fn headless(args: &Args, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: 
     // The cull counts include the boids (culled with the scene); reported apart here.
     let boids = renderer.boids.boids.len() as u32;
     println!(
-        "frames: {frames} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail in {} draw calls, LOD histogram {:?}",
+        "frames: {rendered} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail in {} draw calls, LOD histogram {:?}",
         args.width,
         args.height,
         scene.instances.len(),

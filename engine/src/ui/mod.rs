@@ -11,7 +11,7 @@ pub mod panels;
 pub mod sim_panel;
 
 pub use history::{FrameHistory, Ring, HISTORY_FRAMES};
-pub use panels::{ControlRects, Panel, PassesPanel, RendererPanel};
+pub use panels::{ControlRects, PackPanel, Panel, PassesPanel, RendererPanel};
 pub use sim_panel::SimPanel;
 
 use crate::gpu::Gpu;

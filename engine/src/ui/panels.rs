@@ -212,3 +212,33 @@ impl Panel for PassesPanel<'_> {
         });
     }
 }
+
+/// The pack on show (`assets::reload::PackInfo`): its file, when it was cooked, its bake's
+/// samples per texel (growing while `cook --watch` refines it) and a refused reload's error.
+pub struct PackPanel<'a> {
+    pub info: &'a crate::assets::reload::PackInfo,
+}
+
+impl Panel for PackPanel<'_> {
+    fn title(&self) -> &str {
+        "pack"
+    }
+
+    fn default_open(&self) -> bool {
+        true
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui) {
+        egui::Grid::new("pack").num_columns(2).striped(true).show(ui, |ui| {
+            for (name, value) in self.info.rows(std::time::SystemTime::now()) {
+                ui.label(name);
+                if name == "reload refused" {
+                    ui.colored_label(egui::Color32::from_rgb(255, 96, 96), value);
+                } else {
+                    ui.monospace(value);
+                }
+                ui.end_row();
+            }
+        });
+    }
+}

@@ -4,8 +4,9 @@
 
 use anyhow::Result;
 use engine::app::{Cx, Game, Input};
+use engine::assets::reload::{PackInfo, PackWatch};
 use engine::scene::camera::{Camera, EYE_HEIGHT_M};
-use engine::ui::{Panel, SimPanel};
+use engine::ui::{PackPanel, Panel, SimPanel};
 use engine::render::renderer::Lighting;
 use engine::sim::clock::{ClockParams, FixedClock};
 use engine::sim::World;
@@ -36,6 +37,10 @@ pub struct DemoGame<'a> {
     walk_speed: f32,
     /// The level's particles and flocks, stepped on the fixed clock by each frame's duration.
     world: World,
+    /// `--watch`: the first pack's file, watched for replacement, and what the overlay says of it.
+    watch: Option<(PackWatch, PackInfo)>,
+    /// The first pack as last reloaded (what Tab comes back to instead of `packs[0]`).
+    reloaded: Option<pack::Pack>,
 }
 
 impl<'a> DemoGame<'a> {
@@ -51,6 +56,39 @@ impl<'a> DemoGame<'a> {
             ground: 0.0,
             walk_speed: 1.5,
             world: World::new(FixedClock::new(ClockParams::default())),
+            watch: None,
+            reloaded: None,
+        }
+    }
+
+    /// Reload the first pack whenever its file (`path`) is replaced (`demo --watch`).
+    pub fn watching(mut self, path: &std::path::Path) -> Self {
+        self.watch = Some((PackWatch::new(path), PackInfo::new(path, &self.packs[0])));
+        self
+    }
+
+    /// `--watch`: if the first pack's file was replaced and it is on screen, show the new one,
+    /// keeping the camera, walk mode and world; a pack that cannot be read or loaded leaves the
+    /// old one on screen and its error in the overlay (and on stderr).
+    fn reload_if_replaced(&mut self, cx: &mut Cx) {
+        let Some((watch, info)) = self.watch.as_mut() else { return };
+        if self.current != 0 || !watch.changed() {
+            return;
+        }
+        let path = watch.path().to_path_buf();
+        match pack::Pack::read_file(&path).map_err(anyhow::Error::from).and_then(|p| cx.load(&p).map(|()| p)) {
+            Ok(p) => {
+                self.lighting = Lighting::for_pack(&p.manifest);
+                self.walk_mesh = WalkMesh::from_pack(&p);
+                info.shown(&p);
+                info.reloads += 1;
+                println!("reloaded {}", path.display());
+                self.reloaded = Some(p);
+            }
+            Err(e) => {
+                eprintln!("demo: error: {}: {e:#}; still showing the last good pack", path.display());
+                info.error = Some(format!("{e:#}"));
+            }
         }
     }
 
@@ -138,9 +176,14 @@ impl Game for DemoGame<'_> {
             }
             KeyCode::Tab if self.packs.len() > 1 => {
                 self.current = (self.current + 1) % self.packs.len();
-                let pack = &self.packs[self.current];
+                let reloaded = if self.current == 0 { self.reloaded.take() } else { None };
+                let packs = self.packs;
+                let pack = reloaded.as_ref().unwrap_or(&packs[self.current]);
                 cx.load(pack)?;
                 self.set_up(cx, pack);
+                if self.current == 0 {
+                    self.reloaded = reloaded;
+                }
                 format!("scene {} of {}", self.current + 1, self.packs.len())
             }
             _ => return Ok(None),
@@ -148,6 +191,7 @@ impl Game for DemoGame<'_> {
     }
 
     fn update(&mut self, cx: &mut Cx, input: &Input, dt: f32) {
+        self.reload_if_replaced(cx);
         self.move_camera(cx, input, dt);
         self.world.update(dt as f64);
         level::prepare_frame(&self.world, cx.renderer, cx.scene, &self.camera);
@@ -162,6 +206,10 @@ impl Game for DemoGame<'_> {
     }
 
     fn panels(&mut self, show: &mut dyn FnMut(&mut [&mut dyn Panel])) {
-        show(&mut [&mut SimPanel::new(&mut self.world)]);
+        let mut sim = SimPanel::new(&mut self.world);
+        match &self.watch {
+            Some((_, info)) => show(&mut [&mut PackPanel { info }, &mut sim]),
+            None => show(&mut [&mut sim]),
+        }
     }
 }
