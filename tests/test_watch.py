@@ -11,6 +11,7 @@ import json
 import os
 import re
 import queue
+import shutil
 import signal
 import subprocess
 import threading
@@ -21,7 +22,7 @@ import numpy as np
 import pytest
 
 from asset_pipeline import _core
-from conftest import COOK, DEMO
+from conftest import COOK, DEMO, REPO
 
 LEVEL = """
 [level]
@@ -60,9 +61,9 @@ class Watcher:
     """`cook --watch` (or `command`) in a child process, its stdout and stderr lines in one queue
     as they come."""
 
-    def __init__(self, *args: str, cwd: Path, command: list[str] | None = None):
+    def __init__(self, *args: str, cwd: Path, command: list[str] | None = None, env: dict | None = None):
         command = command if command is not None else [str(COOK), *args, "--watch"]
-        self.proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+        self.proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1, env=env)
         self.lines: queue.Queue[tuple[str, str]] = queue.Queue()
         self.seen: list[tuple[str, str]] = []
         self.pos = {"out": 0, "err": 0}  # where each stream's next `expect` starts in `seen`
@@ -110,7 +111,7 @@ class Watcher:
 
     def stop(self) -> int:
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.proc.send_signal(signal.SIGTERM)
         return self.proc.wait(timeout=STEP_TIMEOUT_S)
 
 
@@ -338,3 +339,46 @@ def test_demo_watch_reloads_a_rewritten_pack_and_keeps_the_old_one_for_a_corrupt
     assert code == 0, demo.transcript()
     demo.expect("validation errors: 0")
     assert not [line for n, line in demo.seen if n == "err" and "validation" in line.lower()], demo.transcript()
+
+
+def test_demo_watch_recompiles_an_edited_shader_and_keeps_the_pipelines_on_a_broken_one(tmp_path):
+    """`demo --watch --headless` with shader sources (ENGINE_SHADERS, a copy of shaders/): an
+    edited shader is compiled again and drawn with from the next frame; one that does not compile
+    prints glslc's error and the frames go on with the pipelines they had; validation clean."""
+    assert DEMO.exists(), f"{DEMO} is built by `make build` (a prerequisite of `make test`)"
+    shaders = tmp_path / "shaders"
+    shutil.copytree(REPO / "shaders", shaders)
+    (tmp_path / "level.toml").write_text(LEVEL.format(color="[0.5, 0.5, 0.5]"))
+    r = subprocess.run([str(COOK), "level.toml", "-o", "level.pack", "--quality", "draft", "-q"], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=STEP_TIMEOUT_S)
+    assert r.returncode == 0, r.stderr
+    shot = tmp_path / "shot.png"
+    demo = Watcher(cwd=tmp_path, command=[str(DEMO), "level.pack", "--headless", "--watch", "--validation", "--flight", "0", "--render-scale", "1",
+                                          "--width", "320", "--height", "180", "--screenshot", str(shot)],
+                   env={**os.environ, "ENGINE_SHADERS": str(shaders)})
+    tonemap = shaders / "tonemap.frag"
+    original = tonemap.read_text()
+    try:
+        demo.expect(f"watching level.pack and the shaders in {shaders}")
+        before = mean_rgb(shot)
+        # Every pixel the tone map writes made pure red.
+        tonemap.write_text(original.replace("out_color = encoded(", "out_color = vec4(1.0, 0.0, 0.0, 1.0) + 0.0 * encoded("))
+        assert "tonemap.frag.spv" in demo.expect("reloaded shaders (")
+        demo.expect(f"wrote {shot}")
+        red = mean_rgb(shot)
+        assert red[0] > 250 and red[1] < 5 and red[2] < 5, (before, red)
+
+        tonemap.write_text(original + "\nthis is not GLSL\n")
+        error = demo.expect("demo: shader error:", stream="err")
+        assert "tonemap.frag" in error, error
+        demo.expect("demo: the pipelines are as they were", stream="err")
+        assert demo.proc.poll() is None, demo.transcript()
+
+        tonemap.write_text(original)
+        demo.expect("reloaded shaders (")
+        demo.expect(f"wrote {shot}")
+        assert np.abs(mean_rgb(shot) - before).max() < 1.0, (before, mean_rgb(shot))
+    finally:
+        code = demo.stop()
+    assert code == 0, demo.transcript()
+    demo.expect("validation errors: 0")

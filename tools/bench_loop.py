@@ -58,7 +58,7 @@ class Lines:
 
     def stop(self) -> None:
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.proc.send_signal(signal.SIGTERM)
         self.proc.wait(timeout=120)
 
 

@@ -10,8 +10,8 @@ swap files, the pack itself when it is written beside the source) are ignored.
 Each cook goes through the stage cache, so only the stages whose inputs changed run again; the
 line after each cook names the stages that ran and those that came from the cache. A cook that
 fails prints its one-line error and leaves the last good pack as it was (the pipeline writes
-atomically); the next save cooks again. Ctrl-C stops watching, and stops a cook in progress
-without writing anything.
+atomically); the next save cooks again. Ctrl-C (or SIGTERM) stops watching, and stops a cook
+in progress without writing anything.
 
 An edit made while a cook runs is not lost: the files' (size, mtime) are noted before each cook
 and compared once the watcher for the next wait is running, so a change made before the watcher
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import signal
 import sys
 import threading
 import time
@@ -179,6 +180,9 @@ def run(source: str | os.PathLike, out: str | os.PathLike, settings: CookSetting
         warn(f"cook: error: {problem}")
         return 2
     watch = FileWatch(debounce_ms)
+    # SIGTERM (a process manager, a test harness, a shell that started the cooker in the
+    # background, where SIGINT is ignored) stops it as Ctrl-C does: cleanly, between writes.
+    restore = _stop_on_sigterm()
     target = settings.bake or BakeSettings()
     local = settings.executor == "local" or settings.executor is None
     refinement = Refinement(stop=watch.pending) if refine and settings.baking and local else None
@@ -221,6 +225,20 @@ def run(source: str | os.PathLike, out: str | os.PathLike, settings: CookSetting
         return 0
     finally:
         watch.close()
+        restore()
+
+
+def _stop_on_sigterm() -> Callable[[], None]:
+    """Make SIGTERM raise KeyboardInterrupt in the main thread while watching; returns what puts
+    the previous handler back. (Only the main thread can set handlers: elsewhere, nothing.)"""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    return lambda: signal.signal(signal.SIGTERM, previous)
 
 
 def _cooked_line(out: Path, outcome: "Outcome", step: bool) -> str:

@@ -68,7 +68,7 @@ impl SkinPipeline {
             let push = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(4)];
             let set_layouts = [*set_layout];
             let layout = gpu.own(d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&push), None)?);
-            let module = gpu.own(shaders::module(d, shaders::SKIN_COMP)?);
+            let module = gpu.own(shaders::module(d, shaders::SKIN_COMP.spv())?);
             let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(*module).name(c"main");
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(*layout)];
             let pipeline = d.create_compute_pipelines(gpu.pipeline_cache, &info, None).map_err(|(_, e)| e)?[0];

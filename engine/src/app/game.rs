@@ -38,6 +38,10 @@ pub struct Cx<'a> {
 impl Cx<'_> {
     /// Replace the scene with `pack`'s meshes and animated characters (`assets::reload`): on an
     /// error the old scene stays, whole.
+    pub fn frames_in_flight(&self) -> usize {
+        self.frames_in_flight
+    }
+
     pub fn load(&mut self, pack: &pack::Pack) -> Result<()> {
         crate::assets::reload::replace_scene(self.gpu, self.renderer, self.scene, pack, self.frames_in_flight)
     }

@@ -1,10 +1,12 @@
 //! A pack replaced while the program runs (`demo --watch`, with `cook --watch` rewriting it):
 //! noticing the new file, and swapping the scene for the new one only once the new one is whole
-//! on the device, so a pack that cannot be read or uploaded leaves the old scene drawn.
+//! on the device, so a pack that cannot be read or uploaded leaves the old scene drawn. And the
+//! shader sources edited while it runs ([`reload_shaders`]).
 
 use crate::anim::animated::AnimatedScene;
 use crate::gpu::Gpu;
 use crate::render::renderer::Renderer;
+use crate::render::shaders::{self, SourceWatch};
 use crate::scene::GpuScene;
 use anyhow::Result;
 use std::path::{Path, PathBuf};
@@ -81,6 +83,35 @@ pub fn replace_scene(gpu: &Gpu, renderer: &mut Renderer, scene: &mut GpuScene, p
     Ok(())
 }
 
+/// What a look at the shader sources found.
+#[derive(Debug)]
+pub enum ShaderReload {
+    /// No source changed since the last look.
+    Unchanged,
+    /// Compiled; these modules changed and the renderer's pipelines were made again from them
+    /// (none: the edit did not change the SPIR-V, a comment, say).
+    Reloaded(Vec<&'static str>),
+    /// A shader did not compile: glslc's messages. The pipelines are as they were.
+    Refused(String),
+}
+
+/// If a file under `watch` changed, compile every shader again (`shaders::reload`) and, if any
+/// module changed, make the renderer's pipelines again (`Renderer::reload_shaders`).
+pub fn reload_shaders(watch: &mut SourceWatch, gpu: &Gpu, renderer: &mut Renderer, frames_in_flight: usize) -> Result<ShaderReload> {
+    if !watch.changed() {
+        return Ok(ShaderReload::Unchanged);
+    }
+    match shaders::reload(&shaders::glslc(), watch.dir()) {
+        Ok(changed) => {
+            if !changed.is_empty() {
+                renderer.reload_shaders(gpu, frames_in_flight)?;
+            }
+            Ok(ShaderReload::Reloaded(changed))
+        }
+        Err(messages) => Ok(ShaderReload::Refused(messages.join("\n"))),
+    }
+}
+
 /// What the overlay says of the pack on show: where it is, when it was written (its file's
 /// mtime: when the cook finished), its bake's samples per texel, and the last reload's error.
 #[derive(Clone, Debug, Default)]
@@ -92,6 +123,9 @@ pub struct PackInfo {
     pub reloads: u32,
     /// Why the last replacement was refused (the pack on show is then the one before it).
     pub error: Option<String>,
+    /// Shader reloads (`--watch` with the shader sources present), and why the last was refused.
+    pub shader_reloads: u32,
+    pub shader_error: Option<String>,
 }
 
 impl PackInfo {
@@ -120,6 +154,12 @@ impl PackInfo {
         rows.push(("reloads", self.reloads.to_string()));
         if let Some(e) = &self.error {
             rows.push(("reload refused", e.clone()));
+        }
+        if self.shader_reloads > 0 {
+            rows.push(("shader reloads", self.shader_reloads.to_string()));
+        }
+        if let Some(e) = &self.shader_error {
+            rows.push(("shaders refused", e.clone()));
         }
         rows
     }

@@ -21,7 +21,8 @@ use game::DemoGame;
 mod flight;
 #[path = "demo/game.rs"]
 mod game;
-use engine::assets::reload::{PackInfo, PackWatch};
+use engine::assets::reload::{reload_shaders, PackInfo, PackWatch, ShaderReload};
+use engine::render::shaders::SourceWatch;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -54,7 +55,10 @@ const USAGE: &str = "usage: demo [PACK...] [--headless] [--frames N] [--width W]
                        rewrites it): the scene, its lightmaps and probes, keeping the camera; a
                        pack that cannot be read or loaded keeps the last good one on screen, its
                        error on stderr and in the overlay's \"pack\" section (which also shows
-                       when the pack was cooked and its bake's samples per texel). Headless, it
+                       when the pack was cooked and its bake's samples per texel). With the
+                       shader sources present (the project's shaders/, or ENGINE_SHADERS), an
+                       edited shader is compiled again (glslc) and the pipelines made from it;
+                       one that does not compile keeps the old ones. Headless, it
                        renders until Ctrl-C (or --frames), prints `reloaded PACK` and writes
                        --screenshot again from the first frame after each reload
   --device D           pick the Vulkan device (also ENGINE_DEVICE); lavapipe is `cpu`
@@ -383,6 +387,8 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
     // --watch: the pack's file, and Ctrl-C / SIGTERM to end the run with its summary and a
     // clean teardown (a watching run has no last frame of its own).
     let mut watch = args.watch.then(|| (PackWatch::new(pack_path), PackInfo::new(pack_path, pack)));
+    // And the shader sources, where they are (the project's ../shaders or ENGINE_SHADERS).
+    let mut shader_watch = if args.watch { engine::render::shaders::sources().map(|d| SourceWatch::new(&d)) } else { None };
     let stop = Arc::new(AtomicBool::new(false));
     if args.watch {
         let flag = stop.clone();
@@ -465,6 +471,21 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
                 }
             }
         }
+        if let (Some(sw), Some((_, info))) = (shader_watch.as_mut(), watch.as_mut()) {
+            match reload_shaders(sw, &gpu, &mut renderer, 1)? {
+                ShaderReload::Unchanged => {}
+                ShaderReload::Reloaded(changed) => {
+                    println!("reloaded shaders ({} modules changed: {})", changed.len(), changed.join(", "));
+                    info.shader_reloads += 1;
+                    info.shader_error = None;
+                    reloaded = true;
+                }
+                ShaderReload::Refused(messages) => {
+                    eprintln!("demo: shader error: {messages}\ndemo: the pipelines are as they were");
+                    info.shader_error = messages.lines().next().map(str::to_string);
+                }
+            }
+        }
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
         renderer.animate(&mut scene, 1.0 / 60.0);
         rendered += 1;
@@ -519,7 +540,10 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
             target.save_png(&args.screenshot)?;
             println!("wrote {}", args.screenshot.display());
             if f == 0 {
-                println!("watching {}", pack_path.display());
+                match &shader_watch {
+                    Some(sw) => println!("watching {} and the shaders in {}", pack_path.display(), sw.dir().display()),
+                    None => println!("watching {}", pack_path.display()),
+                }
             }
         }
         if let Some(secs) = screen {

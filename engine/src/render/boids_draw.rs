@@ -157,6 +157,16 @@ impl BoidsDraw {
         rec.end_rendering();
     }
 
+    /// Drop the pipelines (the shaders were reloaded): `prepare_samples` makes them again from
+    /// the new modules.
+    pub fn reload_pipelines(&mut self, gpu: &Gpu) {
+        unsafe {
+            for pipeline in self.pipelines.drain() {
+                gpu.device.destroy_pipeline(pipeline, None);
+            }
+        }
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.instances.destroy(gpu);
         unsafe {
@@ -224,8 +234,8 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
             offset: 48,
         },
     ];
-    GraphicsPipeline::new("boid", shaders::BOID_VERT)
-        .fragment(shaders::BOID_FRAG, None)
+    GraphicsPipeline::new("boid", shaders::BOID_VERT.spv())
+        .fragment(shaders::BOID_FRAG.spv(), None)
         .vertex_input(&bindings, &attributes)
         .depth(depth_format, true, vk::CompareOp::GREATER_OR_EQUAL)
         .color(HDR_FORMAT, opaque())

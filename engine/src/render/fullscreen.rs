@@ -39,7 +39,7 @@ impl FullscreenFilter {
         for value in variants.iter().map(Some).chain(variants.is_empty().then_some(None)) {
             let bytes = value.map(|v| v.to_le_bytes());
             let spec = bytes.as_ref().map(|b| vk::SpecializationInfo::default().map_entries(&entries).data(b));
-            pipelines.push(GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT).fragment(frag, spec).color(format, opaque()).build(gpu, *layout)?);
+            pipelines.push(GraphicsPipeline::new(name, shaders::FULLSCREEN_VERT.spv()).fragment(frag, spec).color(format, opaque()).build(gpu, *layout)?);
         }
         Ok(FullscreenFilter { input: input.keep(), layout: layout.keep(), pipelines: pipelines.keep() })
     }

@@ -150,7 +150,7 @@ impl MeshKit {
         let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
         let one = vk::SampleCountFlags::TYPE_1;
         let shadow = gpu.own(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?);
-        let shadow_masked = create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG), true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?;
+        let shadow_masked = create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG.spv()), true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?;
         let mut kit = gpu.own(MeshKit {
             frame_layout: frame_layout.keep(),
             material_layout: material_layout.keep(),
@@ -163,6 +163,29 @@ impl MeshKit {
         });
         kit.prepare_samples(gpu, one)?;
         Ok(kit.keep())
+    }
+
+    /// Make every pipeline again from the shaders as they are now (`shaders::reload`), keeping
+    /// the layouts the frame's and the scene's descriptor sets were made for; the camera's lit
+    /// pipelines come back as frames ask for them (`prepare_lit`).
+    pub fn reload_pipelines(&mut self, gpu: &Gpu, shadow_format: vk::Format) -> Result<()> {
+        let pl = self.pipeline_layout;
+        let bias = Some((DEPTH_BIAS_CONSTANT, DEPTH_BIAS_SLOPE));
+        let one = vk::SampleCountFlags::TYPE_1;
+        let shadow = gpu.own(create_mesh_pipeline(gpu, pl, None, shadow_format, None, true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?);
+        let shadow_masked = create_mesh_pipeline(gpu, pl, None, shadow_format, Some(shaders::DEPTH_MASKED_FRAG.spv()), true, vk::CompareOp::LESS_OR_EQUAL, Variant::default(), bias, one)?;
+        let d = &gpu.device;
+        unsafe {
+            for set in self.camera.drain() {
+                for pipeline in set.all() {
+                    d.destroy_pipeline(pipeline, None);
+                }
+            }
+            d.destroy_pipeline(self.shadow, None);
+            d.destroy_pipeline(self.shadow_masked, None);
+        }
+        (self.shadow, self.shadow_masked) = (shadow.keep(), shadow_masked);
+        self.prepare_samples(gpu, one)
     }
 
     /// Make the camera's depth pipelines for `samples` if no frame has used them yet.
@@ -390,7 +413,7 @@ fn depth_pipelines(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFl
     let depth_format = gpu.caps.depth_format;
     let depth = gpu.own(create_mesh_pipeline(gpu, pl, None, depth_format, None, true, NEARER, Variant::default(), None, samples)?);
     let masked = Variant { samples: samples.as_raw(), ..Variant::default() };
-    let depth_masked = create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG), true, NEARER, masked, None, samples)?;
+    let depth_masked = create_mesh_pipeline(gpu, pl, None, depth_format, Some(shaders::DEPTH_MASKED_FRAG.spv()), true, NEARER, masked, None, samples)?;
     Ok(CameraPipelines { depth: depth.keep(), depth_masked, lit: HashMap::new() })
 }
 
@@ -403,14 +426,14 @@ fn lit_pipeline(gpu: &Gpu, pl: vk::PipelineLayout, samples: vk::SampleCountFlags
     match key.phase {
         LitPhase::Plain => {
             let variant = Variant { samples: samples.as_raw(), ..variant };
-            let frag = if key.counting { shaders::MESH_COUNTED_FRAG } else { shaders::MESH_FRAG };
+            let frag = if key.counting { shaders::MESH_COUNTED_FRAG.spv() } else { shaders::MESH_FRAG.spv() };
             create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(frag), true, NEARER, variant, None, samples)
         }
         LitPhase::Equal => {
-            let frag = if key.counting { shaders::MESH_EQUAL_COUNTED_FRAG } else { shaders::MESH_EQUAL_FRAG };
+            let frag = if key.counting { shaders::MESH_EQUAL_COUNTED_FRAG.spv() } else { shaders::MESH_EQUAL_FRAG.spv() };
             create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, opaque())), depth_format, Some(frag), false, vk::CompareOp::EQUAL, variant, None, samples)
         }
-        LitPhase::Blend => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG), false, NEARER, variant, None, samples),
+        LitPhase::Blend => create_mesh_pipeline(gpu, pl, Some((HDR_FORMAT, premultiplied_over())), depth_format, Some(shaders::MESH_BLEND_FRAG.spv()), false, NEARER, variant, None, samples),
     }
 }
 
@@ -449,7 +472,7 @@ fn create_mesh_pipeline(
     // Without a fragment shader only the position is needed: lavapipe would otherwise compute
     // every output of the vertex shader for nothing (mesh.vert's DEPTH_ONLY module).
     let depth_only = frag.is_none();
-    let vert = if depth_only { shaders::MESH_DEPTH_VERT } else { shaders::MESH_VERT };
+    let vert = if depth_only { shaders::MESH_DEPTH_VERT.spv() } else { shaders::MESH_VERT.spv() };
     // The vertex layout comes from the pack crate: one definition of the format. Only the
     // attributes the shader reads are declared: the position and the model matrix (instance
     // locations 6 to 9) for the depth-only module.

@@ -171,6 +171,16 @@ impl ParticlePass {
         rec.end_rendering();
     }
 
+    /// Drop the pipelines (the shaders were reloaded): `prepare_samples` makes them again from
+    /// the new modules.
+    pub fn reload_pipelines(&mut self, gpu: &Gpu) {
+        unsafe {
+            for pipeline in self.pipelines.drain().flatten() {
+                gpu.device.destroy_pipeline(pipeline, None);
+            }
+        }
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.buffers.destroy(gpu);
         unsafe {
@@ -219,8 +229,8 @@ fn create_pipeline(gpu: &Gpu, layout: vk::PipelineLayout, depth_format: vk::Form
         .alpha_blend_op(vk::BlendOp::ADD)
         .color_write_mask(if covers { rgb | vk::ColorComponentFlags::A } else { rgb });
     // Reversed-Z: nearer is greater; particles test depth but do not write it.
-    GraphicsPipeline::new("particle", shaders::PARTICLE_VERT)
-        .fragment(shaders::PARTICLE_FRAG, None)
+    GraphicsPipeline::new("particle", shaders::PARTICLE_VERT.spv())
+        .fragment(shaders::PARTICLE_FRAG.spv(), None)
         .vertex_input(&bindings, &attributes)
         .topology(vk::PrimitiveTopology::TRIANGLE_STRIP)
         .depth(depth_format, false, vk::CompareOp::GREATER_OR_EQUAL)

@@ -554,6 +554,30 @@ impl Renderer {
         Ok(())
     }
 
+    /// Make every pipeline again from the shaders as they are now (after `shaders::reload`):
+    /// the mesh passes' (their layouts kept, so the scene's descriptor sets stay valid), the
+    /// particles' and birds', and the post passes (tone map, FXAA, upscale, depth view), made
+    /// anew with their own sets. Waits for the device. Skinning's compute pipeline belongs to
+    /// the scene's characters (`AnimatedScene`) and keeps its module until they are made again.
+    pub fn reload_shaders(&mut self, gpu: &Gpu, frames_in_flight: usize) -> Result<()> {
+        gpu.wait_idle();
+        let shadow_format = SunShadow::format_for(gpu)?;
+        let passes = gpu.own(passes::register(gpu, self.color_format, frames_in_flight)?);
+        let mut tonemap = gpu.own(ToneMap::new(gpu, self.color_format, frames_in_flight)?);
+        tonemap.saturation = self.tonemap.saturation;
+        self.mesh.reload_pipelines(gpu, shadow_format)?;
+        self.particles.reload_pipelines(gpu);
+        self.boids.reload_pipelines(gpu);
+        for p in &mut self.passes {
+            p.destroy(gpu);
+        }
+        self.passes = passes.keep();
+        let mut old = std::mem::replace(&mut self.tonemap, tonemap.keep());
+        old.destroy(gpu);
+        self.lit_prepared = None;
+        Ok(())
+    }
+
     /// Fragments the shading pass of the frame last recorded in `slot` shaded, once the GPU has
     /// finished it; None unless that frame counted (`count_fragments` on and the device can).
     pub fn fragment_count(&self, slot: usize) -> Option<u32> {

@@ -49,9 +49,9 @@ impl ToneMap {
     pub fn new(gpu: &Gpu, display_format: vk::Format, frames_in_flight: usize) -> Result<ToneMap> {
         let push = std::mem::size_of::<ToneMapPush>() as u32;
         // Variants: SKY off (0) and on (1).
-        let filter = gpu.own(FullscreenFilter::new_variants(gpu, "tone-map", shaders::TONEMAP_FRAG, push, display_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])?);
+        let filter = gpu.own(FullscreenFilter::new_variants(gpu, "tone-map", shaders::TONEMAP_FRAG.spv(), push, display_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])?);
         // The same two with GAMMA2 (bit 1), for the upscaler's input.
-        let low = FullscreenFilter::new_variants(gpu, "tone-map (render scale)", shaders::TONEMAP_FRAG, push, LOW_FORMAT, frames_in_flight, vk::Filter::NEAREST, &[2, 3])?;
+        let low = FullscreenFilter::new_variants(gpu, "tone-map (render scale)", shaders::TONEMAP_FRAG.spv(), push, LOW_FORMAT, frames_in_flight, vk::Filter::NEAREST, &[2, 3])?;
         Ok(ToneMap { saturation: DEFAULT_SATURATION, display_format, filter: filter.keep(), low })
     }
 

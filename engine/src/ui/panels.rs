@@ -232,7 +232,7 @@ impl Panel for PackPanel<'_> {
         egui::Grid::new("pack").num_columns(2).striped(true).show(ui, |ui| {
             for (name, value) in self.info.rows(std::time::SystemTime::now()) {
                 ui.label(name);
-                if name == "reload refused" {
+                if name.ends_with("refused") {
                     ui.colored_label(egui::Color32::from_rgb(255, 96, 96), value);
                 } else {
                     ui.monospace(value);

@@ -4,7 +4,8 @@
 
 use anyhow::Result;
 use engine::app::{Cx, Game, Input};
-use engine::assets::reload::{PackInfo, PackWatch};
+use engine::assets::reload::{reload_shaders, PackInfo, PackWatch, ShaderReload};
+use engine::render::shaders::{self, SourceWatch};
 use engine::scene::camera::{Camera, EYE_HEIGHT_M};
 use engine::ui::{PackPanel, Panel, SimPanel};
 use engine::render::renderer::Lighting;
@@ -41,6 +42,8 @@ pub struct DemoGame<'a> {
     watch: Option<(PackWatch, PackInfo)>,
     /// The first pack as last reloaded (what Tab comes back to instead of `packs[0]`).
     reloaded: Option<pack::Pack>,
+    /// `--watch` with the shader sources present: they, watched.
+    shader_watch: Option<SourceWatch>,
 }
 
 impl<'a> DemoGame<'a> {
@@ -58,12 +61,14 @@ impl<'a> DemoGame<'a> {
             world: World::new(FixedClock::new(ClockParams::default())),
             watch: None,
             reloaded: None,
+            shader_watch: None,
         }
     }
 
     /// Reload the first pack whenever its file (`path`) is replaced (`demo --watch`).
     pub fn watching(mut self, path: &std::path::Path) -> Self {
         self.watch = Some((PackWatch::new(path), PackInfo::new(path, &self.packs[0])));
+        self.shader_watch = shaders::sources().map(|d| SourceWatch::new(&d));
         self
     }
 
@@ -72,6 +77,21 @@ impl<'a> DemoGame<'a> {
     /// old one on screen and its error in the overlay (and on stderr).
     fn reload_if_replaced(&mut self, cx: &mut Cx) {
         let Some((watch, info)) = self.watch.as_mut() else { return };
+        if let Some(sw) = self.shader_watch.as_mut() {
+            match reload_shaders(sw, cx.gpu, cx.renderer, cx.frames_in_flight()) {
+                Ok(ShaderReload::Unchanged) => {}
+                Ok(ShaderReload::Reloaded(changed)) => {
+                    println!("reloaded shaders ({} modules changed: {})", changed.len(), changed.join(", "));
+                    info.shader_reloads += 1;
+                    info.shader_error = None;
+                }
+                Ok(ShaderReload::Refused(messages)) => {
+                    eprintln!("demo: shader error: {messages}\ndemo: the pipelines are as they were");
+                    info.shader_error = messages.lines().next().map(str::to_string);
+                }
+                Err(e) => eprintln!("demo: error: remaking the pipelines: {e:#}"),
+            }
+        }
         if self.current != 0 || !watch.changed() {
             return;
         }

@@ -26,7 +26,7 @@ pub struct DepthView {
 impl DepthView {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<DepthView> {
         let push = std::mem::size_of::<DepthViewPush>() as u32;
-        Ok(DepthView { filter: FullscreenFilter::new(gpu, "depth view", shaders::DEPTH_VIEW_FRAG, push, color_format, frames_in_flight, vk::Filter::NEAREST)? })
+        Ok(DepthView { filter: FullscreenFilter::new(gpu, "depth view", shaders::DEPTH_VIEW_FRAG.spv(), push, color_format, frames_in_flight, vk::Filter::NEAREST)? })
     }
 }
 

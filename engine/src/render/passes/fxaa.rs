@@ -33,8 +33,8 @@ impl Fxaa {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Fxaa> {
         // Bilinear: the taps along the edge fall between pixels.
         let push = std::mem::size_of::<FxaaPush>() as u32;
-        let filter = gpu.own(FullscreenFilter::new_variants(gpu, "fxaa", shaders::FXAA_FRAG, push, color_format, frames_in_flight, vk::Filter::LINEAR, &[0])?);
-        let low = FullscreenFilter::new_variants(gpu, "fxaa (render scale)", shaders::FXAA_FRAG, push, LOW_FORMAT, frames_in_flight, vk::Filter::LINEAR, &[1])?;
+        let filter = gpu.own(FullscreenFilter::new_variants(gpu, "fxaa", shaders::FXAA_FRAG.spv(), push, color_format, frames_in_flight, vk::Filter::LINEAR, &[0])?);
+        let low = FullscreenFilter::new_variants(gpu, "fxaa (render scale)", shaders::FXAA_FRAG.spv(), push, LOW_FORMAT, frames_in_flight, vk::Filter::LINEAR, &[1])?;
         Ok(Fxaa { filter: filter.keep(), low })
     }
 }

@@ -31,7 +31,7 @@ impl Upscale {
     pub fn new(gpu: &Gpu, color_format: vk::Format, frames_in_flight: usize) -> Result<Upscale> {
         let push = std::mem::size_of::<UpscalePush>() as u32;
         // Variants by `Upscaler`: EASU (CUBIC off), the Catmull-Rom cubic (on).
-        Ok(Upscale { filter: FullscreenFilter::new_variants(gpu, "upscale", shaders::UPSCALE_FRAG, push, color_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])? })
+        Ok(Upscale { filter: FullscreenFilter::new_variants(gpu, "upscale", shaders::UPSCALE_FRAG.spv(), push, color_format, frames_in_flight, vk::Filter::NEAREST, &[0, 1])? })
     }
 }
 
