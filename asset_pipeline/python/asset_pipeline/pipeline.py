@@ -191,7 +191,7 @@ def is_up_to_date(source: str | os.PathLike, out: str | os.PathLike, settings: C
         return False
     cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
     settings_doc = _key_settings(settings)
-    files, source_key = _known_source(source, settings, cache)
+    _, source_key = _known_source(source, settings, cache)
     return _recorded_output(out, _stamp(cache, out), source_key, settings_doc, settings) is not None
 
 
