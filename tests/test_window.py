@@ -48,17 +48,10 @@ class DemoLog:
     def wait_for(self, text: str, timeout: float) -> None:
         """Until a line containing `text` has been printed (fails at `timeout` seconds, or when
         demo exits first, with what it printed)."""
-        deadline = time.monotonic() + timeout
-        while not any(text in line for line in self.lines):
-            try:
-                line = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                raise AssertionError(f"no '{text}' within {timeout} s:\n{''.join(self.lines)}\n{''.join(self.err[-40:])}") from None
-            assert line is not None, f"demo exited ({self.proc.wait(timeout=60)}) before '{text}':\n{''.join(self.lines)}\n{''.join(self.err)}"
-            self.lines.append(line)
+        self.wait_for_count(text, 1, timeout)
 
     def wait_for_count(self, text: str, count: int, timeout: float) -> None:
-        """Until `count` lines containing `text` have been printed."""
+        """Until `count` lines containing `text` have been printed (as `wait_for`)."""
         deadline = time.monotonic() + timeout
         while sum(text in line for line in self.lines) < count:
             try:
