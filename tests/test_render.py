@@ -391,3 +391,55 @@ def test_a_hung_gpu_is_a_clear_error_not_a_wait_forever():
     assert "panicked" not in result.stderr
     result = run_demo([pack, "--headless", "--frames", "1"], timeout=60, env=dict(os.environ, ENGINE_GPU_TIMEOUT_S="soon"))
     assert result.returncode == 1 and 'ENGINE_GPU_TIMEOUT_S="soon" is not a positive number of seconds' in result.stderr, result.stderr
+
+
+def lost_device_run(tmp_path, name, lose=None, frames=200):
+    """The demo level flown through headless with validation, every 25th frame written; with
+    `lose`, ENGINE_INJECT_DEVICE_LOST (the frame submits that report a lost device)."""
+    pack = REPO / "build" / "temple.pack"
+    assert pack.exists(), "build/temple.pack is made by `make cook` (a prerequisite of `make test`)"
+    out = tmp_path / name
+    out.mkdir()
+    env = dict(os.environ, ENGINE_VALIDATION="1")
+    env.pop("ENGINE_INJECT_DEVICE_LOST", None)
+    if lose is not None:
+        env["ENGINE_INJECT_DEVICE_LOST"] = lose
+    # A fixed render scale: the adaptive one follows the machine's timing, so no two runs match.
+    result = run_demo([pack, "--headless", "--validation", "--frames", frames, "--width", "320", "--height", "180", "--flight", "10",
+                       "--render-scale", "1", "--screenshot", out / "last.png", "--screenshot-every", "25"], env=env)
+    return result, out
+
+
+def test_a_lost_device_is_made_again_and_the_run_goes_on_from_the_same_state(tmp_path):
+    # Frame 50 of 200 reports a lost device: the demo makes the device, the renderer and the
+    # scene again from the pack, draws frame 50 again and goes on. The flight, the characters,
+    # the particles and the birds carry on from where they were, so every frame from 50 on is
+    # the uninjected run's to the byte; validation stays clean over both devices; exit 0.
+    clean, clean_dir = lost_device_run(tmp_path, "clean")
+    assert clean.returncode == 0 and "device lost" not in clean.stdout, clean.stdout + clean.stderr
+    lost, lost_dir = lost_device_run(tmp_path, "lost", lose="50")
+    assert lost.returncode == 0, f"exit {lost.returncode}\n{lost.stdout}\n{lost.stderr}"
+    assert "device lost at frame 50 (the GPU was lost (injected by ENGINE_INJECT_DEVICE_LOST)" in lost.stdout, lost.stdout
+    assert "drawing frame 50 again" in lost.stdout and "device recoveries: 1" in lost.stdout, lost.stdout
+    assert "validation errors: 0" in lost.stdout and "[vulkan validation" not in lost.stderr, lost.stderr
+    assert "frames: 200 at 320x180" in lost.stdout, lost.stdout
+    shots = sorted(p.name for p in clean_dir.glob("*.png"))
+    assert len(shots) == 9, shots  # frames 25, 50, ..., 200 and the last
+    for name in shots:
+        same = (clean_dir / name).read_bytes() == (lost_dir / name).read_bytes()
+        assert same, f"{name} differs from the run without a lost device"
+
+
+@pytest.mark.parametrize("lose, says", [
+    ("0", "demo: error: the GPU was lost (injected by ENGINE_INJECT_DEVICE_LOST) (at frame submit 0)"),
+    ("50,51", "demo: error: the GPU was lost again right after the device was made anew; giving up: the GPU was lost"),
+    ("fifty", 'demo: error: ENGINE_INJECT_DEVICE_LOST="fifty" is not a comma-separated list of frame numbers'),
+])
+def test_a_device_lost_at_start_up_or_again_at_once_is_a_clear_error(tmp_path, lose, says):
+    # A device that is lost before the first frame was shown, or again on the first frame after
+    # it was made anew, will not do better on another try: one line saying so, exit 1, no panic.
+    result, _ = lost_device_run(tmp_path, "run", lose=lose, frames=60)
+    assert result.returncode == 1, f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    errors = [line for line in result.stderr.splitlines() if line.startswith("demo: error:")]
+    assert len(errors) == 1 and errors[0].startswith(says), result.stderr
+    assert "panicked" not in result.stderr and "[vulkan validation" not in result.stderr, result.stderr

@@ -350,6 +350,18 @@ impl AnimatedScene {
         Some((batch.output(slot).buffer, first as i32))
     }
 
+    /// The playback of `old`, the same pack's characters on a lost device: each instance's
+    /// animator (clip, time, fade, pose), its place on its route and its joint matrices, so the
+    /// characters go on from where they were instead of from their first frame.
+    pub fn carry_on_from(&mut self, old: &mut AnimatedScene) {
+        for (new, old) in self.instances.iter_mut().zip(old.instances.iter_mut()).filter(|(n, o)| n.instance == o.instance) {
+            std::mem::swap(&mut new.animator, &mut old.animator);
+            std::mem::swap(&mut new.route, &mut old.route);
+            std::mem::swap(&mut new.joints, &mut old.joints);
+            new.root = old.root;
+        }
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         if let Some(b) = &mut self.batch {
             b.destroy(gpu);

@@ -59,6 +59,11 @@ pub trait Game {
     /// The view to render.
     fn camera(&self) -> Camera;
     fn lighting(&self) -> Lighting;
+    /// The pack the scene on show was loaded from, when it is not the window's first one
+    /// (`cx.load` since): after a device loss the scene is made again from it.
+    fn pack(&self) -> Option<&pack::Pack> {
+        None
+    }
     /// Show the overlay with the game's panels: call `show` once with them.
     fn panels(&mut self, show: &mut dyn FnMut(&mut [&mut dyn Panel])) {
         show(&mut []);

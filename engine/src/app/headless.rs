@@ -150,10 +150,9 @@ impl Offscreen {
                 d.cmd_write_timestamp2(self.cb, vk::PipelineStageFlags2::BOTTOM_OF_PIPE, q, 1);
             }
             d.end_command_buffer(self.cb)?;
-            let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cb)];
-            let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cbs)];
-            d.queue_submit2(gpu.queue, &submit, self.fence)?;
         }
+        let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cb)];
+        gpu.submit_frame(&[vk::SubmitInfo2::default().command_buffer_infos(&cbs)], self.fence)?;
         let record_ms = start.elapsed().as_secs_f64() * 1e3;
         unsafe {
             gpu.wait_fence(self.fence, "a frame")?;
@@ -191,6 +190,141 @@ impl Offscreen {
         }
         self.readback.destroy(gpu);
         self.color.destroy(gpu);
+    }
+}
+
+/// How a headless run's device, target and renderer are made (`Stage`).
+#[derive(Clone)]
+pub struct StageOptions {
+    pub gpu: crate::gpu::GpuOptions,
+    pub width: u32,
+    pub height: u32,
+    pub shadow_map_size: u32,
+    pub aa: crate::render::renderer::AntiAliasing,
+    pub render_scale: crate::render::scale::RenderScale,
+    /// The upscaler's filter (None: the device kind's default).
+    pub upscaler: Option<crate::render::scale::Upscaler>,
+    /// Draw the debug overlay over every frame.
+    pub overlay: bool,
+}
+
+/// Everything a headless run has on the device, made from one pack: the device, the offscreen
+/// target, the renderer with the scene's characters, the scene and the overlay. Made again
+/// whole after a device loss (`recover`).
+pub struct Stage {
+    pub overlay: Option<Overlay>,
+    pub target: Offscreen,
+    pub renderer: Renderer,
+    pub scene: GpuScene,
+    /// Last: the rest is made on it.
+    pub gpu: Gpu,
+}
+
+/// A `Stage` without its device.
+struct Parts {
+    overlay: Option<Overlay>,
+    target: Offscreen,
+    renderer: Renderer,
+    scene: GpuScene,
+}
+
+impl Parts {
+    /// `mark` hears "renderer" and "scene upload" as each is made (the demo's start-up times).
+    fn make(gpu: &Gpu, opts: &StageOptions, pack: &pack::Pack, mark: &mut dyn FnMut(&'static str)) -> Result<Parts> {
+        let target = gpu.own(Offscreen::new(gpu, opts.width, opts.height)?);
+        let mut renderer = gpu.own(Renderer::new(gpu, OFFSCREEN_FORMAT, 1)?);
+        renderer.set_shadow_map_size(gpu, opts.shadow_map_size)?;
+        renderer.aa = opts.aa;
+        renderer.render_scale = crate::render::scale::ScaleController::new(opts.render_scale);
+        if let Some(u) = opts.upscaler {
+            renderer.upscaler = u;
+        }
+        let overlay = if opts.overlay { Some(Overlay::new(gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
+        mark("renderer");
+        let scene = match GpuScene::upload(gpu, pack, renderer.layouts()) {
+            Ok(s) => gpu.own(s),
+            Err(e) => {
+                if let Some(o) = overlay {
+                    o.destroy(gpu);
+                }
+                return Err(e);
+            }
+        };
+        match crate::anim::animated::AnimatedScene::new(gpu, pack, &scene, 1) {
+            Ok(a) => renderer.animation = a,
+            Err(e) => {
+                if let Some(o) = overlay {
+                    o.destroy(gpu);
+                }
+                return Err(e);
+            }
+        }
+        mark("scene upload");
+        Ok(Parts { overlay, target: target.keep(), renderer: renderer.keep(), scene: scene.keep() })
+    }
+
+    fn destroy(self, gpu: &Gpu) {
+        let Parts { overlay, mut target, mut renderer, mut scene } = self;
+        if let Some(o) = overlay {
+            o.destroy(gpu);
+        }
+        scene.destroy(gpu);
+        renderer.destroy(gpu);
+        target.destroy(gpu);
+    }
+}
+
+impl Stage {
+    /// A device chosen by `opts.gpu` with `pack`'s scene on it; `mark` hears "device",
+    /// "renderer" and "scene upload" as each is done.
+    pub fn new(opts: &StageOptions, pack: &pack::Pack, mark: &mut dyn FnMut(&'static str)) -> Result<Stage> {
+        let gpu = Gpu::new(&opts.gpu)?;
+        mark("device");
+        let parts = Parts::make(&gpu, opts, pack, mark)?;
+        Ok(Stage::assemble(gpu, parts))
+    }
+
+    fn assemble(gpu: Gpu, p: Parts) -> Stage {
+        Stage { overlay: p.overlay, target: p.target, renderer: p.renderer, scene: p.scene, gpu }
+    }
+
+    fn split(self) -> (Gpu, Parts) {
+        let Stage { overlay, target, renderer, scene, gpu } = self;
+        (gpu, Parts { overlay, target, renderer, scene })
+    }
+
+    /// After the device was lost: a new device with `pack`'s scene made again on it (`pack`:
+    /// the one on show), carrying on from this one's state: the renderer's settings, LODs,
+    /// render scale and characters, the scene's instances as the game left them, the overlay's
+    /// history. What was on the lost device is retired (`recovery::retire`). On an error (the
+    /// new device cannot be made or is lost too) this stage is left as it was, still lost.
+    pub fn recover(&mut self, opts: &StageOptions, pack: &pack::Pack) -> Result<()> {
+        let gpu = self.gpu.successor(&opts.gpu)?;
+        let mut parts = Parts::make(&gpu, opts, pack, &mut |_| {})?;
+        if let Err(e) = parts.renderer.set_shadow_map_size(&gpu, self.renderer.shadow.size) {
+            parts.destroy(&gpu);
+            return Err(e);
+        }
+        parts.renderer.carry_on_from(&mut self.renderer);
+        parts.scene.carry_on_from(&mut self.scene);
+        if let (Some(new), Some(old)) = (parts.overlay.as_mut(), self.overlay.as_mut()) {
+            new.carry_on_from(old);
+        }
+        let old = std::mem::replace(self, Stage::assemble(gpu, parts));
+        let (old_gpu, old_parts) = old.split();
+        super::recovery::retire(old_gpu, old_parts, |gpu, p| p.destroy(gpu));
+        Ok(())
+    }
+
+    /// Frees everything, the device last; returns the validation errors counted over the run,
+    /// its teardown and every device it had included.
+    pub fn destroy(self) -> usize {
+        let (gpu, parts) = self.split();
+        let log = gpu.validation_log();
+        gpu.wait_idle();
+        parts.destroy(&gpu);
+        drop(gpu);
+        log.error_count()
     }
 }
 

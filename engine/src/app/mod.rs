@@ -5,11 +5,13 @@
 
 pub mod game;
 pub mod headless;
+pub mod recovery;
 pub(crate) mod swapchain;
 
 pub use game::{Cx, Game, Input};
 
 use crate::gpu::{Gpu, GpuOptions};
+use recovery::LossPolicy;
 use crate::ui::{FrameStats, Overlay};
 use crate::render::graph::{Access, Pass, OUTPUT};
 use crate::render::renderer::{FrameTarget, Renderer};
@@ -109,6 +111,11 @@ struct State {
     needs_resize: bool,
     /// Frames skipped because no swapchain image came back in time (reported once).
     skipped_acquires: u64,
+    /// The device's options (with the window's surface extensions): a lost device's successor
+    /// is made with them.
+    gpu_opts: GpuOptions,
+    /// Which device losses are survived (`recovery`).
+    losses: LossPolicy,
 }
 
 impl ApplicationHandler for App<'_> {
@@ -195,10 +202,25 @@ impl ApplicationHandler for App<'_> {
                 s.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::RedrawRequested => {
+                let presented = s.presented;
                 if let Err(e) = s.frame(&mut *self.game) {
-                    self.error = Some(e);
-                    el.exit();
+                    // A lost device is made again from the pack on show (`recovery`); the next
+                    // redraw draws the frame again, from the same game state.
+                    let what = format!("{e:#}");
+                    let start = Instant::now();
+                    let pack = self.game.pack().unwrap_or(self.first);
+                    if let Err(e) = s.losses.survive(e).and_then(|()| s.recover(pack)) {
+                        self.error = Some(e);
+                        el.exit();
+                        return;
+                    }
+                    s.losses.recovered();
+                    println!("window: device lost at frame {} ({what}); made again from the pack in {:.0} ms", s.presented, start.elapsed().as_secs_f64() * 1e3);
+                    s.announcing = Some(("device made again".into(), s.presented));
                     return;
+                }
+                if s.presented > presented {
+                    s.losses.frame_shown();
                 }
                 if s.presented == 10 {
                     println!("window: presented 10 frames");
@@ -253,37 +275,19 @@ impl State {
             ash_window::create_surface(&gpu.entry, &gpu.instance, display, window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw(), None)?
         };
         let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
-        let mut renderer = Renderer::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        let swapchain = gpu.own(swapchain);
+        let (mut renderer, scene) = recovery::renderer_and_scene(&gpu, pack, swapchain.format, FRAMES_IN_FLIGHT, opts.shadow_map_size)?;
         renderer.aa = opts.aa;
         renderer.render_scale = crate::render::scale::ScaleController::new(opts.render_scale);
         if let Some(u) = opts.upscaler {
             renderer.upscaler = u;
         }
-        let loaded = renderer.set_shadow_map_size(&gpu, opts.shadow_map_size).and_then(|_| {
-            let scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
-            match crate::anim::animated::AnimatedScene::new(&gpu, pack, &scene, FRAMES_IN_FLIGHT) {
-                Ok(a) => Ok((scene, a)),
-                Err(e) => {
-                    let mut scene = scene;
-                    scene.destroy(&gpu);
-                    Err(e)
-                }
-            }
-        });
-        let scene = match loaded {
-            Ok((scene, animation)) => {
-                renderer.animation = animation;
-                scene
-            }
-            Err(e) => {
-                renderer.destroy(&gpu);
-                return Err(e);
-            }
-        };
+        let (renderer, scene) = (gpu.own(renderer), gpu.own(scene));
+        let frames = gpu.own(Frames::new(&gpu)?);
         let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
-        let frames = Frames::new(&gpu)?;
+        let (swapchain, renderer, scene, frames) = (swapchain.keep(), renderer.keep(), scene.keep(), frames.keep());
         Ok(State {
             overlay: Some(overlay),
             egui,
@@ -293,6 +297,7 @@ impl State {
             frames,
             window,
             gpu,
+            gpu_opts,
             input: Input::default(),
             looking: false,
             last_cursor: None,
@@ -301,7 +306,56 @@ impl State {
             announcing: None,
             needs_resize: false,
             skipped_acquires: 0,
+            losses: LossPolicy::default(),
         })
+    }
+
+    /// After the device was lost (`recovery`): a new device, surface and swapchain for the same
+    /// window, and `pack`'s scene made again on it, carrying on from this state (the renderer's
+    /// settings, LODs, render scale and characters, the scene's instances, the overlay). The
+    /// window's surface can have one swapchain: the lost device's goes first (a hung device's
+    /// cannot; making the new one may then fail). On an error the old state stays, to be torn
+    /// down.
+    fn recover(&mut self, pack: &pack::Pack) -> Result<()> {
+        let gpu = self.gpu.successor(&self.gpu_opts)?;
+        if !self.gpu.hung() {
+            self.gpu.wait_idle();
+            self.swapchain.destroy(&self.gpu);
+        }
+        let display = self.window.display_handle().map_err(|e| anyhow!("display handle: {e}"))?.as_raw();
+        let handle = self.window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw();
+        let surface = unsafe { ash_window::create_surface(&gpu.entry, &gpu.instance, display, handle, None)? };
+        let swapchain = gpu.own(Swapchain::new(&gpu, surface, self.window.inner_size())?);
+        let (renderer, scene) = recovery::renderer_and_scene(&gpu, pack, swapchain.format, FRAMES_IN_FLIGHT, self.renderer.shadow.size)?;
+        let (mut renderer, mut scene) = (gpu.own(renderer), gpu.own(scene));
+        let frames = gpu.own(Frames::new(&gpu)?);
+        let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        renderer.carry_on_from(&mut self.renderer);
+        scene.carry_on_from(&mut self.scene);
+        if let Some(old) = self.overlay.as_mut() {
+            overlay.carry_on_from(old);
+        }
+        self.egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*self.window, Some(self.window.scale_factor() as f32), None, None);
+        let (swapchain, renderer, scene, frames) = (swapchain.keep(), renderer.keep(), scene.keep(), frames.keep());
+        let old = (
+            std::mem::replace(&mut self.overlay, Some(overlay)),
+            std::mem::replace(&mut self.frames, frames),
+            std::mem::replace(&mut self.scene, scene),
+            std::mem::replace(&mut self.renderer, renderer),
+            std::mem::replace(&mut self.swapchain, swapchain),
+        );
+        let old_gpu = std::mem::replace(&mut self.gpu, gpu);
+        recovery::retire(old_gpu, old, |gpu, (overlay, mut frames, mut scene, mut renderer, mut swapchain)| {
+            if let Some(o) = overlay {
+                o.destroy(gpu);
+            }
+            frames.destroy(gpu);
+            scene.destroy(gpu);
+            renderer.destroy(gpu);
+            swapchain.destroy(gpu);
+        });
+        self.needs_resize = false;
+        Ok(())
     }
 
     fn cx(&mut self) -> Cx<'_> {
@@ -321,7 +375,10 @@ impl State {
         if self.needs_resize {
             self.swapchain.recreate(&self.gpu, self.window.inner_size())?;
             self.needs_resize = false;
-            println!("window: swapchain rebuilt at {}x{}", self.swapchain.extent.width, self.swapchain.extent.height);
+            let what = format!("swapchain rebuilt at {}x{}", self.swapchain.extent.width, self.swapchain.extent.height);
+            println!("window: {what}");
+            // Scripts wait for "... shown" before they look at the new size.
+            self.announcing = Some((what, self.presented));
         }
         if self.swapchain.extent.width == 0 || self.swapchain.extent.height == 0 {
             return Ok(()); // minimised
@@ -382,7 +439,7 @@ impl State {
             let signals = [vk::SemaphoreSubmitInfo::default().semaphore(rendered).stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
             let cbs = [vk::CommandBufferSubmitInfo::default().command_buffer(cb)];
             let submit = [vk::SubmitInfo2::default().wait_semaphore_infos(&waits).command_buffer_infos(&cbs).signal_semaphore_infos(&signals)];
-            d.queue_submit2(self.gpu.queue, &submit, fence)?;
+            self.gpu.submit_frame(&submit, fence)?;
             let swapchains = [self.swapchain.swapchain];
             let indices = [image_index];
             let wait = [rendered];

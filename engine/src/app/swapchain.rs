@@ -174,11 +174,13 @@ impl Swapchain {
         self.images.clear();
     }
 
+    /// Frees the swapchain and the surface; a second call does nothing (the handles are null
+    /// after the first: a recovery destroys the lost device's before the window's teardown).
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.destroy_images(gpu);
         unsafe {
-            self.loader.destroy_swapchain(self.swapchain, None);
-            self.surface_loader.destroy_surface(self.surface, None);
+            self.loader.destroy_swapchain(std::mem::take(&mut self.swapchain), None);
+            self.surface_loader.destroy_surface(std::mem::take(&mut self.surface), None);
         }
     }
 }

@@ -7,12 +7,12 @@
 
 use std::time::Instant;
 use engine::scene::camera::Camera;
-use engine::gpu::{DeviceLost, DevicePreference, Gpu, GpuOptions};
-use engine::app::headless::{Offscreen, OFFSCREEN_FORMAT};
-use engine::ui::{self, FrameStats, Overlay};
-use engine::render::renderer::{Lighting, Renderer};
-use engine::render::scale::{RenderScale, ScaleController, Upscaler};
-use engine::scene::GpuScene;
+use engine::gpu::{DeviceLost, DevicePreference, GpuOptions};
+use engine::app::headless::{Stage, StageOptions};
+use engine::app::recovery::LossPolicy;
+use engine::ui::{self, FrameStats};
+use engine::render::renderer::Lighting;
+use engine::render::scale::{RenderScale, Upscaler};
 use engine::stats::{median, percentile};
 use engine::app::{self, WindowOptions};
 use game::DemoGame;
@@ -335,7 +335,7 @@ fn main() -> ExitCode {
 /// them (a fresh-clone CI run of `test_a_hung_gpu_is_a_clear_error_not_a_wait_forever` saw a
 /// segfault on the way out), so none of them run.
 fn exit_device_lost(e: &anyhow::Error) -> ! {
-    eprintln!("demo: error: {e:#}");
+    eprintln!("demo: error: {e:#}; restart the program (on a real GPU, update or reset the driver)");
     let _ = std::io::Write::flush(&mut std::io::stdout());
     let _ = std::io::Write::flush(&mut std::io::stderr());
     // SAFETY: _exit ends the process; nothing after it runs, nothing before it is left half done
@@ -362,23 +362,21 @@ fn validation_verdict(enabled: bool, errors: usize) -> ExitCode {
 }
 
 fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOptions, mut startup: Startup) -> anyhow::Result<ExitCode> {
-    let gpu = Gpu::new(gpu_opts)?;
-    println!("device: {} ({:?})", gpu.caps.device_name, gpu.caps.device_type);
-    startup.mark("device");
-    let mut target = Offscreen::new(&gpu, args.width, args.height)?;
-    let mut renderer = Renderer::new(&gpu, engine::app::headless::OFFSCREEN_FORMAT, 1)?;
-    renderer.set_shadow_map_size(&gpu, args.shadow_map_size)?;
-    renderer.aa = args.aa;
-    renderer.render_scale = ScaleController::new(args.render_scale);
-    if let Some(u) = args.upscaler {
-        renderer.upscaler = u;
-    }
-    // Declared after `gpu`, so on an early return it drops first (its allocator clone with it).
-    let mut overlay = if args.overlay { Some(Overlay::new(&gpu, OFFSCREEN_FORMAT, 1)?) } else { None };
-    startup.mark("renderer");
-    let mut scene = GpuScene::upload(&gpu, pack, renderer.layouts())?;
-    renderer.animation = engine::anim::animated::AnimatedScene::new(&gpu, pack, &scene, 1)?;
-    startup.mark("scene upload");
+    let stage_opts = StageOptions {
+        gpu: gpu_opts.clone(),
+        width: args.width,
+        height: args.height,
+        shadow_map_size: args.shadow_map_size,
+        aa: args.aa,
+        render_scale: args.render_scale,
+        upscaler: args.upscaler,
+        overlay: args.overlay,
+    };
+    let mut stage = Stage::new(&stage_opts, pack, &mut |what| {
+        startup.mark(what);
+    })?;
+    println!("device: {} ({:?})", stage.gpu.caps.device_name, stage.gpu.caps.device_type);
+    let scene = &stage.scene;
     println!("scene upload: {} bytes in {} submits", scene.upload.bytes, scene.upload.submits);
     let (min, max) = scene.bounds();
     let still = Camera::for_pack(&pack.manifest, min, max);
@@ -425,13 +423,17 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
     let mut frame_ms = record();
     let mut gpu_ms = record();
     // Every pass of the renderer, in frame order, with its GPU ms per frame (0 when it did not run).
-    let pass_names: Vec<&'static str> = renderer.pass_names().collect();
+    let pass_names: Vec<&'static str> = stage.renderer.pass_names().collect();
     let mut pass_ms: Vec<Vec<f64>> = pass_names.iter().map(|_| record()).collect();
     let mut skin_ms = record();
     // Frames drawn at each render scale (in hundredths).
     let mut scales: std::collections::BTreeMap<u32, u64> = Default::default();
     let (mut reloaded, mut rendered) = (false, 0u64);
     let mut next_frame = Instant::now();
+    // The pack on show when it is not `pack` (a reload under --watch): what a lost device is
+    // made again from.
+    let mut on_show: Option<pack::Pack> = None;
+    let mut losses = LossPolicy::default();
     for f in 0..frames {
         if args.watch {
             // Watching, frames keep real time (at most 60 a second) instead of running flat out
@@ -455,7 +457,7 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         if let Some((w, info)) = watch.as_mut().filter(|_| replaced) {
             let path = w.path();
             let fresh = pack::Pack::read_file(path).map_err(anyhow::Error::from);
-            match fresh.and_then(|p| engine::assets::reload::replace_scene(&gpu, &mut renderer, &mut scene, &p, 1).map(|()| p)) {
+            match fresh.and_then(|p| engine::assets::reload::replace_scene(&stage.gpu, &mut stage.renderer, &mut stage.scene, &p, 1).map(|()| p)) {
                 Ok(p) => {
                     // The camera and the world go on; the light is the new pack's.
                     lighting = Lighting::for_pack(&p.manifest);
@@ -463,6 +465,7 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
                     info.reloads += 1;
                     println!("reloaded {}", path.display());
                     reloaded = true;
+                    on_show = Some(p);
                 }
                 Err(e) if e.is::<DeviceLost>() => return Err(e),
                 Err(e) => {
@@ -472,7 +475,7 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
             }
         }
         if let (Some(sw), Some((_, info))) = (shader_watch.as_mut(), watch.as_mut()) {
-            match reload_shaders(sw, &gpu, &mut renderer, 1)? {
+            match reload_shaders(sw, &stage.gpu, &mut stage.renderer, 1)? {
                 ShaderReload::Unchanged => {}
                 ShaderReload::Reloaded(changed) => {
                     println!("reloaded shaders ({} modules changed: {})", changed.len(), changed.join(", "));
@@ -487,7 +490,7 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
             }
         }
         // Headless frames advance a fixed 1/60 s of animation, so runs are reproducible.
-        renderer.animate(&mut scene, 1.0 / 60.0);
+        stage.renderer.animate(&mut stage.scene, 1.0 / 60.0);
         rendered += 1;
         let last = f + 1 == frames;
         let every = args.screenshot_every.is_some_and(|k| (f + 1) % k == 0);
@@ -497,24 +500,39 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         // Frame f shows the flight at f/60 s (frame 0: the player's view).
         let camera = flight.as_ref().map_or(still, |fl| fl.camera(f as f32 / 60.0));
         let screen = args.screens.iter().find(|(k, _)| *k == f).map(|&(_, secs)| secs);
-        engine::sim::level::prepare_frame(&world, &mut renderer, &scene, &camera);
+        engine::sim::level::prepare_frame(&world, &mut stage.renderer, &stage.scene, &camera);
         // The first frame of a watching run, and the first after each reload, are written too.
         let shown = watch.is_some() && (f == 0 || std::mem::take(&mut reloaded));
         let capture = last || every || screen.is_some() || shown;
-        let t = match overlay.as_mut() {
-            Some(o) => target.render_with(&gpu, &mut renderer, &scene, &camera, &lighting, capture, o, |o, renderer| {
-                // A fixed 60 Hz clock: the same frames give the same pictures.
-                let mut sim = ui::SimPanel::new(&mut world);
-                let input = ui::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new());
-                match &watch {
-                    Some((_, info)) => o.build(input, renderer, &mut [&mut ui::PackPanel { info }, &mut sim]),
-                    None => o.build(input, renderer, &mut [&mut sim]),
-                };
-            })?,
-            None => target.render(&gpu, &mut renderer, &scene, &camera, &lighting, capture)?,
+        // A lost device is made again from the pack on show and the frame drawn again
+        // (`app::recovery`): the world, the camera and the renderer's state carry on.
+        let t = loop {
+            let drawn = match stage.overlay.as_mut() {
+                Some(o) => stage.target.render_with(&stage.gpu, &mut stage.renderer, &stage.scene, &camera, &lighting, capture, o, |o, renderer| {
+                    // A fixed 60 Hz clock: the same frames give the same pictures.
+                    let mut sim = ui::SimPanel::new(&mut world);
+                    let input = ui::headless_input(args.width, args.height, f as f64 / 60.0, Vec::new());
+                    match &watch {
+                        Some((_, info)) => o.build(input, renderer, &mut [&mut ui::PackPanel { info }, &mut sim]),
+                        None => o.build(input, renderer, &mut [&mut sim]),
+                    };
+                }),
+                None => stage.target.render(&stage.gpu, &mut stage.renderer, &stage.scene, &camera, &lighting, capture),
+            };
+            let e = match drawn {
+                Ok(t) => break t,
+                Err(e) => e,
+            };
+            let what = format!("{e:#}");
+            losses.survive(e)?;
+            let start = Instant::now();
+            stage.recover(&stage_opts, on_show.as_ref().unwrap_or(pack)).map_err(|e| e.context(format!("making the device again after it was lost at frame {f}")))?;
+            losses.recovered();
+            println!("device lost at frame {f} ({what}); made again from the pack in {:.0} ms, drawing frame {f} again", start.elapsed().as_secs_f64() * 1e3);
         };
-        if let Some(o) = overlay.as_mut() {
-            o.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(&gpu, &renderer, 0));
+        losses.frame_shown();
+        if let Some(o) = stage.overlay.as_mut() {
+            o.push_frame(t.frame_ms, t.gpu_ms, FrameStats::read(&stage.gpu, &stage.renderer, 0));
         }
         if f == 0 {
             startup.mark("first frame");
@@ -522,8 +540,8 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         }
         frame_ms.push(t.frame_ms);
         gpu_ms.extend(t.gpu_ms);
-        *scales.entry((renderer.frame_scale() * 100.0).round() as u32).or_default() += 1;
-        if let Some(p) = renderer.profile(&gpu, 0) {
+        *scales.entry((stage.renderer.frame_scale() * 100.0).round() as u32).or_default() += 1;
+        if let Some(p) = stage.renderer.profile(&stage.gpu, 0) {
             for (v, name) in pass_ms.iter_mut().zip(&pass_names) {
                 v.push(p.ms(name));
             }
@@ -531,13 +549,13 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         }
         if every {
             let dir = args.screenshot.parent().unwrap_or(Path::new("."));
-            target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
+            stage.target.save_png(&dir.join(format!("frame_{:05}.png", f + 1)))?;
         }
         if args.rss_at.contains(&(f + 1)) {
             println!("rss after frame {}: {} KiB", f + 1, resident_kib().unwrap_or(0));
         }
         if shown && !last {
-            target.save_png(&args.screenshot)?;
+            stage.target.save_png(&args.screenshot)?;
             println!("wrote {}", args.screenshot.display());
             if f == 0 {
                 match &shader_watch {
@@ -548,27 +566,27 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         }
         if let Some(secs) = screen {
             let path = args.screens_dir.join(format!("t{secs}s.png"));
-            target.save_png(&path)?;
-            println!("wrote {} (render scale {:.2})", path.display(), renderer.frame_scale());
+            stage.target.save_png(&path)?;
+            println!("wrote {} (render scale {:.2})", path.display(), stage.renderer.frame_scale());
         }
     }
-    target.save_png(&args.screenshot)?;
+    stage.target.save_png(&args.screenshot)?;
     println!("wrote {}", args.screenshot.display());
-    let c = renderer.visibility.counts;
+    let c = stage.renderer.visibility.counts;
     // The cull counts include the boids (culled with the scene); reported apart here.
-    let boids = renderer.boids.boids.len() as u32;
+    let boids = stage.renderer.boids.boids.len() as u32;
     println!(
         "frames: {rendered} at {}x{}, {} instances ({} culled, {} drawn), {} boids ({} drawn), {} triangles drawn of {} at full detail in {} draw calls, LOD histogram {:?}",
         args.width,
         args.height,
-        scene.instances.len(),
+        stage.scene.instances.len(),
         c.cull.culled - (boids - c.boids),
         c.cull.visible - c.boids,
         boids,
         c.boids,
         c.triangles,
-        scene.triangle_count(),
-        renderer.draw_calls,
+        stage.scene.triangle_count(),
+        stage.renderer.draw_calls,
         c.lod_histogram
     );
     println!(
@@ -580,7 +598,7 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         println!("gpu_ms: median {m:.3}");
     }
     let at: Vec<String> = scales.iter().map(|(s, n)| format!("{:.2}: {n}", *s as f32 / 100.0)).collect();
-    println!("render scale {}: frames at each {{{}}}", renderer.render_scale.mode.describe(), at.join(", "));
+    println!("render scale {}: frames at each {{{}}}", stage.renderer.render_scale.mode.describe(), at.join(", "));
     // The passes that ran in some frame, as the overlay lists them.
     let ran: Vec<String> = pass_names
         .iter()
@@ -588,12 +606,9 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
         .filter_map(|(name, ms)| median(ms).filter(|_| ms.iter().any(|&m| m > 0.0)).map(|m| format!("{name} {m:.3}")))
         .collect();
     if !ran.is_empty() {
-        println!("pass gpu_ms (median): {} ({} shadow casters, {} billboards)", ran.join(", "), renderer.shadow_casters, renderer.visibility.counts.particles);
+        println!("pass gpu_ms (median): {} ({} shadow casters, {} billboards)", ran.join(", "), stage.renderer.shadow_casters, stage.renderer.visibility.counts.particles);
     }
-    if let Some(o) = overlay.take() {
-        o.destroy(&gpu);
-    }
-    if let Some(a) = &renderer.animation {
+    if let Some(a) = &stage.renderer.animation {
         println!(
             "animation: {} animated instances, {} skinning jobs in {} dispatch(es) ({} vertices) last frame, skinning gpu_ms median {:.3}, animation cpu_ms last frame {:.3}",
             a.instances.len(),
@@ -604,9 +619,9 @@ fn headless(args: &Args, pack_path: &Path, pack: &pack::Pack, gpu_opts: &GpuOpti
             a.cpu_ms
         );
     }
-    scene.destroy(&gpu);
-    renderer.destroy(&gpu);
-    target.destroy(&gpu);
-    let errors = gpu.validation().error_count();
+    if losses.recoveries > 0 {
+        println!("device recoveries: {}", losses.recoveries);
+    }
+    let errors = stage.destroy();
     Ok(validation_verdict(gpu_opts.validation, errors))
 }

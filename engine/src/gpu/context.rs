@@ -6,7 +6,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::ffi::{c_char, CStr};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -19,10 +19,57 @@ use super::pipeline_cache::DiskCache;
 pub const DEFAULT_GPU_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// The device is hung (a wait for it timed out) or lost: no further work can be trusted to
-/// finish, so the `Gpu` stops waiting for it and leaves its objects to the process's exit.
+/// finish. The `Gpu` stops waiting for it; its owner may make a new one (`gpu::recovery`).
 #[derive(Debug, thiserror::Error)]
-#[error("the GPU {0} (while waiting for {1}); restart the program (on a real GPU, update or reset the driver)")]
+#[error("the GPU {0} ({1})")]
 pub struct DeviceLost(pub &'static str, pub String);
+
+/// How a device stopped working.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Loss {
+    /// The driver reported VK_ERROR_DEVICE_LOST: its objects may still be destroyed (the spec
+    /// allows every vkDestroy* after a loss), and waits return at once.
+    Lost,
+    /// A wait timed out: the device may still be running the work, so nothing it could be
+    /// using is destroyed; it is left to the process's exit.
+    Hung,
+    /// `ENGINE_INJECT_DEVICE_LOST` made a submit report a loss; the device itself is fine.
+    Injected,
+}
+
+impl Loss {
+    const fn code(self) -> u8 {
+        match self {
+            Loss::Lost => 1,
+            Loss::Hung => 2,
+            Loss::Injected => 3,
+        }
+    }
+
+    fn from_code(c: u8) -> Option<Loss> {
+        [Loss::Lost, Loss::Hung, Loss::Injected].into_iter().find(|l| l.code() == c)
+    }
+}
+
+/// Frame submits made by this process (`Gpu::submit_frame`), across devices: the counter the
+/// fault injection counts in.
+static FRAME_SUBMITS: AtomicU64 = AtomicU64::new(0);
+
+/// The frame submits (counted from 0 over the process, `FRAME_SUBMITS`) that report a lost
+/// device instead of running: `ENGINE_INJECT_DEVICE_LOST`, a comma-separated list. A test's way
+/// to lose a device on a CPU implementation that never loses one.
+fn injected_losses() -> Result<&'static [u64]> {
+    static LIST: std::sync::OnceLock<std::result::Result<Vec<u64>, String>> = std::sync::OnceLock::new();
+    let list = LIST.get_or_init(|| match std::env::var("ENGINE_INJECT_DEVICE_LOST") {
+        Err(_) => Ok(Vec::new()),
+        Ok(v) => v
+            .split(',')
+            .map(|n| n.trim().parse::<u64>())
+            .collect::<std::result::Result<Vec<u64>, _>>()
+            .map_err(|_| format!("ENGINE_INJECT_DEVICE_LOST={v:?} is not a comma-separated list of frame numbers")),
+    });
+    list.as_deref().map_err(|e| anyhow!("{e}"))
+}
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
@@ -124,8 +171,9 @@ pub struct Gpu {
     pub swapchain_capable: bool,
     /// `wait_fence`'s limit, in nanoseconds.
     timeout_ns: AtomicU64,
-    /// Set once a wait found the device hung or lost.
-    lost: AtomicBool,
+    /// 0 while the device works, else the `Loss` code: set once a submit or a wait found it
+    /// lost or hung.
+    loss: AtomicU8,
     /// Allocations left before one is made to fail (0: none fails): `fail_allocation`.
     pub(super) allocation_fault: AtomicU64,
 }
@@ -137,6 +185,17 @@ fn cstr_name(raw: &[c_char]) -> String {
 
 impl Gpu {
     pub fn new(opts: &GpuOptions) -> Result<Gpu> {
+        Gpu::create(opts, Arc::new(ValidationLog::default()), gpu_timeout_from_env()?)
+    }
+
+    /// A new device made with `opts` to take over from this one after a loss: the validation
+    /// messages of both are counted together, and the wait limit is this one's.
+    pub fn successor(&self, opts: &GpuOptions) -> Result<Gpu> {
+        Gpu::create(opts, self.validation_log.clone(), self.timeout())
+    }
+
+    fn create(opts: &GpuOptions, validation_log: Arc<ValidationLog>, timeout: Duration) -> Result<Gpu> {
+        injected_losses()?;
         // SAFETY: loading the Vulkan loader library; failure is reported, not assumed away.
         let entry = unsafe { ash::Entry::load() }
             .context("cannot load the Vulkan loader (libvulkan.so.1); install libvulkan1 and mesa-vulkan-drivers (`make setup`)")?;
@@ -156,7 +215,6 @@ impl Gpu {
             .application_name(c"engine")
             .engine_name(c"engine")
             .api_version(vk::API_VERSION_1_3);
-        let validation_log = Arc::new(ValidationLog::default());
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
                 vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
@@ -281,8 +339,8 @@ impl Gpu {
             debug,
             validation_log,
             swapchain_capable: want_swapchain,
-            timeout_ns: AtomicU64::new(gpu_timeout_from_env()?.as_nanos().min(u64::MAX as u128) as u64),
-            lost: AtomicBool::new(false),
+            timeout_ns: AtomicU64::new(timeout.as_nanos().min(u64::MAX as u128) as u64),
+            loss: AtomicU8::new(0),
             allocation_fault: AtomicU64::new(0),
         })
     }
@@ -292,14 +350,53 @@ impl Gpu {
     /// and the `Gpu` is marked lost.
     pub fn wait_fence(&self, fence: vk::Fence, what: &str) -> Result<()> {
         self.alive(what)?;
-        let why = match unsafe { self.device.wait_for_fences(&[fence], true, self.timeout_ns.load(Ordering::Relaxed)) } {
+        let (why, loss) = match unsafe { self.device.wait_for_fences(&[fence], true, self.timeout_ns.load(Ordering::Relaxed)) } {
             Ok(()) => return Ok(()),
-            Err(vk::Result::TIMEOUT) => "did not finish in time: it is hung",
-            Err(vk::Result::ERROR_DEVICE_LOST) => "was lost (a driver reset or crash)",
+            Err(vk::Result::TIMEOUT) => ("did not finish in time: it is hung", Loss::Hung),
+            Err(vk::Result::ERROR_DEVICE_LOST) => ("was lost (a driver reset or crash)", Loss::Lost),
             Err(e) => return Err(anyhow!("waiting for {what}: {e}")),
         };
-        self.lost.store(true, Ordering::Relaxed);
-        Err(DeviceLost(why, format!("{what}, {:.1} s", self.timeout().as_secs_f64())).into())
+        self.loss.store(loss.code(), Ordering::Relaxed);
+        Err(DeviceLost(why, format!("while waiting for {what}, {:.1} s", self.timeout().as_secs_f64())).into())
+    }
+
+    /// Submits a frame's command buffers (`vkQueueSubmit2`), signalling `fence`. A device that
+    /// reports itself lost is `DeviceLost`; so is a submit `ENGINE_INJECT_DEVICE_LOST` names,
+    /// which then submits nothing (the work recorded for it is never run).
+    pub fn submit_frame(&self, submits: &[vk::SubmitInfo2], fence: vk::Fence) -> Result<()> {
+        self.alive("a frame")?;
+        let n = FRAME_SUBMITS.fetch_add(1, Ordering::Relaxed);
+        if injected_losses()?.contains(&n) {
+            self.loss.store(Loss::Injected.code(), Ordering::Relaxed);
+            return Err(DeviceLost("was lost (injected by ENGINE_INJECT_DEVICE_LOST)", format!("at frame submit {n}")).into());
+        }
+        match unsafe { self.device.queue_submit2(self.queue, submits, fence) } {
+            Ok(()) => Ok(()),
+            Err(vk::Result::ERROR_DEVICE_LOST) => {
+                self.loss.store(Loss::Lost.code(), Ordering::Relaxed);
+                Err(DeviceLost("was lost (a driver reset or crash)", format!("at frame submit {n}")).into())
+            }
+            Err(e) => Err(anyhow!("submitting a frame: {e}")),
+        }
+    }
+
+    /// Destroys a device that was lost (not hung) once every object made on it was destroyed
+    /// (`app::recovery::retire`); a working one is simply dropped.
+    pub fn destroy_after_loss(self) {
+        if !self.hung() {
+            self.loss.store(0, Ordering::Relaxed);
+        }
+        drop(self);
+    }
+
+    /// How the device stopped working, if it did.
+    pub fn loss(&self) -> Option<Loss> {
+        Loss::from_code(self.loss.load(Ordering::Relaxed))
+    }
+
+    /// Whether its objects must be left alone: a hung device may still be using them.
+    pub fn hung(&self) -> bool {
+        self.loss() == Some(Loss::Hung)
     }
 
     /// The limit of `wait_fence`.
@@ -315,19 +412,24 @@ impl Gpu {
     /// the command buffers of the hung work are still pending.
     pub fn alive(&self, what: &str) -> Result<()> {
         match self.is_lost() {
-            true => Err(DeviceLost("was lost before", what.to_string()).into()),
+            true => Err(DeviceLost("was lost before", format!("{what} was not started")).into()),
             false => Ok(()),
         }
     }
 
-    /// Whether a wait found the device hung or lost.
+    /// Whether a submit or a wait found the device hung or lost.
     pub fn is_lost(&self) -> bool {
-        self.lost.load(Ordering::Relaxed)
+        self.loss().is_some()
     }
 
     /// Everything the validation layer has reported so far (empty when validation is off).
     pub fn validation(&self) -> &ValidationLog {
         &self.validation_log
+    }
+
+    /// The validation log, to read after the `Gpu` is gone (its destruction is validated too).
+    pub fn validation_log(&self) -> Arc<ValidationLog> {
+        self.validation_log.clone()
     }
 
     pub fn validation_enabled(&self) -> bool {
@@ -355,7 +457,7 @@ impl Gpu {
                 Ok(()) => self.wait_fence(fence, "an upload"),
                 Err(e) => Err(e.into()),
             };
-            if !self.is_lost() {
+            if !self.hung() {
                 d.destroy_fence(fence, None);
                 d.free_command_buffers(self.upload_pool, &[cb]);
             }
@@ -364,9 +466,10 @@ impl Gpu {
         }
     }
 
-    /// Waits for all the device's work (not at all once it is lost: that would never return).
+    /// Waits for all the device's work (not at all once it is hung: that would never return; a
+    /// lost device returns at once).
     pub fn wait_idle(&self) {
-        if !self.is_lost() {
+        if !self.hung() {
             unsafe {
                 let _ = self.device.device_wait_idle();
             }
@@ -377,8 +480,10 @@ impl Gpu {
 impl Drop for Gpu {
     fn drop(&mut self) {
         if self.is_lost() {
-            // Destroying the device would wait for the work it never finishes: leave everything
-            // to the process's exit.
+            // Its owner may not have destroyed what it made on it (an error ends the run on the
+            // way out), and a hung device would be waited for forever (or have memory freed
+            // under it): leave everything to the process's exit. A recovery that did destroy
+            // everything lets it go with `destroy_after_loss`.
             return;
         }
         unsafe {

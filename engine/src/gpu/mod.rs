@@ -9,7 +9,7 @@ mod pipeline_cache;
 mod upload;
 mod validation;
 
-pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, DEFAULT_GPU_TIMEOUT};
+pub use context::{Capabilities, DeviceLost, DevicePreference, Gpu, GpuOptions, Loss, DEFAULT_GPU_TIMEOUT};
 pub use memory::{barrier, full_range, Buffer, Image, SlotBuffers, Transition};
 pub use owned::{Destroy, Owned};
 pub use upload::Uploader;

@@ -48,9 +48,9 @@ impl<T: Destroy> DerefMut for Owned<'_, T> {
 
 impl<T: Destroy> Drop for Owned<'_, T> {
     fn drop(&mut self) {
-        // A hung or lost device may still be using the object (the wait that timed out was for
+        // A hung device may still be using the object (the wait that timed out was for
         // work on it): leave it to the process's exit, as `Gpu`'s drop does.
-        if let Some(mut v) = self.value.take().filter(|_| !self.gpu.is_lost()) {
+        if let Some(mut v) = self.value.take().filter(|_| !self.gpu.hung()) {
             v.destroy(self.gpu);
         }
     }

@@ -167,6 +167,14 @@ impl BoidsDraw {
         }
     }
 
+    /// This frame's birds, from the pass of a lost device (`Renderer::carry_on_from`).
+    pub fn carry_on_from(&mut self, old: &mut BoidsDraw) {
+        std::mem::swap(&mut self.boids, &mut old.boids);
+        std::mem::swap(&mut self.groups, &mut old.groups);
+        std::mem::swap(&mut self.visible, &mut old.visible);
+        std::mem::swap(&mut self.visible_groups, &mut old.visible_groups);
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.instances.destroy(gpu);
         unsafe {

@@ -181,6 +181,12 @@ impl ParticlePass {
         }
     }
 
+    /// This frame's billboards, from the pass of a lost device (`Renderer::carry_on_from`).
+    pub fn carry_on_from(&mut self, old: &mut ParticlePass) {
+        std::mem::swap(&mut self.billboards, &mut old.billboards);
+        std::mem::swap(&mut self.batches, &mut old.batches);
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         self.buffers.destroy(gpu);
         unsafe {

@@ -584,6 +584,70 @@ impl Renderer {
         self.slot_counted[slot].then(|| u32::from_le_bytes(self.counters[slot].mapped_ref()[..4].try_into().unwrap()))
     }
 
+    /// Take over from `old`, a renderer of a device that was lost, what is not on the device:
+    /// its settings, the culling and LOD state (LOD hysteresis), the render scale, this frame's
+    /// particles and birds, and the animated characters' playback (when both have them: this
+    /// renderer's `animation` is the same pack's, made anew). The shadow map's size needs the
+    /// device: `recovery` sets it. The destructuring names every field, so a new one must be
+    /// placed on one side or the other here.
+    pub fn carry_on_from(&mut self, old: &mut Renderer) {
+        let Renderer {
+            color_format: _,
+            depth_format: _,
+            mesh: _,
+            graph: _,
+            passes: _,
+            pool: _,
+            frame_ubos: _,
+            counters: _,
+            frame_sets: _,
+            tonemap,
+            shadow: _,
+            particles,
+            boids,
+            shadow_casters,
+            shadow_casters_drawn,
+            instancing,
+            draw_calls,
+            instance_buffers: _,
+            batcher: _,
+            frame: _,
+            lit_prepared: _,
+            prepass,
+            count_fragments,
+            depth_test,
+            lightmaps,
+            bicubic_lightmaps,
+            reflections,
+            depth_view,
+            sky,
+            material_maps,
+            specular,
+            transparency,
+            aa,
+            slot_counted: _,
+            visibility,
+            render_scale,
+            upscaler,
+            slot_scale: _,
+            scale_feedback,
+            animation,
+        } = old;
+        self.tonemap.saturation = tonemap.saturation;
+        self.particles.carry_on_from(particles);
+        self.boids.carry_on_from(boids);
+        (self.shadow_casters, self.shadow_casters_drawn, self.draw_calls) = (*shadow_casters, *shadow_casters_drawn, *draw_calls);
+        (self.instancing, self.prepass, self.count_fragments, self.depth_test) = (*instancing, *prepass, *count_fragments, *depth_test);
+        (self.lightmaps, self.bicubic_lightmaps, self.reflections, self.depth_view) = (*lightmaps, *bicubic_lightmaps, *reflections, *depth_view);
+        (self.sky, self.material_maps, self.specular, self.transparency) = (*sky, *material_maps, *specular, *transparency);
+        (self.aa, self.upscaler, self.scale_feedback) = (*aa, *upscaler, *scale_feedback);
+        std::mem::swap(&mut self.visibility, visibility);
+        std::mem::swap(&mut self.render_scale, render_scale);
+        if let (Some(new), Some(old)) = (self.animation.as_mut(), animation.as_mut()) {
+            new.carry_on_from(old);
+        }
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         for b in self.frame_ubos.iter_mut().chain(self.counters.iter_mut()) {
             b.destroy(gpu);

@@ -328,6 +328,12 @@ impl GpuScene {
         self.instances.iter().map(|i| self.meshes[i.mesh as usize].lods[0].triangles as u64).sum()
     }
 
+    /// The placed instances of `old`, the same pack's scene on a lost device: what the game
+    /// spawned, moved and removed through the scene API stays as it was.
+    pub fn carry_on_from(&mut self, old: &mut GpuScene) {
+        std::mem::swap(&mut self.instances, &mut old.instances);
+    }
+
     pub fn destroy(&mut self, gpu: &Gpu) {
         unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
         self.samplers.destroy(gpu);

@@ -213,6 +213,13 @@ impl Overlay {
         self.controls.iter().find(|(n, _)| *n == name).map(|(_, r)| r.center())
     }
 
+    /// What the overlay of a lost device showed: whether it is shown and its frame history.
+    pub fn carry_on_from(&mut self, old: &mut Overlay) {
+        self.visible = old.visible;
+        std::mem::swap(&mut self.history, &mut old.history);
+        std::mem::swap(&mut self.last, &mut old.last);
+    }
+
     /// Destroy the GPU objects; the device must be idle. Consumes the overlay, so its clone of the
     /// allocator is gone before the `Gpu` drops.
     pub fn destroy(self, gpu: &Gpu) {

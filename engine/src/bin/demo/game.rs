@@ -225,6 +225,10 @@ impl Game for DemoGame<'_> {
         self.lighting
     }
 
+    fn pack(&self) -> Option<&pack::Pack> {
+        Some(self.reloaded.as_ref().filter(|_| self.current == 0).unwrap_or(&self.packs[self.current]))
+    }
+
     fn panels(&mut self, show: &mut dyn FnMut(&mut [&mut dyn Panel])) {
         let mut sim = SimPanel::new(&mut self.world);
         match &self.watch {
