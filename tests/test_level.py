@@ -914,3 +914,56 @@ def test_character_route_is_read_as_waypoints_and_bad_routes_are_errors(tmp_path
     ]:
         msg = error_of(tmp_path, CHARACTERS.replace("speed = 1.2 }", f"speed = 1.2, {bad} }}"))
         assert f"{where}: {reason}" in msg, msg
+
+
+# ---- found by the level TOML fuzz target (fuzz/python/level_toml.py) ----------------------------
+# Each input is the minimised one; before the fix it raised something other than a one-line
+# CookError naming the file.
+
+@pytest.mark.parametrize("body, says", [
+    # A name (or key) holding a line break made the message two lines: they are escaped.
+    ('[[materials]]\nname = "st\\re"\n[[brushes]]\nname = "b"\nkind = "box"\nsize = [1, 1, 1]\nmaterial = "stone"\n',
+     "brushes[0].material: unknown material 'stone' (defined: st\\re)"),
+    ('[level]\n"a\\nb" = 1\n', "level.a\\nb: unknown key 'a\\nb'"),
+    # An integer past a float's range: OverflowError in the number checks.
+    ("[level]\ntexels_per_metre = 1" + "0" * 400 + "\n", "level.texels_per_metre: expected a number, got an integer too large for a number"),
+    ('[[reflection_probes]]\nposition = [1' + "0" * 400 + ', 0, 0]\nbox_min = [0, 0, 0]\nbox_max = [1, 1, 1]\n',
+     "reflection_probes[0].position: reflection probe 'reflection_probe_0': every number must be finite"),
+    ('[[spawns]]\nname = "p"\nkind = "player"\nparams = { speed = 1' + "0" * 400 + " }\n",
+     "spawns[0].params.speed: expected a number, string, boolean or array of numbers"),
+    # tomllib's own failures that are not TOMLDecodeError: ValueError for an integer of more
+    # than 4300 digits, RecursionError for deep nesting.
+    ("x = " + "1" * 4301 + "\n", "not a valid level TOML: Exceeds the limit (4300 digits) for integer string conversion"),
+    ("x = " + "[" * 2000 + "]" * 2000 + "\n", "not a valid level TOML: arrays or inline tables nested too deeply"),
+])
+def test_fuzz_found_inputs_are_one_line_errors(tmp_path, body, says):
+    path = tmp_path / "level.toml"
+    path.write_text(body)
+    with pytest.raises(CookError) as e:
+        load_level(path)
+    msg = str(e.value)
+    assert msg.startswith(str(path)) and len(msg.splitlines()) == 1, repr(msg)
+    assert says in msg, msg
+
+
+def test_a_light_direction_too_long_to_square_is_still_normalised(tmp_path):
+    # [1e200, 1e200, 0]: its squared length overflows to infinity, which made the direction
+    # (0, 0, 0) without a word (found beside the fuzz target).
+    spec = load_level(write(tmp_path, HEADER + ONE_BOX + """
+        [[lights]]
+        name = "sun"
+        kind = "sun"
+        intensity = 1000
+        direction = [1e200, 1e200, 0]
+        """))
+    assert spec.lights[0].direction == pytest.approx((2 ** -0.5, 2 ** -0.5, 0.0))
+
+
+def test_parse_level_is_load_level_of_the_text(tmp_path):
+    from asset_pipeline.level import parse_level
+
+    text = TEMPLE.read_text()
+    a, b = load_level(TEMPLE), parse_level(text, TEMPLE)
+    assert (a.name, len(a.brushes), len(a.objects), len(a.lights), len(a.spawns)) == (b.name, len(b.brushes), len(b.objects), len(b.lights), len(b.spawns))
+    with pytest.raises(CookError, match=r"^elsewhere/level\.toml:2:5: "):
+        parse_level("[level]\nx = = 1\n", "elsewhere/level.toml")

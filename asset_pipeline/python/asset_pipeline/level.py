@@ -97,6 +97,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -240,10 +241,16 @@ def _find_line(text: str, key: tuple) -> int | None:
     return None if found is None else found + 1
 
 
+def _one_line(s: str) -> str:
+    """`s` with its line breaks and other unprintable characters escaped (a name or key from the
+    file may hold a newline): the message stays one line."""
+    return s if s.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in s)
+
+
 def _error(path: Path, text: str, key: tuple, reason: str) -> CookError:
     line = _find_line(text, key)
     where = f"{path}:{line}" if line else f"{path}"
-    return CookError(f"{where}: {_key_text(key)}: {reason}")
+    return CookError(f"{where}: {_one_line(_key_text(key))}: {_one_line(reason)}")
 
 
 # ---- typed readers: each takes (checker, value, key) and returns the clean value --------------
@@ -298,12 +305,22 @@ REQUIRED = object()
 
 
 def _tname(v) -> str:
+    if type(v) is int and not _fits_float(v):
+        return "an integer too large for a number"
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "an array",
             dict: "a table"}.get(type(v), type(v).__name__)
 
 
+def _fits_float(v: int) -> bool:
+    """Whether an integer converts to a float (TOML integers have no bound; past ~1.8e308
+    float() raises OverflowError)."""
+    return abs(v) <= sys.float_info.max
+
+
 def _is_num(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    return math.isfinite(v) if isinstance(v, float) else _fits_float(v)
 
 
 def number(lo: float | None = None, hi: float | None = None, lo_open: bool = False):
@@ -536,7 +553,7 @@ def _reflection_probe(c: _Checker, raw, key: tuple, i: int) -> ir.ReflectionProb
         v = raw[k]
         if not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
             c.fail(key + (k,), f"{what}: expected an array of 3 numbers, got {_tname(v) if not isinstance(v, list) else f'{len(v)} values'}")
-        if not all(math.isfinite(x) for x in v):
+        if not all(_is_num(x) for x in v):
             c.fail(key + (k,), f"{what}: every number must be finite, got [{', '.join(str(x) for x in v)}]")
         return tuple(float(x) for x in v)
 
@@ -544,7 +561,7 @@ def _reflection_probe(c: _Checker, raw, key: tuple, i: int) -> ir.ReflectionProb
     blend = raw.get("blend_distance", 0.5)
     if not isinstance(blend, (int, float)) or isinstance(blend, bool):
         c.fail(key + ("blend_distance",), f"{what}: expected a number, got {_tname(blend)}")
-    if not math.isfinite(blend) or blend < 0:
+    if not _is_num(blend) or blend < 0:
         c.fail(key + ("blend_distance",), f"{what}: blend_distance must be a finite number >= 0, got {blend}")
     empty = [a for a, l, h in zip("xyz", lo, hi) if not l < h]
     if empty:
@@ -616,6 +633,13 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise CookError(f"{path}: cannot read the level: {e}") from None
+    return parse_level(text, path, allow_external_uris)
+
+
+def parse_level(text: str, path: str | Path, allow_external_uris: bool = False) -> LevelSpec:
+    """`load_level` of `text`, the contents of the level file `path` (which names it in errors
+    and is where the files it names are looked for). Raises CookError naming file, line and key."""
+    path = Path(path)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -624,6 +648,12 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
         if m:
             raise CookError(f"{path}:{m[1]}:{m[2]}: {msg[:m.start()] + msg[m.end():]}") from None
         raise CookError(f"{path}: {msg}") from None
+    except ValueError as e:
+        # tomllib's own int(): an integer of more digits than Python converts (4300).
+        raise CookError(f"{path}: not a valid level TOML: {_one_line(str(e).split(';')[0])}") from None
+    except RecursionError:
+        # tomllib parses nested arrays and inline tables recursively.
+        raise CookError(f"{path}: not a valid level TOML: arrays or inline tables nested too deeply") from None
 
     c = _Checker(path, text, allow_external_uris)
     top = c.table(doc, (), {
@@ -705,7 +735,12 @@ def load_level(path: str | Path, allow_external_uris: bool = False) -> LevelSpec
         lights.append(l)
         d = l.get("direction")
         if d is not None:
-            n = float(np.linalg.norm(d))
+            with np.errstate(over="ignore"):
+                n = float(np.linalg.norm(d))
+            if not math.isfinite(n):
+                # Its squares overflow ([1e200, 1e200, 0]): scaled by its largest component first.
+                d = tuple(float(x) for x in np.divide(d, max(abs(x) for x in d)))
+                n = float(np.linalg.norm(d))
             if n < 1e-9:
                 c.fail(key + ("direction",), "must not be the zero vector")
             d = tuple(float(x) / n for x in d)
