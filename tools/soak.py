@@ -1,17 +1,30 @@
-"""The validation soak (issue 11): the demo headless for many frames with the Vulkan validation
-layer on. Passes when there are no validation messages at all and the resident memory after the
-last frame is within 1% of what it was after frame 1,000 (a leak of a few KiB per frame would
-show as megabytes by then).
+"""The validation soak (issues 11 and 27): the demo headless for many frames with the Vulkan
+validation layer on and every pass of the renderer running. Passes when there are no validation
+messages at all and the resident memory after the last frame is within 1% of what it was after
+frame 1,000 (a leak of a few KiB per frame would show as megabytes by then).
 
     .venv/bin/python tools/soak.py [--frames 10000] [--pack build/temple.pack] [--width 320 --height 180]
+                                   [--aa fxaa,msaa] [--json OUT]
 
-Run by `make soak`, outside `make test` (it takes a while on lavapipe). Exit status 0 pass,
-1 fail, 2 bad arguments or no demo binary.
+Every pass: the demo's defaults leave some off, so each run adds `--overlay` (the debug overlay,
+egui, drawn into every frame), `--render-scale 0.75` (the 3D passes at 3/4 size, then the
+upscale pass) and an anti-aliasing mode. The two modes exclude each other (MSAA's resolve pass, or
+the FXAA pass), so there is one run per mode in --aa, each of --frames frames; the flight (the
+default 24 s loop over the level) keeps culling, LODs, the characters, doves and particles
+changing. Each run lists the passes that ran (the demo's `pass gpu_ms` line) and fails if one
+of the renderer's passes is missing, but for the two that cannot run here: the other AA mode's
+pass, and `depth view` (a debug view that replaces the frame, switched only from the overlay).
+The sun's static shadow map is drawn once and then copied each frame (`shadow static` runs when
+the static casters change, i.e. at the first frame).
+
+Run by `make soak` and `make check-long`, outside `make test` (it takes a while on lavapipe).
+Exit status 0 pass, 1 fail, 2 bad arguments or no demo binary.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import subprocess
 import sys
@@ -20,6 +33,51 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "target" / "release" / "demo"
+# The renderer's passes (engine/src/render/passes/mod.rs, in frame order) that every frame of a
+# soak run must have run in some frame; per AA mode the one pass of the mode is added.
+PASSES = ["skinning", "shadow static", "shadow copy", "shadow", "prepass", "shading", "boids", "transparent", "particles",
+          "tonemap", "upscale"]
+MODE_PASS = {"msaa": "resolve", "fxaa": "fxaa"}
+RENDER_SCALE = "0.75"
+
+
+def soak(args, aa: str) -> dict:
+    shot = ROOT / "build" / f"soak-{aa}.png"
+    cmd = [str(DEMO), str(args.pack), "--headless", "--validation", "--frames", str(args.frames), "--width", str(args.width),
+           "--height", str(args.height), "--overlay", "--aa", aa, "--render-scale", RENDER_SCALE,
+           "--rss-at", f"{args.baseline},{args.frames}", "--screenshot", str(shot)]
+    print("soak:", " ".join(cmd), flush=True)
+    start = time.monotonic()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    minutes = (time.monotonic() - start) / 60
+    rss = {int(f): int(k) for f, k in re.findall(r"rss after frame (\d+): (\d+) KiB", r.stdout)}
+    messages = [line for line in r.stderr.splitlines() if line.startswith("[vulkan validation")]
+    errors = re.search(r"validation errors: (\d+)", r.stdout)
+    ran = re.search(r"pass gpu_ms \(median\): (.*?) \(\d+ shadow casters", r.stdout)
+    passes = [re.sub(r" [\d.]+$", "", p) for p in ran.group(1).split(", ")] if ran else []
+    missing = [p for p in PASSES + [MODE_PASS[aa]] if p not in passes]
+    out = {"aa": aa, "frames": args.frames, "minutes": round(minutes, 1), "exit": r.returncode, "messages": len(messages),
+           "errors": int(errors.group(1)) if errors else None, "passes": passes, "missing_passes": missing}
+    print(f"soak [{aa}]: {args.frames} frames at {args.width}x{args.height} in {minutes:.1f} min, exit {r.returncode}")
+    print(f"soak [{aa}]: validation messages (errors and warnings): {len(messages)}; errors counted by the demo: {out['errors'] if errors else '?'}")
+    for line in messages[:10]:
+        print(f"  {line}")
+    print(f"soak [{aa}]: passes that ran: {', '.join(passes) or '?'}" + (f"; MISSING: {', '.join(missing)}" if missing else ""))
+    # Warnings count too: the soak's promise is zero messages.
+    ok = r.returncode == 0 and errors is not None and errors.group(1) == "0" and not messages and not missing
+    if args.baseline in rss and args.frames in rss:
+        a, b = rss[args.baseline], rss[args.frames]
+        change = (b - a) / a
+        out.update(rss_baseline_kib=a, rss_last_kib=b, drift_percent=round(100 * change, 3))
+        print(f"soak [{aa}]: resident memory after frame {args.baseline}: {a / 1024:.1f} MiB, after frame {args.frames}: {b / 1024:.1f} MiB ({change:+.2%})")
+        ok = ok and abs(change) <= 0.01
+    else:
+        print(f"soak [{aa}]: the demo did not report its memory", file=sys.stderr)
+        print(r.stdout[-2000:], r.stderr[-2000:], file=sys.stderr)
+        ok = False
+    out["ok"] = ok
+    print(f"soak [{aa}]: PASS" if ok else f"soak [{aa}]: FAIL", flush=True)
+    return out
 
 
 def main() -> int:
@@ -29,37 +87,22 @@ def main() -> int:
     ap.add_argument("--pack", type=Path, default=ROOT / "build" / "temple.pack")
     ap.add_argument("--width", type=int, default=320)
     ap.add_argument("--height", type=int, default=180)
+    ap.add_argument("--aa", default="fxaa,msaa", help="anti-aliasing modes, one run each (default fxaa,msaa)")
+    ap.add_argument("--json", type=Path, help="also write the runs' results here")
     args = ap.parse_args()
     if not DEMO.exists():
         print(f"soak: {DEMO} is missing (run `make build`)", file=sys.stderr)
         return 2
     if not 0 < args.baseline < args.frames:
         ap.error("--baseline must be between 0 and --frames")
-    cmd = [str(DEMO), str(args.pack), "--headless", "--validation", "--frames", str(args.frames), "--width", str(args.width),
-           "--height", str(args.height), "--rss-at", f"{args.baseline},{args.frames}", "--screenshot", str(ROOT / "build" / "soak.png")]
-    print("soak:", " ".join(cmd), flush=True)
-    start = time.monotonic()
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    minutes = (time.monotonic() - start) / 60
-    rss = {int(f): int(k) for f, k in re.findall(r"rss after frame (\d+): (\d+) KiB", r.stdout)}
-    messages = [line for line in r.stderr.splitlines() if line.startswith("[vulkan validation")]
-    errors = re.search(r"validation errors: (\d+)", r.stdout)
-    print(f"soak: {args.frames} frames at {args.width}x{args.height} in {minutes:.1f} min, exit {r.returncode}")
-    print(f"soak: validation messages (errors and warnings): {len(messages)}; errors counted by the demo: {errors.group(1) if errors else '?'}")
-    for line in messages[:10]:
-        print(f"  {line}")
-    ok = r.returncode == 0 and errors is not None and errors.group(1) == "0"
-    if args.baseline in rss and args.frames in rss:
-        a, b = rss[args.baseline], rss[args.frames]
-        change = (b - a) / a
-        print(f"soak: resident memory after frame {args.baseline}: {a / 1024:.1f} MiB, after frame {args.frames}: {b / 1024:.1f} MiB ({change:+.2%})")
-        ok = ok and abs(change) <= 0.01
-    else:
-        print("soak: the demo did not report its memory", file=sys.stderr)
-        print(r.stdout[-2000:], r.stderr[-2000:], file=sys.stderr)
-        ok = False
-    # Warnings count too: the soak's promise is zero messages, and the only known one (the
-    # SPIR-V `invariant` decoration notice) is reported above so it can be judged.
+    modes = [m for m in args.aa.split(",") if m]
+    if not modes or any(m not in MODE_PASS for m in modes):
+        ap.error(f"--aa: a comma-separated list of {', '.join(MODE_PASS)}")
+    runs = [soak(args, m) for m in modes]
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(runs, indent=2) + "\n")
+    ok = all(r["ok"] for r in runs)
     print("soak: PASS" if ok else "soak: FAIL")
     return 0 if ok else 1
 
