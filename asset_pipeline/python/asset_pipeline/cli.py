@@ -1,4 +1,6 @@
 """``cook SOURCE -o OUT.pack``: the command-line front of :func:`asset_pipeline.cook`.
+``cook --cache-info`` / ``cook --cache-prune`` (with ``--cache DIR`` or ``-o OUT.pack``): show or
+trim the stage cache, cooking nothing.
 
 Exit status: 0 on success, 2 on bad arguments or bad input (as argparse), 130 when interrupted.
 With ``--watch`` (asset_pipeline.watch): 0 when stopped with Ctrl-C, whatever the cooks did; 2
@@ -12,15 +14,17 @@ import argparse
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 from asset_pipeline import CookError
 from asset_pipeline.bake import LIGHTMAP_MODES, PRESETS, BakeSettings
+from asset_pipeline.cache import evict, format_size, info, parse_size
 from asset_pipeline.chunks import ChunkSettings
 from asset_pipeline.compress import parse_overrides
 from asset_pipeline.cook import cook_detailed
 from asset_pipeline.executor import EXECUTORS
-from asset_pipeline.pipeline import CookSettings
+from asset_pipeline.pipeline import CookSettings, cache_limit
 
 
 def _count(n: int, one: str, many: str) -> str:
@@ -69,16 +73,28 @@ def _face_size(text: str) -> int:
     return n
 
 
+def _size(text: str) -> int:
+    """argparse type: a size in bytes (cache.parse_size: 500M, 4G, 1.5GiB, plain bytes)."""
+    try:
+        return parse_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+USAGE = """cook SOURCE -o OUT.pack [options]
+       cook --cache-info | --cache-prune (--cache DIR | -o OUT.pack) [--cache-max SIZE]"""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="cook", description="Cook a glTF 2.0 file (.gltf/.glb) or a CSG level (.toml) into a pack.")
-    parser.add_argument("source", help="the .gltf, .glb or level .toml to cook")
-    parser.add_argument("-o", "--out", required=True, metavar="OUT.pack", help="where to write the pack (its directory must exist)")
+    parser = argparse.ArgumentParser(prog="cook", usage=USAGE, description="Cook a glTF 2.0 file (.gltf/.glb) or a CSG level (.toml) into a pack.")
+    # Both are required for a cook (checked below): --cache-info and --cache-prune take neither.
+    parser.add_argument("source", nargs="?", help="the .gltf, .glb or level .toml to cook")
+    parser.add_argument("-o", "--out", metavar="OUT.pack", help="where to write the pack (its directory must exist)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     parser.add_argument("--force", action="store_true", help="ignore cached stage results and rebuild everything")
     parser.add_argument("--watch", action="store_true",
                         help="after cooking, watch every file the cook read and cook again when one changes (through the stage cache: only "
                              "what the change affects runs again); a failed cook keeps the last good pack; Ctrl-C stops")
-    parser.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
     parser.add_argument("--no-lods", action="store_true", help="skip the LOD stage")
     parser.add_argument("--no-lightmap-uvs", action="store_true", help="skip the lightmap UV stage")
     parser.add_argument("--no-chunks", action="store_true", help="do not cut large static meshes into level chunks")
@@ -103,6 +119,16 @@ def main(argv: list[str] | None = None) -> int:
                              "none (keep uncompressed) or force (compress whatever the quality); may repeat, the last match wins")
     parser.add_argument("--mip-filter", choices=["box", "tent", "bspline", "mitchell", "catmull-rom", "lanczos3"],
                         help="mip filter for every texture (default: mitchell; tent for HDR, which accepts only box, tent or bspline)")
+    cache = parser.add_argument_group("stage cache")
+    cache.add_argument("--cache", type=Path, metavar="DIR", help="stage cache directory (default: .cook-cache beside the output)")
+    cache.add_argument("--cache-max", type=_size, metavar="SIZE",
+                       help="bound of the stage cache: after each cook the least recently used entries are removed until it holds at most "
+                            "this; K, M, G, T are powers of 1000, Ki, Mi, Gi, Ti of 1024 (500M, 4G, 1.5GiB; "
+                            "default: $COOK_CACHE_MAX, else 4GiB). Entries a running cook uses are kept")
+    maintenance = cache.add_mutually_exclusive_group()
+    maintenance.add_argument("--cache-info", action="store_true",
+                             help="print the stage cache's size, limit, entries and size per stage, oldest and newest use, and exit")
+    maintenance.add_argument("--cache-prune", action="store_true", help="trim the stage cache to --cache-max now, and exit")
     bake = parser.add_argument_group("baking (lightmaps, probes and reflection probes, for levels with lightmap UVs)")
     bake.add_argument("--no-bake", action="store_true", help="skip the bake stage")
     bake.add_argument("--sky-nits", type=_non_negative_number, default=CookSettings.sky_nits, metavar="NITS",
@@ -128,6 +154,16 @@ def main(argv: list[str] | None = None) -> int:
     scale.add_argument("--tile-texels", type=_positive, metavar="N", default=BakeSettings.tile_texels,
                        help=f"lightmap texels per Ray task (default: {BakeSettings.tile_texels})")
     args = parser.parse_args(argv)
+    try:
+        limit = cache_limit(CookSettings(cache_max=args.cache_max))  # $COOK_CACHE_MAX read once, here
+    except CookError as e:
+        print(f"cook: error: {e}", file=sys.stderr)
+        return 2
+    if args.cache_info or args.cache_prune:
+        return _cache_command(parser, args, limit)
+    missing = [name for name, value in (("source", args.source), ("-o/--out", args.out)) if value is None]
+    if missing:
+        parser.error(f"the following arguments are required: {', '.join(missing)}")
     if args.watch and args.force:
         parser.error("--watch and --force: a forced cook would rerun every stage on every save (drop --force)")
     if args.ray_address is not None and args.executor != "ray":
@@ -149,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         # A process that exits on Ctrl-C leaves its tasks to the cluster (see RayExecutor).
         from asset_pipeline.executor import RayExecutor
         executor = RayExecutor(args.ray_address, cancel_on_interrupt=False)
-    settings = CookSettings(force=args.force, cache_dir=args.cache, lods=not args.no_lods, chunks=not args.no_chunks, chunk=chunk,
+    settings = CookSettings(force=args.force, cache_dir=args.cache, cache_max=limit, lods=not args.no_lods, chunks=not args.no_chunks, chunk=chunk,
                             bake=bake_settings, baking=not args.no_bake,
                             lightmap_uvs=not args.no_lightmap_uvs, texels_per_metre=args.texels_per_metre, report=not args.no_report,
                             mips=not args.no_mips, mesh_opt=not args.no_mesh_opt, compress=not args.no_compress,
@@ -181,6 +217,36 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cook: wrote {args.out}: {_count(s['meshes'], 'mesh', 'meshes')}, {_count(s['triangles'], 'triangle', 'triangles')}, "
               f"{_count(s['textures'], 'texture', 'textures')}, {s['bytes']} bytes"
               + (f" ({_count(result.tasks_submitted, 'Ray task', 'Ray tasks')})" if args.executor == "ray" else ""))
+    return 0
+
+
+def _cache_command(parser: argparse.ArgumentParser, args, limit: int) -> int:
+    """--cache-info or --cache-prune: the cache named by --cache, else the one beside -o's pack."""
+    flag = "--cache-info" if args.cache_info else "--cache-prune"
+    if args.source is not None or args.watch:
+        parser.error(f"{flag} cooks nothing: drop {'SOURCE' if args.source is not None else '--watch'}")
+    if args.cache is None and args.out is None:
+        parser.error(f"{flag} needs the cache: --cache DIR, or -o OUT.pack for the .cook-cache beside it")
+    root = args.cache if args.cache is not None else Path(args.out).parent / ".cook-cache"
+    if not root.is_dir():
+        print(f"cook: error: {flag}: no stage cache at '{root}' ({'not a directory' if root.exists() else 'no such directory'})", file=sys.stderr)
+        return 2
+    if args.cache_prune:
+        e = evict(root, limit)
+        print(f"cook: pruned {root}: removed {_count(e.removed, 'entry', 'entries')} ({format_size(e.freed)}); "
+              f"{format_size(e.total)} in {_count(e.entries, 'entry', 'entries')} left, limit {format_size(limit)}")
+        if e.total > limit:
+            print(f"cook: warning: {_count(e.cooks, 'running cook uses', 'running cooks use')} {format_size(e.in_use)} of it: kept", file=sys.stderr)
+        return 0
+    i = info(root)
+    when = lambda ns: "-" if ns is None else time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(ns / 1e9))
+    print(f"stage cache: {i.root}")
+    print(f"size: {format_size(i.total)} in {_count(i.entries, 'entry', 'entries')} (limit {format_size(limit)})")
+    for stage, (n, size) in i.stages.items():
+        print(f"  {stage:<12} {n:>6} {'entry' if n == 1 else 'entries':<7} {format_size(size):>10}")
+    print(f"oldest use: {when(i.oldest_ns)}")
+    print(f"newest use: {when(i.newest_ns)}")
+    print(f"running cooks: {i.cooks}")
     return 0
 
 

@@ -30,7 +30,8 @@ import numpy as np
 
 from asset_pipeline import ir
 from asset_pipeline._core import CookError
-from asset_pipeline.cache import Hasher, StageCache, library_version, process_running, write_atomic
+from asset_pipeline.cache import (DEFAULT_CACHE_MAX, Hasher, StageCache, file_lock, format_size, library_version, parse_size,
+                                  process_running, write_atomic)
 from asset_pipeline.vertex_format import uv_precision_warnings
 from asset_pipeline.gltf_import import import_gltf_scene, write_pack
 from asset_pipeline.progress import Progress
@@ -60,6 +61,9 @@ class CookSettings:
     mip_filter: str | None = None  # box|tent|bspline|mitchell|catmull-rom|lanczos3; None = per usage (mitchell, tent for hdr)
     force: bool = False  # ignore every cache entry and rebuild
     cache_dir: Path | None = None  # default: .cook-cache beside the output
+    # The stage cache's bound in bytes: after each cook the least recently used entries go until
+    # it holds at most this (cache.evict). None: $COOK_CACHE_MAX (a size: 500M, 4G, 1.5GiB), else 4 GiB.
+    cache_max: int | None = None
     report: bool = True
     # Where independent work runs (executor.py): "local" (this process) or "ray" (Ray tasks on
     # the cluster at ray_address; None: as ray.init(): $RAY_ADDRESS, else a cluster `ray start`ed
@@ -104,6 +108,9 @@ class CookResult:
     # Every file the cook read: the source, then what it names (props, buffers, images,
     # textures), resolved, in first-read order; what `cook --watch` watches.
     files: list[str] = field(default_factory=list)
+    # Every stage cache file the cook loaded or stored (its entries and its output stamp): what
+    # the cache's eviction after it kept.
+    cache_entries: list[str] = field(default_factory=list)
 
 
 def _settings_doc(obj) -> object:
@@ -159,14 +166,65 @@ def uniform_scale(world: np.ndarray) -> float:
 
 def cook(source: str | os.PathLike, out: str | os.PathLike, settings: CookSettings | None = None, progress: Progress | None = None) -> CookResult:
     """Cook `source` (.gltf, .glb or a level .toml) into the pack `out` (written atomically) and
-    a report beside it. Raises CookError on bad input, naming the file and the problem."""
+    a report beside it. Raises CookError on bad input, naming the file and the problem.
+    At the end the stage cache is trimmed to its limit (settings.cache_max)."""
+    settings = settings or CookSettings()
+    progress = progress or Progress(enabled=False)
     try:
-        return _cook(source, out, settings, progress)
+        cache = StageCache(cache_root(settings, Path(out)), enabled=not settings.force, max_bytes=cache_limit(settings))
+        try:
+            result = _cook(source, out, settings, progress, cache)
+        except CookError:
+            _trim(cache, progress)  # what a failed cook stored counts too
+            raise
+        else:
+            _trim(cache, progress)
+        finally:
+            cache.end()
+        result.cache_entries = sorted(os.fspath(p) for p in cache.used)
+        return result
     except CookError as e:
         # Later stages (uv2, bake, textures) name the mesh or texture; say which file it came from.
         if os.fspath(source) not in str(e):
             raise CookError(f"{os.fspath(source)}: {e}") from None
         raise
+
+
+def cache_root(settings: CookSettings, out: Path) -> Path:
+    """The stage cache of a cook into `out`: settings.cache_dir, else `.cook-cache` beside it."""
+    return Path(settings.cache_dir) if settings.cache_dir is not None else Path(out).parent / ".cook-cache"
+
+
+def cache_limit(settings: CookSettings) -> int:
+    """The stage cache's bound in bytes: settings.cache_max, else $COOK_CACHE_MAX, else 4 GiB."""
+    if settings.cache_max is not None:
+        if settings.cache_max < 0:
+            raise CookError(f"cache_max {settings.cache_max} is negative")
+        return int(settings.cache_max)
+    text = os.environ.get("COOK_CACHE_MAX", "").strip()
+    if not text:
+        return DEFAULT_CACHE_MAX
+    try:
+        return parse_size(text)
+    except ValueError as e:
+        raise CookError(f"COOK_CACHE_MAX: {e}") from None
+
+
+def _trim(cache: StageCache, progress: Progress) -> None:
+    """Evict the least recently used entries down to the cache's limit; say what went, and when
+    what is in use alone is over the limit (kept: not an error)."""
+    try:
+        e = cache.trim()
+    except OSError as err:  # a cache we may not write: the cook itself went well
+        progress.warning(f"stage cache {cache.root}: not trimmed: {err}")
+        return
+    if e.removed:
+        progress.line(f"cache: removed {e.removed} least recently used entr{'y' if e.removed == 1 else 'ies'} ({format_size(e.freed)}); "
+                      f"{format_size(e.total)} of {format_size(e.limit)} in {cache.root}")
+    if e.total > e.limit:
+        others = f" and {e.cooks} other running cook{'s' if e.cooks != 1 else ''}" if e.cooks else ""
+        progress.warning(f"stage cache {cache.root}: the entries this cook{others} use{'s' if not others else ''} ({format_size(e.in_use)}) are more than "
+                         f"its limit ({format_size(e.limit)}, --cache-max); kept them")
 
 
 def _recorded_output(out: Path, stamp: Path, source_key: str | None, settings_doc: dict, settings: CookSettings) -> dict | None:
@@ -189,7 +247,7 @@ def is_up_to_date(source: str | os.PathLike, out: str | os.PathLike, settings: C
     source, out = Path(source), Path(out)
     if not source.is_file():
         return False
-    cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
+    cache = StageCache(cache_root(settings, out), enabled=not settings.force)
     settings_doc = _key_settings(settings)
     _, source_key = _known_source(source, settings, cache)
     return _recorded_output(out, _stamp(cache, out), source_key, settings_doc, settings) is not None
@@ -201,7 +259,7 @@ def _key_settings(settings: CookSettings) -> dict:
     from asset_pipeline.bake import SCHEDULING
 
     doc = {f.name: _settings_doc(getattr(settings, f.name)) for f in dataclasses.fields(settings)
-           if f.name not in ("force", "cache_dir", "report", "executor", "ray_address", "refine")}
+           if f.name not in ("force", "cache_dir", "cache_max", "report", "executor", "ray_address", "refine")}
     if isinstance(doc.get("bake"), dict):
         for k in SCHEDULING:
             doc["bake"].pop(k, None)
@@ -226,9 +284,7 @@ def _stamp(cache: StageCache, out: Path) -> Path:
     return cache.root / "outputs" / (Hasher("output").text(os.fspath(out.resolve())).key()[:24] + ".json")
 
 
-def _cook(source, out, settings: CookSettings | None, progress: Progress | None) -> CookResult:
-    settings = settings or CookSettings()
-    progress = progress or Progress(enabled=False)
+def _cook(source, out, settings: CookSettings, progress: Progress, cache: StageCache) -> CookResult:
     source, out = Path(source), Path(out)
     if not source.is_file():
         raise CookError(f"{source}: no such file")
@@ -238,7 +294,6 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         from asset_pipeline.chunks import ChunkSettings
 
         (settings.chunk or ChunkSettings()).check()  # a bad setting fails before any work
-    cache = StageCache(settings.cache_dir or out.parent / ".cook-cache", enabled=not settings.force)
     stages: list[StageRecord] = []
 
     from asset_pipeline.executor import make_executor
@@ -255,8 +310,11 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
 
     # Up to date: the output exists, is the file this key produced, and nothing is forced.
     recorded = _recorded_output(out, stamp, source_key, settings_doc, settings)
+    cache.use(stamp)  # read, or about to be written: not for this cook's eviction
     if recorded is not None:
         return CookResult(summary=recorded["summary"], up_to_date=True, files=list(files))
+    # This cook runs: from now on the entries it uses are kept from other cooks' eviction.
+    cache.begin()
 
     if executor is not None:
         # Connect now, so a bad address fails before minutes of work rather than after.
@@ -330,27 +388,36 @@ def _cook(source, out, settings: CookSettings | None, progress: Progress | None)
         scene = dataclasses.replace(scene, warnings=[*scene.warnings, *precision])
 
     rec = StageRecord("write", items=1)
-    t0 = time.perf_counter()
-    _remove_stale_temporaries(out)
-    cache.remove_stale_temporaries()
-    with progress.stage("write", 1) as bar:
-        # Lightmap files first, then the pack: each is written whole and renamed into place.
-        exrs = _write_exrs(baked_scene, out)
-        summary = write_pack(scene, out)
-        bar.advance()
-    rec.seconds = time.perf_counter() - t0
-    stages.append(rec)
+    # Cooks of one output write one at a time, each its pack, lightmaps, report and then its
+    # stamp: the stamp always records the files its own cook wrote.
+    with _output_lock(stamp):
+        t0 = time.perf_counter()
+        _remove_stale_temporaries(out)
+        cache.remove_stale_temporaries()
+        with progress.stage("write", 1) as bar:
+            # Lightmap files first, then the pack: each is written whole and renamed into place.
+            exrs = _write_exrs(baked_scene, out)
+            summary = write_pack(scene, out)
+            bar.advance()
+        rec.seconds = time.perf_counter() - t0
+        stages.append(rec)
 
-    report = None
-    if settings.report:
-        report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene, mesh_opt_stats, compress_stats)
-    outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
-    stamp.parent.mkdir(parents=True, exist_ok=True)
-    record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
-    write_atomic(stamp, lambda f: f.write(record))
+        report = None
+        if settings.report:
+            report = write_report(out, scene, summary, stages, uv2_stats, bake_stats, exrs, chunk_stats, atlas_scene, mesh_opt_stats, compress_stats)
+        outputs = [[os.fspath(f), f.stat().st_size, f.stat().st_mtime_ns] for f in [out, *exrs]]
+        record = json.dumps({"key": _cook_key(source_key, settings_doc, settings), "files": outputs, "summary": summary}).encode()
+        write_atomic(stamp, lambda f: f.write(record))
     return CookResult(summary=summary, up_to_date=False, stages=stages, report=report,
                       tasks_submitted=executor.submitted if executor is not None else 0, uv2=uv2_stats, bake=bake_stats, scene=scene,
                       chunks=chunk_stats, mesh_opt=mesh_opt_stats, compress=compress_stats, files=list(files))
+
+
+def _output_lock(stamp: Path):
+    """The lock of one output's files (beside its stamp, `outputs/<hash>.lock`; empty, never
+    counted as an entry)."""
+    stamp.parent.mkdir(parents=True, exist_ok=True)
+    return file_lock(stamp.with_suffix(".lock"))
 
 
 # Temporary files of this output's pack, lightmaps and report, named by the writers (pack crate:
