@@ -173,9 +173,10 @@ def format_size(n: int) -> str:
 # zstd level 1: on the demo level's bake (22 MB of float32 lightmap sums) level 3 saves 2% more
 # and takes three times as long; its meshes and textures shrink 3x-50x at either.
 ZSTD_LEVEL = 1
-# An array is stored compressed only when that saves at least this fraction of it (half-float
-# bake results and block-compressed textures often do not: decompressing them would cost time
-# for nothing), and only from this size (below it the frame's header outweighs any gain).
+# An array is stored compressed only when that saves at least this fraction of it (data that
+# looks random, as some block-compressed textures and noisy sums do, gains little: decompressing
+# it would cost load time for nothing), and only from this size (below it the frame's header
+# outweighs any gain).
 MIN_SAVING = 0.10
 MIN_COMPRESS_BYTES = 256
 
