@@ -1,8 +1,11 @@
 """Atomic outputs: a cook killed with SIGKILL at any point leaves the previous pack whole.
 
 A small level (CSG, lightmap UVs, a draft bake, procedural textures with mips) is cooked once to
-time a full cook; then, 20 times, a forced cook that would write different bytes (another bake
-seed) is killed at a point spread over that duration by a seeded RNG. Every time the pack on disk
+learn its stages and their times; then, 20 times, a forced cook that would write different bytes
+(another bake seed) is killed inside a chosen stage: once in each stage and after the last, the
+rest in and after the write (where the pack is renamed into place). A kill waits for the cook's line saying the stage before
+it ended (the event), then a seeded random part of the stage's measured time, so where it lands
+does not depend on the machine's speed or load. Every time the pack on disk
 must be either the previous pack, byte for byte, or the complete new one (the kill landed after
 the rename), and must load; anything else left beside it must be a hidden temporary file that no
 one would take for a pack; and the next cook must succeed with exactly the expected bytes (so a
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import signal
 import subprocess
 import time
@@ -85,14 +89,36 @@ KILLS = 20
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 
 
-def cook(src: Path, out: Path, seed: int, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([str(COOK), str(src), "-o", str(out), "-q", "--quality", "draft", "--seed", str(seed), *extra],
+def cook(src: Path, out: Path, seed: int, *extra: str, quiet: bool = True) -> subprocess.Popen:
+    """A cook; not quiet, it prints a line to stderr as each stage ends."""
+    return subprocess.Popen([str(COOK), str(src), "-o", str(out), *(["-q"] if quiet else []), "--quality", "draft", "--seed", str(seed), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
 
 
-def finish(p: subprocess.Popen) -> None:
+def finish(p: subprocess.Popen) -> str:
     stdout, stderr = p.communicate(timeout=300)
     assert p.returncode == 0, stderr
+    return stderr
+
+
+# The line the cook prints as each stage ends (stderr not a terminal): "cook: bake p0: 9176/9176 in 0.08 s, ...".
+STAGE_LINE = re.compile(r"^cook: ([\w ]+): \d+/\d+ in ([\d.]+) s")
+
+
+def stages(stderr: str) -> list[tuple[str, float]]:
+    return [(m[1], float(m[2])) for m in map(STAGE_LINE.match, stderr.splitlines()) if m]
+
+
+def wait_for_stage_end(p: subprocess.Popen, stage: str) -> list[str]:
+    """Read the cook's stderr until the line saying `stage` ended (or the end of the output, if the
+    cook ended or failed first); returns the lines read."""
+    lines = []
+    for line in p.stderr:
+        lines.append(line)
+        m = STAGE_LINE.match(line)
+        if m and m[1] == stage:
+            break
+    return lines
 
 
 def loads(pack: Path) -> None:
@@ -109,9 +135,9 @@ def test_sigkill_during_cook_keeps_the_previous_pack(tmp_path):
     ref = tmp_path / "ref"
     ref.mkdir()
     finish(cook(src, ref / "one.pack", 1))
-    t0 = time.perf_counter()
-    finish(cook(src, ref / "one.pack", 1, "--force"))
-    duration = time.perf_counter() - t0
+    order = stages(finish(cook(src, ref / "one.pack", 1, "--force", quiet=False)))
+    names = [n for n, _ in order]
+    assert names[-1] == "write" and len(names) >= 5, order
     packs = {0: None, 1: (ref / "one.pack").read_bytes()}
 
     out_dir = tmp_path / "out"
@@ -125,26 +151,34 @@ def test_sigkill_during_cook_keeps_the_previous_pack(tmp_path):
     assert expected_files <= settled, settled
 
     rng = random.Random(20261123)
+    # One kill in each stage (the first one from the start: the imports and the level stage) and
+    # one after the write (the report and the cache's entries are written then, and the pack is
+    # the new one); the others alternately in the write and after it.
+    order.append(("after the write", order[-1][1]))
+    targets = list(range(len(order)))
+    targets += [len(order) - 2 + k % 2 for k in range(KILLS - len(targets))]
     current, outcomes = 0, {"old": 0, "new": 0}
-    for k in range(KILLS):
+    for k, i in enumerate(targets):
         seed = 1 - current  # a cook whose pack differs from the one on disk
-        # Stratified over the measured duration (a little past it: a cook's time varies with the
-        # machine's load, and the last moments hold the rename): each kill in its own slice.
-        delay = 1.1 * duration * (k + rng.random()) / KILLS
-        p = cook(src, out, seed, "--force")
-        time.sleep(delay)
+        stage, seconds = order[i]
+        into = rng.random() * seconds  # this far into the stage, by its measured time
+        p = cook(src, out, seed, "--force", quiet=False)
+        if i > 0:
+            wait_for_stage_end(p, order[i - 1][0])
+        time.sleep(into)
         p.send_signal(signal.SIGKILL)
         p.communicate(timeout=60)
         assert p.returncode in (-signal.SIGKILL, 0), (k, p.returncode)
+        where = f"kill {k} in stage {stage}, {into * 1000:.0f} ms into it"
 
         got = out.read_bytes()
-        assert got in (packs[current], packs[seed]), f"kill {k} after {delay:.2f} s: the pack is neither the previous one nor the new one"
+        assert got in (packs[current], packs[seed]), f"{where}: the pack is neither the previous one nor the new one"
         outcomes["old" if got == packs[current] else "new"] += 1
         loads(out)
         # Whatever else the killed cook left is a hidden temporary, not something to load.
         for f in out_dir.iterdir():
             if f.name not in expected_files and f.name not in settled:
-                assert f.name.startswith(".") and (f.name.endswith(".tmp") or ".tmp-" in f.name), f"kill {k}: stray file {f.name}"
+                assert f.name.startswith(".") and (f.name.endswith(".tmp") or ".tmp-" in f.name), f"{where}: stray file {f.name}"
                 assert not f.name.endswith(".pack"), f.name
         assert sorted(out_dir.glob("*.pack")) == [out]
 
@@ -157,7 +191,7 @@ def test_sigkill_during_cook_keeps_the_previous_pack(tmp_path):
         left += sorted(str(f.relative_to(out_dir)) for f in (out_dir / ".cook-cache").rglob("*.tmp"))
         assert left == [], f"after kill {k}: temporary files left: {left}"
         current = seed
-    print(f"full cook {duration:.2f} s; {KILLS} kills: {outcomes}")
+    print(f"stages {order}; {KILLS} kills: {outcomes}")
 
 
 def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):

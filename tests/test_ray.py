@@ -14,10 +14,16 @@ stops: a head node and one extra worker node, one CPU each (two worker processes
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import os
+import pty
+import re
+import select
 import signal
 import socket
+import struct
 import subprocess
+import termios
 import textwrap
 import time
 from pathlib import Path
@@ -102,10 +108,10 @@ def test_demo_level_on_ray_is_byte_identical_to_local(cluster, tmp_path):
     assert "Ray tasks)" in outs["ray"][1] and "(0 Ray tasks)" not in outs["ray"][1], outs["ray"][1]
 
 
-def _local_room(room: Path, tmp_path: Path) -> Path:
+def _local_room(room: Path, tmp_path: Path, settings: bake.BakeSettings = ROOM_BAKE) -> Path:
     out = tmp_path / "local" / "room.pack"
     out.parent.mkdir()
-    cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=out.parent / "cache"))
+    cook(room, out, CookSettings(bake=settings, lods=False, report=False, cache_dir=out.parent / "cache"))
     return out
 
 
@@ -129,28 +135,31 @@ def _busy_workers(raylet_pid: int, task: str) -> list[int]:
 def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room, tmp_path):
     _, worker_node = cluster
     raylet_pid = worker_node.all_processes["raylet"][0].process.pid
-    local = _local_room(room, tmp_path)
+    # Tiles of about 40 ms (64x the paths of the other tests' tiles, 239 of them): the worker
+    # node's worker is inside one nearly all the time from when it starts (Ray gives the second
+    # node work once the head's is busy) until its queue runs out, seconds later.
+    settings = dataclasses.replace(ROOM_BAKE, samples=1024)
+    local = _local_room(room, tmp_path, settings)
     killed: list[int] = []
+    looks: list[int] = []
 
     def kill_one(stage, done, total):
-        # Once some tiles are in and most are still to come, kill the worker node's worker while
-        # it is inside a tile. A tile takes milliseconds, and the worker may be between two just
-        # as a result comes in: look for a while (the nodes keep working through their queues
-        # while this callback holds the driver).
-        if stage == "bake tiles" and not killed and 2 <= done < total // 2:
-            deadline = time.monotonic() + 5.0
-            while not killed and time.monotonic() < deadline:
-                for pid in _busy_workers(raylet_pid, "bake_tile")[:1]:
-                    os.kill(pid, signal.SIGKILL)
-                    killed.append(pid)
-                time.sleep(0.002)
+        # Each tile that comes back (from either node) is a moment to look: the first one, after
+        # two tiles and before the last, at which the worker node's worker is titled
+        # `ray::bake_tile` (inside a tile) kills it. No waiting here: the next result is the next
+        # look.
+        if stage == "bake tiles" and not killed and 2 <= done < total - 1:
+            looks.append(done)
+            for pid in _busy_workers(raylet_pid, "bake_tile")[:1]:
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
 
     out = tmp_path / "ray" / "room.pack"
     out.parent.mkdir()
     executor = RayExecutor()
-    result = cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=out.parent / "cache", executor=executor),
+    result = cook(room, out, CookSettings(bake=settings, lods=False, report=False, cache_dir=out.parent / "cache", executor=executor),
                   progress=Progress(callback=kill_one))
-    assert killed, "no busy worker was found to kill"
+    assert killed, f"no busy worker was found to kill at {len(looks)} tile results"
     assert result.tasks_submitted > 0
     # The killed worker's tile was retried: the pack and the EXR are the local cook's bytes.
     assert _files(out) == _files(local)
@@ -240,34 +249,62 @@ def test_ctrl_c_to_the_cook_process_exits_130_and_leaves_the_previous_pack(clust
     out = tmp_path / "room.pack"
     cook(room, out, CookSettings(bake=ROOM_BAKE, lods=False, report=False, cache_dir=tmp_path / "cache"))
     before = _files(out)
-    # Enough paths per texel that the bake lasts several seconds on the two loopback workers.
+    # Enough paths per texel that the bake lasts several seconds on the two loopback workers. Its
+    # stderr is a terminal, so the cook draws its progress bars: the interrupt waits for the
+    # `bake tiles` bar to show tiles back (the bake is under way, on the cluster), not for a time.
+    primary, secondary = pty.openpty()
+    fcntl.ioctl(secondary, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 160, 0, 0))
     proc = subprocess.Popen([str(COOK), str(room), "-o", str(out), "--no-lods", "--cache", str(tmp_path / "cache"), "--quality", "draft",
                              "--samples", "2048", "--tile-texels", "256", "--executor", "ray", "--ray-address", address],
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=secondary, stdout=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    os.close(secondary)
     try:
-        lines = []
-        for line in proc.stderr:  # stage lines are printed as each stage ends; the bake follows uv2
-            lines.append(line)
-            if line.startswith("cook: uv2:"):
-                break
-        time.sleep(3.0)
-        assert proc.poll() is None, "the cook finished before it could be interrupted:\n" + "".join(lines)
+        shown = _read_pty_until(primary, re.compile(r"bake tiles:\s*\d+%\|[^|]*\|\s*([1-9]\d*)/(\d+)"))
+        assert proc.poll() is None, "the cook finished before it could be interrupted:\n" + shown
         proc.send_signal(signal.SIGINT)
-        rest = proc.stderr.read()
+        rest = _read_pty_until(primary, None)
         code = proc.wait(timeout=60)
     finally:
+        os.close(primary)
         if proc.poll() is None:
             proc.kill()
-    assert code == 130, "".join(lines) + rest
-    assert "cook: interrupted; nothing written" in rest
+    assert code == 130, shown + rest
+    assert "cook: interrupted; nothing written" in rest, rest
     assert "Traceback" not in rest
     assert _files(out) == before
     assert not [p.name for p in tmp_path.iterdir() if ".tmp" in p.name]
-    # The cancelled tasks give the cluster's CPUs back.
-    deadline = time.monotonic() + 30
-    while ray.available_resources().get("CPU", 0) < ray.cluster_resources().get("CPU", 0) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert ray.available_resources().get("CPU", 0) == ray.cluster_resources().get("CPU", 0)
+    # The cancelled tasks give the cluster's CPUs back: a placement group of one CPU per CPU of
+    # the cluster is created (ready) only once every CPU is free at the same time.
+    from ray.util.placement_group import placement_group, remove_placement_group
+
+    group = placement_group([{"CPU": 1}] * int(ray.cluster_resources()["CPU"]))
+    try:
+        ray.get(group.ready(), timeout=60)
+    finally:
+        remove_placement_group(group)
+
+
+def _read_pty_until(fd: int, pattern: re.Pattern | None, timeout: float = 120.0) -> str:
+    """What a child wrote to the terminal `fd` until `pattern` is found in it (None: until the
+    child closed it), reading as it comes; fails after `timeout` seconds without it (a safety net:
+    a cook that hangs)."""
+    seen = b""
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        assert left > 0, f"waited {timeout} s for {pattern.pattern if pattern else 'the end'}:\n" + seen.decode(errors="replace")
+        if not select.select([fd], [], [], left)[0]:
+            continue
+        try:
+            chunk = os.read(fd, 65536)
+        except OSError:  # EIO: the child closed the terminal and it is drained
+            chunk = b""
+        if not chunk:
+            assert pattern is None, f"the cook closed its terminal before {pattern.pattern}:\n" + seen.decode(errors="replace")
+            return seen.decode(errors="replace")
+        seen += chunk
+        if pattern is not None and pattern.search(seen.decode(errors="replace")):
+            return seen.decode(errors="replace")
 
 
 def test_a_loopback_cluster_needs_no_environment_variable_from_the_user(cluster, room, tmp_path):
