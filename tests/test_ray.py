@@ -23,6 +23,7 @@ import signal
 import socket
 import struct
 import subprocess
+import sys
 import termios
 import textwrap
 import time
@@ -45,6 +46,9 @@ from asset_pipeline import bake  # noqa: E402
 from asset_pipeline.executor import RayExecutor  # noqa: E402
 from asset_pipeline.pipeline import CookSettings, cook  # noqa: E402
 from asset_pipeline.progress import Progress  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+from ray_kill_cook import busy_workers  # noqa: E402  (the long check kills workers the same way)
 
 from test_bake import ROOM  # noqa: E402
 
@@ -115,23 +119,6 @@ def _local_room(room: Path, tmp_path: Path, settings: bake.BakeSettings = ROOM_B
     return out
 
 
-def _busy_workers(raylet_pid: int, task: str) -> list[int]:
-    """Worker processes of one raylet that are running `task` (Ray titles a busy worker
-    `ray::<task>`)."""
-    pids = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            title = (d / "cmdline").read_bytes().split(b"\0")[0].decode(errors="replace")
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid == raylet_pid and title.startswith(f"ray::{task}"):
-            pids.append(int(d.name))
-    return pids
-
-
 def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room, tmp_path):
     _, worker_node = cluster
     raylet_pid = worker_node.all_processes["raylet"][0].process.pid
@@ -150,7 +137,7 @@ def test_killing_a_worker_mid_bake_still_gives_the_identical_pack(cluster, room,
         # look.
         if stage == "bake tiles" and not killed and 2 <= done < total - 1:
             looks.append(done)
-            for pid in _busy_workers(raylet_pid, "bake_tile")[:1]:
+            for pid in busy_workers(raylet_pid, "bake_tile")[:1]:
                 os.kill(pid, signal.SIGKILL)
                 killed.append(pid)
 
