@@ -97,7 +97,7 @@ fuzz: fuzz-build cooker
 	bash tools/fuzz_seed.sh
 	$(PY) tools/fuzz_run.py $(foreach t,$(FUZZ_TARGETS),$(t)=$(FUZZ_SECONDS))
 
-# The long checks (issue 27), outside `make test`, about an hour here: the soak above (every pass,
+# The long checks (issue 27), outside `make test`, ~45 min here: the soak above (every pass,
 # 2 x CHECK_LONG_FRAMES frames), each fuzz target for its fixed time in CHECK_LONG_FUZZ (chosen so
 # each reaches 1,000,000 executions on this 2-core machine: measured 9,000, 5,000, 2,200 and 4,500
 # executions a second), and a Ray cook of the demo level with a worker SIGKILLed mid-bake that must

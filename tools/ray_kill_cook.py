@@ -71,7 +71,7 @@ def busy_workers(raylet_pid: int, task: str) -> list[int]:
 
 
 def run_cook(args: list[str]) -> subprocess.CompletedProcess:
-    r = subprocess.run([str(COOK), *args], capture_output=True, text=True)
+    r = subprocess.run([str(COOK), *args], capture_output=True, text=True, cwd=ROOT)
     if r.returncode != 0:
         raise SystemExit(f"ray_kill_cook: the local cook failed:\n{r.stderr}")
     return r
@@ -83,7 +83,7 @@ def ray_cook_with_a_kill(cmd: list[str], raylet_pid: int) -> dict:
     primary, secondary = pty.openpty()
     fcntl.ioctl(secondary, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 160, 0, 0))
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=secondary, stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=secondary, stdin=subprocess.DEVNULL, cwd=ROOT)
     os.close(secondary)
     killed: dict = {}
     shown = b""
@@ -129,7 +129,11 @@ def main() -> int:
     if not COOK.exists():
         print(f"ray_kill_cook: {COOK} is missing (run `make cooker`)", file=sys.stderr)
         return 2
+    # The pack records its source as the cook was given it: both cooks name it as `make cook`
+    # does, relative to the project's root (and run there).
     level = args.level.resolve()
+    if level.is_relative_to(ROOT):
+        level = level.relative_to(ROOT)
     name = f"{level.stem}.pack"
 
     # The local cook: build/'s when the settings are the default ones (`make cook`), made fresh if
@@ -157,7 +161,7 @@ def main() -> int:
     finally:
         cluster.shutdown()
 
-    result = {"level": str(level.relative_to(ROOT)) if level.is_relative_to(ROOT) else str(level), "local": str(local),
+    result = {"level": str(level), "local": str(local),
               "ray": str(out), "cook_exit": run["code"], "killed": run["killed"], "seconds": run["seconds"]}
     if run["code"] != 0:
         print("\n".join(run["stderr_lines"][-20:]), file=sys.stderr)
