@@ -85,6 +85,7 @@ def main() -> int:
         good = r["ok"] and enough
         rows.append((f"fuzz {r['target']} ({r['seconds']} s)",
                      f"executions {r['executions']:,} ({r['exec_per_s']:,}/s), crashes {r['crashes']}"
+                     + "".join(f" ({Path(a).name.split('-')[0]}: fuzz/artifacts/{r['target']}/{Path(a).name}, after {r['wall_s']:.0f} s)" for a in r["artifacts"])
                      + ("" if enough else f" (< {MIN_EXECUTIONS:,} executions)"), "pass" if good else "FAIL"))
         ok = ok and good
     ray = load(OUT / "ray-kill.json")
