@@ -340,7 +340,31 @@ fn unzstd(frame: &[u8]) -> Result<Vec<u8>, PackError> {
         Ok(None) => return Err(bad("its zstd frame does not state its size".into())),
         Err(_) => return Err(bad("not a zstd frame".into())),
     };
-    let out = zstd::bulk::decompress(frame, size).map_err(|e| bad(format!("zstd: {e}")))?;
+    // The stated size is the frame's word, not a fact: a forged 50 KB frame can claim 60 GiB.
+    // Allocating it up front (zstd's bulk API does) aborted the process when the allocation
+    // failed (the pack_manifest fuzzer found it). So the output grows with what the frame really
+    // decodes to, each reservation fallible: a frame that decodes to less is malformed, and one
+    // that really needs more memory than there is, an error too.
+    let mut decoder = zstd::stream::read::Decoder::with_buffer(frame).map_err(|e| bad(format!("zstd: {e}")))?;
+    let mut out: Vec<u8> = Vec::new();
+    let cannot = |_| bad(format!("decodes to {size} bytes, more memory than can be had"));
+    // Packs' blobs shrink a few times under zstd: reserve for that at once, grow past it.
+    out.try_reserve_exact(size.min(frame.len().saturating_mul(16).saturating_add(1 << 20))).map_err(cannot)?;
+    let mut chunk = vec![0u8; 1 << 20];
+    loop {
+        let n = std::io::Read::read(&mut decoder, &mut chunk).map_err(|e| bad(format!("zstd: {e}")))?;
+        if n == 0 {
+            break;
+        }
+        if out.len() + n > size {
+            return Err(bad(format!("decodes to more bytes than its frame says ({size})")));
+        }
+        if out.capacity() - out.len() < n {
+            let grow = out.capacity().max(n).min(size - out.len());
+            out.try_reserve_exact(grow).map_err(cannot)?;
+        }
+        out.extend_from_slice(&chunk[..n]);
+    }
     if out.len() != size {
         return Err(bad(format!("decoded {} bytes, its frame says {size}", out.len())));
     }

@@ -395,6 +395,22 @@ fn a_bad_data_encoding_or_frame_is_malformed_not_a_panic() {
     assert!(forge(1, &frame[..frame.len() - 3]).starts_with("malformed pack: data:"), "a frame cut short");
     let short = zstd::bulk::compress(&data[..data.len() - 16], 3).unwrap();
     assert!(forge(1, &short).starts_with("malformed pack:"), "a frame of fewer bytes than the ranges need");
+    // A frame that claims 60 GiB (under MAX_DATA_BYTES) and holds one 128 KiB run: the claim was
+    // allocated up front and the process aborted when that failed (found by the pack_manifest
+    // fuzzer). Now the output grows with what the frame decodes to.
+    // Magic; an 8-byte content size and a window descriptor (128 KiB); the size; one block.
+    let mut bomb = vec![0x28, 0xB5, 0x2F, 0xFD, 0xC0, (17 - 10) << 3];
+    bomb.extend_from_slice(&(60u64 << 30).to_le_bytes());
+    let block: u32 = 1 | (1 << 1) | ((128 << 10) << 3); // last block, RLE, 128 KiB
+    bomb.extend_from_slice(&block.to_le_bytes()[..3]);
+    bomb.push(0);
+    // zstd finds the frame ends short of its claim; before, this test aborted on the allocation.
+    let said = forge(1, &bomb);
+    assert!(said.starts_with("malformed pack: data: zstd:"), "{said}");
+    // The same as one segment (its window is the whole claimed size): zstd refuses the window.
+    let mut single = vec![0x28, 0xB5, 0x2F, 0xFD, 0xE0];
+    single.extend_from_slice(&bomb[6..]);
+    assert!(forge(1, &single).starts_with("malformed pack: data: zstd:"), "{}", forge(1, &single));
 }
 
 #[test]
