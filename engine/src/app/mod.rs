@@ -258,6 +258,21 @@ impl ApplicationHandler for App<'_> {
     }
 }
 
+/// What the window has on `gpu`: a surface and swapchain for `window`, a renderer writing its
+/// format with `pack`'s scene, the frames in flight and the overlay (hidden). On an error
+/// nothing made is left behind. At start-up and after a device loss alike.
+fn on_device(gpu: &Gpu, window: &Window, pack: &pack::Pack, shadow_map_size: u32) -> Result<(Swapchain, Renderer, GpuScene, Frames, Overlay)> {
+    let display = window.display_handle().map_err(|e| anyhow!("display handle: {e}"))?.as_raw();
+    let handle = window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw();
+    let surface = unsafe { ash_window::create_surface(&gpu.entry, &gpu.instance, display, handle, None)? };
+    let swapchain = gpu.own(Swapchain::new(gpu, surface, window.inner_size())?);
+    let (renderer, scene) = recovery::renderer_and_scene(gpu, pack, swapchain.format, FRAMES_IN_FLIGHT, shadow_map_size)?;
+    let (renderer, scene) = (gpu.own(renderer), gpu.own(scene));
+    let frames = gpu.own(Frames::new(gpu)?);
+    let overlay = Overlay::new(gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+    Ok((swapchain.keep(), renderer.keep(), scene.keep(), frames.keep(), overlay))
+}
+
 impl State {
     fn new(el: &ActiveEventLoop, pack: &pack::Pack, opts: &WindowOptions) -> Result<State> {
         let attrs = Window::default_attributes().with_title(opts.title.clone()).with_inner_size(PhysicalSize::new(opts.width, opts.height));
@@ -271,23 +286,14 @@ impl State {
         if !gpu.swapchain_capable {
             return Err(anyhow!("{} cannot present to a window (no VK_KHR_swapchain)", gpu.caps.device_name));
         }
-        let surface = unsafe {
-            ash_window::create_surface(&gpu.entry, &gpu.instance, display, window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw(), None)?
-        };
-        let swapchain = Swapchain::new(&gpu, surface, window.inner_size())?;
-        let swapchain = gpu.own(swapchain);
-        let (mut renderer, scene) = recovery::renderer_and_scene(&gpu, pack, swapchain.format, FRAMES_IN_FLIGHT, opts.shadow_map_size)?;
+        let (swapchain, mut renderer, scene, frames, mut overlay) = on_device(&gpu, &window, pack, opts.shadow_map_size)?;
         renderer.aa = opts.aa;
         renderer.render_scale = crate::render::scale::ScaleController::new(opts.render_scale);
         if let Some(u) = opts.upscaler {
             renderer.upscaler = u;
         }
-        let (renderer, scene) = (gpu.own(renderer), gpu.own(scene));
-        let frames = gpu.own(Frames::new(&gpu)?);
-        let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
         overlay.visible = opts.overlay;
         let egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*window, Some(window.scale_factor() as f32), None, None);
-        let (swapchain, renderer, scene, frames) = (swapchain.keep(), renderer.keep(), scene.keep(), frames.keep());
         Ok(State {
             overlay: Some(overlay),
             egui,
@@ -322,21 +328,13 @@ impl State {
             self.gpu.wait_idle();
             self.swapchain.destroy(&self.gpu);
         }
-        let display = self.window.display_handle().map_err(|e| anyhow!("display handle: {e}"))?.as_raw();
-        let handle = self.window.window_handle().map_err(|e| anyhow!("window handle: {e}"))?.as_raw();
-        let surface = unsafe { ash_window::create_surface(&gpu.entry, &gpu.instance, display, handle, None)? };
-        let swapchain = gpu.own(Swapchain::new(&gpu, surface, self.window.inner_size())?);
-        let (renderer, scene) = recovery::renderer_and_scene(&gpu, pack, swapchain.format, FRAMES_IN_FLIGHT, self.renderer.shadow.size)?;
-        let (mut renderer, mut scene) = (gpu.own(renderer), gpu.own(scene));
-        let frames = gpu.own(Frames::new(&gpu)?);
-        let mut overlay = Overlay::new(&gpu, swapchain.format, FRAMES_IN_FLIGHT)?;
+        let (swapchain, mut renderer, mut scene, frames, mut overlay) = on_device(&gpu, &self.window, pack, self.renderer.shadow.size)?;
         renderer.carry_on_from(&mut self.renderer);
         scene.carry_on_from(&mut self.scene);
         if let Some(old) = self.overlay.as_mut() {
             overlay.carry_on_from(old);
         }
         self.egui = egui_winit::State::new(overlay.context().clone(), egui::ViewportId::ROOT, &*self.window, Some(self.window.scale_factor() as f32), None, None);
-        let (swapchain, renderer, scene, frames) = (swapchain.keep(), renderer.keep(), scene.keep(), frames.keep());
         let old = (
             std::mem::replace(&mut self.overlay, Some(overlay)),
             std::mem::replace(&mut self.frames, frames),
