@@ -15,13 +15,14 @@ mkdir -p "$logs"
 if ! command -v stress-ng >/dev/null; then
   apt-get install -y -q stress-ng >/dev/null || { echo "stress_runs: cannot install stress-ng" >&2; exit 2; }
 fi
+# Every run tests the commit that was HEAD at the start, even if work goes on meanwhile.
 head=$(git rev-parse --short HEAD)
 # The clone lives elsewhere: the samples beside this checkout are named for it.
 samples="${GLTF_SAMPLES_DIR:-$(realpath -m ../shared/gltf-samples)}"
 failed=0
 for i in $(seq 1 "$runs"); do
   rm -rf "$clone"
-  git clone -q "$PWD" "$clone"
+  git clone -q "$PWD" "$clone" && git -C "$clone" checkout -q "$head"
   stress-ng --cpu 1 --quiet --timeout 0 &
   load=$!
   start=$(date +%s)
