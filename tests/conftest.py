@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 from pathlib import Path
 
@@ -12,6 +13,50 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 COOK = REPO / ".venv" / "bin" / "cook"
 DEMO = REPO / "target" / "release" / "demo"
+
+# A suite started in the background by a non-interactive shell (`make test &`, nohup) inherits
+# SIGINT ignored, and so would every process it starts: Python then installs no Ctrl-C handler, so
+# a cook could not be interrupted and the Ctrl-C test failed for the way the suite was started
+# (issue 27's first stress run). With a handler here, exec gives the tests' processes SIGINT's
+# default, as a terminal would.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def run_bounded(args, timeout: float, *, env=None, cwd=None, input=None) -> subprocess.CompletedProcess:
+    """subprocess.run(args, capture_output=True, text=True, timeout=timeout), except that a process
+    still running at its timeout fails the test with where it was stuck: every thread's native
+    stack (gdb, where installed) and, for a Python program, every thread's Python stack
+    (faulthandler, on the SIGABRT that ends it). A hang seen once in many runs is then found from
+    that one failure, not guessed at."""
+    args = [str(a) for a in args]
+    env = {**(os.environ if env is None else env), "PYTHONFAULTHANDLER": "1"}
+    with subprocess.Popen(args, stdin=subprocess.PIPE if input is not None else subprocess.DEVNULL, stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, env=env, cwd=cwd) as proc:
+        try:
+            out, err = proc.communicate(input, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            native = _native_stacks(proc.pid)
+            proc.send_signal(signal.SIGABRT)
+            try:
+                out, err = proc.communicate(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                out, err = proc.communicate()
+            pytest.fail(f"{Path(args[0]).name} still ran after {timeout} s, stopped with SIGABRT: {' '.join(args)}\n"
+                        f"--- its stderr (Python's stacks at the end) ---\n{err[-30000:]}\n--- native stacks ---\n{native}", pytrace=False)
+    return subprocess.CompletedProcess(args, proc.returncode, out, err)
+
+
+def _native_stacks(pid: int) -> str:
+    gdb = shutil.which("gdb")
+    if gdb is None:
+        return "(gdb is not installed)"
+    try:
+        r = subprocess.run([gdb, "-p", str(pid), "-batch", "-nx", "-ex", "thread apply all bt"], capture_output=True, text=True, timeout=120)
+        return r.stdout[-30000:] + r.stderr[-2000:]
+    except subprocess.TimeoutExpired:
+        return "(gdb did not finish in 120 s)"
 
 
 def gltf_samples_path() -> Path:
@@ -35,7 +80,7 @@ def run_cook():
                     "(VIRTUAL_ENV=$PWD/.venv .venv/bin/maturin develop --release -m asset_pipeline/Cargo.toml)")
 
     def run(*args: object, **kwargs) -> subprocess.CompletedProcess:
-        return subprocess.run([str(COOK), *map(str, args)], capture_output=True, text=True, timeout=300, **kwargs)
+        return run_bounded([COOK, *args], 300, **kwargs)
 
     return run
 
@@ -43,12 +88,12 @@ def run_cook():
 def run_demo(args, timeout=300, env=None) -> subprocess.CompletedProcess:
     """Run the built `demo` binary (text output captured)."""
     assert DEMO.exists(), f"{DEMO} is built by `make build` (a prerequisite of `make test`)"
-    return subprocess.run([str(DEMO), *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env)
+    return run_bounded([DEMO, *args], timeout, env=env)
 
 
 def cook_ok(source: Path, out: Path, *args: str) -> None:
     """Cook `source` to `out` with the CLI (and `args`) and require success."""
-    result = subprocess.run([str(COOK), str(source), "-o", str(out), *args], capture_output=True, text=True, timeout=300)
+    result = run_bounded([COOK, source, "-o", out, *args], 300)
     assert result.returncode == 0, f"cook {source} failed ({result.returncode}):\n{result.stderr}"
     assert out.exists()
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import COOK, REPO
+from conftest import COOK, REPO, run_bounded
 from test_atomic import LEVEL
 
 RUNS = {
@@ -34,7 +34,7 @@ def cook_outputs(src: Path, out: Path, run: dict, seed: int = 7) -> dict[str, by
     env = {**os.environ, "OMP_NUM_THREADS": "1", **{k: v for k, v in run.items() if not k.startswith("_")}}
     args = [str(COOK), str(src), "-o", str(out), "-q", "--quality", "draft", "--seed", str(seed), "--cache", str(out.parent / "cache"),
             *run.get("_args", ())]
-    r = subprocess.run(args, capture_output=True, text=True, timeout=300, env=env)
+    r = run_bounded(args, 300, env=env)
     assert r.returncode == 0, r.stderr
     return {p.name: p.read_bytes() for p in sorted(out.parent.iterdir()) if p.suffix in (".pack", ".exr")}
 

@@ -241,13 +241,18 @@ def test_ctrl_c_to_the_cook_process_exits_130_and_leaves_the_previous_pack(clust
     # `bake tiles` bar to show tiles back (the bake is under way, on the cluster), not for a time.
     primary, secondary = pty.openpty()
     fcntl.ioctl(secondary, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 160, 0, 0))
-    proc = subprocess.Popen([str(COOK), str(room), "-o", str(out), "--no-lods", "--cache", str(tmp_path / "cache"), "--quality", "draft",
-                             "--samples", "2048", "--tile-texels", "256", "--executor", "ray", "--ray-address", address],
+    # The cook gets SIGINT's default disposition, as from a terminal, whatever this process has: a
+    # suite started in the background inherits it ignored (and Ray's driver here may put that back
+    # after conftest's handler), and an ignoring cook finishes its bake (stress run 1, issue 27).
+    default_sigint = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); os.execv(sys.argv[1], sys.argv[1:])"]
+    proc = subprocess.Popen([*default_sigint, str(COOK), str(room), "-o", str(out), "--no-lods", "--cache", str(tmp_path / "cache"), "--quality",
+                             "draft", "--samples", "2048", "--tile-texels", "256", "--executor", "ray", "--ray-address", address],
                             stderr=secondary, stdout=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
     os.close(secondary)
     try:
         shown = _read_pty_until(primary, re.compile(r"bake tiles:\s*\d+%\|[^|]*\|\s*([1-9]\d*)/(\d+)"))
         assert proc.poll() is None, "the cook finished before it could be interrupted:\n" + shown
+        assert not int(Path(f"/proc/{proc.pid}/status").read_text().split("SigIgn:")[1].split()[0], 16) & (1 << (signal.SIGINT - 1)), "the cook was started with SIGINT ignored"
         proc.send_signal(signal.SIGINT)
         rest = _read_pty_until(primary, None)
         code = proc.wait(timeout=60)

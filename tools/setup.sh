@@ -10,11 +10,13 @@ cd "$(dirname "$0")/.."
 # the libraries winit loads at run time; screenshots of the X screen: imagemagick's `import`;
 # synthetic keys and mouse for the window tests: xdotool (XTEST);
 # OpenEXR's own tools (exrheader) to check that our lightmap files are real EXR; a C++ compiler
-# for meshoptimizer (the cooker's mesh_opt stage builds it from the meshopt crate's source).
+# for meshoptimizer (the cooker's mesh_opt stage builds it from the meshopt crate's source);
+# gdb, so a test whose program hangs fails with every thread's stack (tests/conftest.py's
+# run_bounded): a hang seen once in many runs is found from that one failure.
 APT_PACKAGES=(
   mesa-vulkan-drivers libvulkan1 vulkan-validationlayers glslc g++
   xvfb xauth libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6 libx11-xcb1 imagemagick xdotool
-  openexr
+  openexr gdb
 )
 
 missing=()
