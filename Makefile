@@ -63,8 +63,8 @@ bench: build cook
 
 # The validation soak (issues 11, 27): 10,000 headless frames with validation on and every pass
 # running (the overlay, a render scale below 1 for the upscale pass; one run with FXAA, one with
-# MSAA's resolve); zero validation messages and resident memory after frame 10,000 within 1% of
-# frame 1,000. Outside `make test`.
+# MSAA's resolve); zero validation messages, and the memory allocated (heap and device) at the end
+# within 1% of frame 1,000's (tools/soak.py). Outside `make test`.
 soak: build cook
 	$(PY) tools/soak.py $(SOAK_ARGS)
 

@@ -363,6 +363,25 @@ def test_demo_reports_bad_packs_with_exit_2(tmp_path):
     assert "pack format version 2 is not supported" in stderr and "cook one with" in stderr, stderr
 
 
+def test_the_demo_reports_the_memory_the_soak_compares(box_textured_pack):
+    # tools/soak.py judges a leak on the memory allocated on the heap and on the device. The
+    # device figure is our allocator's count of live buffers and images: frames of 16x the pixels
+    # hold at least their targets' growth more (the HDR colour target alone is RGBA16F, 8 bytes a
+    # pixel), though the blocks they come from were allocated before.
+    import sys
+    sys.path.insert(0, str(REPO / "tools"))
+    from soak import memory_samples
+    device = {}
+    for w, h in ((320, 180), (1280, 720)):
+        r = run_demo([str(box_textured_pack), "--headless", "--frames", "4", "--width", str(w), "--height", str(h), "--rss-at", "2,4"])
+        assert r.returncode == 0, r.stderr
+        samples = memory_samples(r.stdout)
+        assert sorted(samples) == [2, 4], r.stdout
+        device[w] = samples[4][1]
+        assert all(heap > 1_000 and resident > 10_000 for heap, _, resident in samples.values()), samples
+    assert device[1280] - device[320] >= (1280 * 720 - 320 * 180) * 8 // 1024, device
+
+
 def test_demo_rejects_bad_arguments():
     for args in (["--frames"], ["--frames", "x"], ["--width", "0"], ["--bogus"]):
         result = run_demo(args)

@@ -257,6 +257,15 @@ impl Gpu {
         names.sort();
         names
     }
+
+    /// Device memory in bytes: what the live buffers and images hold, and what the allocator's
+    /// blocks hold in all (the first's sum, plus free room). The soak compares the first over
+    /// thousands of frames: a buffer made per frame and never freed grows it, though it fits in a
+    /// block already there.
+    pub fn device_memory(&self) -> (u64, u64) {
+        let report = self.allocator.lock().unwrap().generate_report();
+        (report.total_allocated_bytes, report.total_capacity_bytes)
+    }
 }
 
 /// Memory for one buffer (`linear`) or optimally tiled image from the shared allocator.
