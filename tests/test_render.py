@@ -7,6 +7,7 @@ which fails the test that caused it.
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,9 @@ from PIL import Image
 
 import asset_pipeline
 from conftest import DEMO, REPO, cook_ok, run_demo
+
+sys.path.insert(0, str(REPO / "tools"))
+from soak import memory_samples  # noqa: E402  (tools/ is not a package)
 
 REFERENCE_DIR = REPO / "tests" / "reference"
 
@@ -368,9 +372,6 @@ def test_the_demo_reports_the_memory_the_soak_compares(box_textured_pack):
     # device figure is our allocator's count of live buffers and images: frames of 16x the pixels
     # hold at least their targets' growth more (the HDR colour target alone is RGBA16F, 8 bytes a
     # pixel), though the blocks they come from were allocated before.
-    import sys
-    sys.path.insert(0, str(REPO / "tools"))
-    from soak import memory_samples
     device = {}
     for w, h in ((320, 180), (1280, 720)):
         r = run_demo([str(box_textured_pack), "--headless", "--frames", "4", "--width", str(w), "--height", str(h), "--rss-at", "2,4"])

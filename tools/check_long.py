@@ -72,12 +72,12 @@ def main() -> int:
         rows.append(("soak", f"did not report (exit {soak_code})", "FAIL"))
         ok = False
     for r in soak:
-        drift = f"{r['drift_percent']:+.2f}%" if "drift_percent" in r else "?"
+        heap = f"{r['heap_drift_percent']:+.2f}%" if "heap_drift_percent" in r else "?"
         device = f"{r['device_drift_percent']:+.2f}%" if "device_drift_percent" in r else "?"
         resident = f"{r['resident_drift_percent']:+.2f}%" if "resident_drift_percent" in r else "?"
         missing = f"; passes missing: {', '.join(r['missing_passes'])}" if r["missing_passes"] else ""
         rows.append((f"soak, --aa {r['aa']} ({r['frames']:,} frames, {r['minutes']} min)",
-                     f"validation messages {r['messages']}, memory allocated: heap {drift}, device {device} "
+                     f"validation messages {r['messages']}, memory allocated: heap {heap}, device {device} "
                      f"(frames 1,000-1,450 -> last 500; resident {resident}, not judged), "
                      f"{len(r['passes'])} passes{missing}", "pass" if r["ok"] else "FAIL"))
         ok = ok and r["ok"]

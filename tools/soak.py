@@ -96,7 +96,7 @@ def soak(args, aa: str) -> dict:
         ra, rb = mem[args.baseline][2], mem[args.frames][2]
         heaps = [m[0] for m in mem.values()]
         devices = [m[1] for m in mem.values()]
-        out.update(heap_baseline_kib=a, heap_last_kib=b, drift_percent=round(100 * change, 3), heap_min_kib=min(heaps),
+        out.update(heap_baseline_kib=a, heap_last_kib=b, heap_drift_percent=round(100 * change, 3), heap_min_kib=min(heaps),
                    heap_max_kib=max(heaps), device_baseline_kib=da, device_last_kib=db,
                    device_drift_percent=round(100 * device_change, 3), device_min_kib=min(devices), device_max_kib=max(devices),
                    resident_baseline_kib=ra, resident_last_kib=rb,
